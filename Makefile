@@ -1,0 +1,30 @@
+# The two commands of the README: `make run` and `make test`. Each sets up what it needs first.
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+SYSTAMP := $(VENV)/.system-packages
+
+.PHONY: run test lint setup clean-venv
+
+run: $(STAMP)
+	$(VENV)/bin/avatar-studio studio
+
+test: $(STAMP)
+	$(VENV)/bin/ruff check app render models tests scripts
+	$(PY) -m pytest -q
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check app render models tests scripts
+
+setup: $(STAMP)
+
+$(SYSTAMP):
+	bash scripts/setup_system.sh
+	mkdir -p $(VENV) && touch $@
+
+$(STAMP): pyproject.toml scripts/setup_python.sh $(SYSTAMP)
+	bash scripts/setup_python.sh $(VENV)
+	touch $@
+
+clean-venv:
+	rm -rf $(VENV)

@@ -1,0 +1,1 @@
+"""Morphable head models: one data form (HeadModel), loaders for each source, skinning."""

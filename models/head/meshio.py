@@ -1,0 +1,77 @@
+"""Minimal, fast OBJ reading and OBJ/PLY writing that keep the vertex order."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from models.head.model import HeadModelError
+
+
+def read_obj(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V,3) float64 and triangles (F,3) int64 (polygons fanned) from an OBJ file."""
+    path = Path(path)
+    try:
+        lines = path.read_text(errors="replace").splitlines()
+    except OSError as e:
+        raise HeadModelError(f"{path}: cannot read ({e.strerror})") from None
+    verts, faces = [], []
+    try:
+        for line in lines:
+            if line.startswith("v "):
+                verts.append([float(t) for t in line.split()[1:4]])
+            elif line.startswith("f "):
+                idx = [int(t.split("/")[0]) for t in line.split()[1:]]
+                faces.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))
+    except (ValueError, IndexError):
+        raise HeadModelError(f"{path}: malformed OBJ line {line[:60]!r}") from None
+    if not verts:
+        raise HeadModelError(f"{path}: OBJ has no vertices")
+    v = np.asarray(verts, np.float64)
+    if v.shape[1] != 3:
+        raise HeadModelError(f"{path}: OBJ vertices need 3 coordinates")
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    f = np.where(f < 0, f + len(v), f - 1)  # OBJ is 1-based; negative indices count back
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise HeadModelError(f"{path}: OBJ face indices outside its {len(v)} vertices")
+    return v, f
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    """Write via a temporary file in the same folder, so a crash never leaves half a file."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_mesh(path: str | Path, vertices: np.ndarray, triangles: np.ndarray) -> None:
+    """Write (V,3) vertices and (F,3) triangles as OBJ or PLY (by suffix), vertex order kept."""
+    path = Path(path)
+    v = np.asarray(vertices, np.float64)
+    f = np.asarray(triangles, np.int64)
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
+        body = "".join(f"v {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in v)
+        body += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f)
+        data = body.encode()
+    elif suffix == ".ply":
+        header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n"
+                  "property float x\nproperty float y\nproperty float z\n"
+                  f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
+        face_rec = np.zeros(len(f), dtype=[("n", "u1"), ("idx", "<i4", (3,))])
+        face_rec["n"] = 3
+        face_rec["idx"] = f
+        data = header.encode() + v.astype("<f4").tobytes() + face_rec.tobytes()
+    else:
+        raise ValueError(f"{path}: mesh output must end in .obj or .ply")
+    _atomic_write(path, data)

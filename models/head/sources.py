@@ -1,0 +1,52 @@
+"""HEAD specs of the command line: `builtin`, `ict:PATH` (npz or FaceXModel/ folder), `flame:PATH`."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from models.head.builtin import SHIPPED_PATH, head_model_from_arrays
+from models.head.flame import load_flame
+from models.head.ict import load_ict_folder, load_ict_npz
+from models.head.model import HeadModel, HeadModelError
+
+_BUILTIN_KEYS = ("template", "triangles", "shape_basis", "expr_basis", "expr_names", "J_regressor",
+                 "weights", "parents", "joint_names", "landmarks", "uv", "triangles_uv")
+
+
+def load_builtin(path: str | Path = SHIPPED_PATH) -> HeadModel:
+    """The built-in head from its npz (as written by models.head.builtin)."""
+    path = Path(path)
+    if not path.is_file():
+        raise HeadModelError(f"{path}: no such file (rebuild it: python -m models.head.builtin)")
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            missing = [k for k in _BUILTIN_KEYS if k not in d.files]
+            if missing:
+                raise HeadModelError(f"{path}: built-in head npz lacks {', '.join(missing)}")
+            arrays = {k: d[k] for k in d.files}
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as e:
+        raise HeadModelError(f"{path}: not a readable npz ({type(e).__name__}: {e})") from None
+    try:
+        return head_model_from_arrays(arrays)
+    except HeadModelError as e:
+        raise HeadModelError(f"{path}: {e}") from None
+
+
+def load_head(spec: str) -> HeadModel:
+    """A head model from a HEAD spec; HeadModelError names the file and the problem."""
+    kind, _, arg = spec.partition(":")
+    if kind == "builtin":
+        return load_builtin(arg) if arg else load_builtin()
+    if kind == "ict":
+        if not arg:
+            raise HeadModelError("ict: needs a path, as in ict:ict_head.npz or ict:FaceXModel/")
+        p = Path(arg)
+        return load_ict_folder(p) if p.is_dir() else load_ict_npz(p)
+    if kind == "flame":
+        if not arg:
+            raise HeadModelError("flame: needs a path, as in flame:generic_model.pkl")
+        return load_flame(arg)
+    raise HeadModelError(f"head '{spec}': expected builtin, ict:PATH or flame:PATH")

@@ -1,0 +1,208 @@
+"""The GL preview of the guide mesh: shaded with a shadow-mapped directional light, normals as
+colours, a wireframe overlay and landmark points, drawn into an offscreen framebuffer."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import moderngl
+import numpy as np
+
+from render.camera import Camera, look_at, orthographic
+from render.gl.context import GLContext
+from render.mesh import vertex_normals
+
+PassName = Literal["shaded", "normals", "wireframe", "shadow"]
+
+
+@dataclass(frozen=True)
+class PreviewSettings:
+    """What the preview draws and how it is lit."""
+
+    pass_name: PassName = "shaded"
+    """shaded: lit mesh; normals: world normals as colours; wireframe: shaded with edges;
+    shadow: where the key light reaches (white) and where it is blocked (black)."""
+    light_dir: tuple[float, float, float] = (0.45, 0.5, 0.75)
+    """Direction from the head towards the key light, world space (normalised when used)."""
+    shadows: bool = True
+    """Cast shadows from a shadow map."""
+    shadow_map_px: int = 2048
+    """Shadow map resolution, pixels per side."""
+    albedo: tuple[float, float, float] = (0.80, 0.62, 0.52)
+    ambient: tuple[float, float, float] = (0.22, 0.22, 0.24)
+    light_color: tuple[float, float, float] = (0.85, 0.85, 0.82)
+    background: tuple[float, float, float] = (0.16, 0.17, 0.19)
+    wireframe_overlay: bool = False
+    """Edges over any pass (the `wireframe` pass turns this on)."""
+    landmarks: bool = False
+    """Draw the head model's landmarks as points."""
+    samples: int = 4
+    """Multisample anti-aliasing samples (1 = off)."""
+
+
+@dataclass(frozen=True)
+class MeshFrame:
+    """One posed mesh to draw."""
+
+    vertices: np.ndarray  # (V,3) metres
+    triangles: np.ndarray  # (F,3)
+    landmarks: np.ndarray | None = None  # (L,3)
+
+
+def light_view_projection(light_dir: np.ndarray, center: np.ndarray, radius_m: float) -> np.ndarray:
+    """Orthographic light camera that sees a sphere of `radius_m` about `center` from `light_dir`."""
+    d = np.asarray(light_dir, np.float64) / np.linalg.norm(light_dir)
+    eye = center + d * (3 * radius_m)
+    return orthographic(radius_m, radius_m, radius_m, 5 * radius_m) @ look_at(eye, center)
+
+
+class PreviewRenderer:
+    """Draws MeshFrames; owns its GL buffers, reuses them while the mesh size stays the same."""
+
+    def __init__(self, gl: GLContext):
+        self.gl = gl
+        self.ctx = gl.ctx
+        self._fbo: moderngl.Framebuffer | None = None
+        self._resolve: moderngl.Framebuffer | None = None
+        self._size: tuple[int, int, int] = (0, 0, 0)
+        self._shadow_fbo: moderngl.Framebuffer | None = None
+        self._shadow_tex: moderngl.Texture | None = None
+        self._vbo: moderngl.Buffer | None = None
+        self._ibo: moderngl.Buffer | None = None
+        self._vbo_size = -1
+        self.last_depth: np.ndarray | None = None
+
+    def _framebuffer(self, w: int, h: int, samples: int) -> moderngl.Framebuffer:
+        if self._size != (w, h, samples):
+            for fb in (self._fbo, self._resolve):
+                if fb is not None:
+                    fb.release()
+            samples = min(samples, self.ctx.max_samples) if samples > 1 else 0
+            self._fbo = self.ctx.framebuffer(self.ctx.renderbuffer((w, h), 4, samples=samples),
+                                             self.ctx.depth_renderbuffer((w, h), samples=samples))
+            self._resolve = self.ctx.framebuffer(self.ctx.renderbuffer((w, h), 4),
+                                                 self.ctx.depth_texture((w, h)))
+            self._size = (w, h, samples)
+        return self._fbo
+
+    def _shadow(self, px: int) -> moderngl.Framebuffer:
+        if self._shadow_tex is None or self._shadow_tex.size != (px, px):
+            if self._shadow_fbo is not None:
+                self._shadow_fbo.release()
+                self._shadow_tex.release()
+            self._shadow_tex = self.ctx.depth_texture((px, px))
+            self._shadow_tex.compare_func = "<="
+            self._shadow_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self._shadow_tex.repeat_x = self._shadow_tex.repeat_y = False
+            self._shadow_fbo = self.ctx.framebuffer(depth_attachment=self._shadow_tex)
+        return self._shadow_fbo
+
+    def _upload(self, frame: MeshFrame) -> None:
+        v = np.asarray(frame.vertices, np.float32)
+        n = vertex_normals(v, frame.triangles)
+        data = np.concatenate([v, n], 1).astype("f4").tobytes()
+        if self._vbo is None or self._vbo_size != len(data):
+            for b in (self._vbo, self._ibo):
+                if b is not None:
+                    b.release()
+            self._vbo = self.ctx.buffer(data)
+            self._vbo_size = len(data)
+            self._ibo = self.ctx.buffer(np.asarray(frame.triangles, np.int32).tobytes())
+        else:
+            self._vbo.write(data)
+            self._ibo.write(np.asarray(frame.triangles, np.int32).tobytes())
+
+    def _vao(self, program: str, with_normals: bool) -> moderngl.VertexArray:
+        prog = self.gl.program(program)
+        layout = (self._vbo, "3f 3f", "in_position", "in_normal") if with_normals else \
+            (self._vbo, "3f 12x", "in_position")
+        return self.ctx.vertex_array(prog, [layout], index_buffer=self._ibo)
+
+    def render(self, frame: MeshFrame, camera: Camera, settings: PreviewSettings = PreviewSettings()
+               ) -> np.ndarray:
+        """RGB image (H,W,3) uint8, top row first; the camera depth (metres, inf for background)
+        is kept in `last_depth`."""
+        self._upload(frame)
+        ctx = self.ctx
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE)
+        vp = (camera.projection @ camera.view).astype("f4")
+        light_dir = np.asarray(settings.light_dir, np.float64)
+        light_dir /= np.linalg.norm(light_dir)
+        v = np.asarray(frame.vertices, np.float64)
+        center = 0.5 * (v.min(0) + v.max(0))
+        radius = float(np.linalg.norm(v - center, axis=1).max()) * 1.05 + 1e-6
+        light_vp = light_view_projection(light_dir, center, radius).astype("f4")
+        use_shadows = settings.shadows and settings.pass_name in ("shaded", "wireframe", "shadow")
+        if use_shadows:
+            sfbo = self._shadow(settings.shadow_map_px)
+            sfbo.use()
+            sfbo.clear(depth=1.0)
+            depth_prog = self.gl.program("depth")
+            depth_prog["u_view_projection"].write(light_vp.T.tobytes())
+            vao = self._vao("depth", False)
+            vao.render(moderngl.TRIANGLES)
+            vao.release()
+        fbo = self._framebuffer(camera.width_px, camera.height_px, settings.samples)
+        fbo.use()
+        fbo.clear(*settings.background, 1.0, depth=1.0)
+        if settings.pass_name == "normals":
+            prog = self.gl.program("normals")
+            prog["u_view_projection"].write(vp.T.tobytes())
+            vao = self._vao("normals", True)
+        else:
+            prog = self.gl.program("shaded")
+            prog["u_view_projection"].write(vp.T.tobytes())
+            prog["u_light_view_projection"].write(light_vp.T.tobytes())
+            prog["u_light_dir"].value = tuple(light_dir)
+            prog["u_albedo"].value = settings.albedo
+            prog["u_ambient"].value = settings.ambient
+            prog["u_light_color"].value = settings.light_color
+            prog["u_shadow_bias"].value = 0.6 / settings.shadow_map_px
+            prog["u_use_shadows"].value = int(use_shadows)
+            prog["u_mode"].value = 1 if settings.pass_name == "shadow" else 0
+            if use_shadows:
+                self._shadow_tex.use(location=0)
+            prog["u_shadow_map"].value = 0
+            vao = self._vao("shaded", True)
+        wire = settings.wireframe_overlay or settings.pass_name == "wireframe"
+        if wire:
+            ctx.polygon_offset = (1.0, 1.0)
+        vao.render(moderngl.TRIANGLES)
+        vao.release()
+        ctx.polygon_offset = (0.0, 0.0)
+        flat = self.gl.program("flat")
+        flat["u_view_projection"].write(vp.T.tobytes())
+        if wire:
+            ctx.wireframe = True
+            flat["u_color"].value = (0.05, 0.05, 0.08, 1.0)
+            flat["u_point_size_px"].value = 1.0
+            vao = self._vao("flat", False)
+            vao.render(moderngl.TRIANGLES)
+            vao.release()
+            ctx.wireframe = False
+        if settings.landmarks and frame.landmarks is not None and len(frame.landmarks):
+            ctx.enable(moderngl.PROGRAM_POINT_SIZE)
+            ctx.disable(moderngl.DEPTH_TEST)
+            flat["u_color"].value = (0.1, 1.0, 0.3, 1.0)
+            flat["u_point_size_px"].value = max(3.0, camera.height_px / 160)
+            buf = ctx.buffer(np.asarray(frame.landmarks, "f4").tobytes())
+            vao = ctx.vertex_array(flat, [(buf, "3f", "in_position")])
+            vao.render(moderngl.POINTS)
+            vao.release()
+            buf.release()
+            ctx.enable(moderngl.DEPTH_TEST)
+        ctx.copy_framebuffer(self._resolve, fbo)
+        w, h = camera.width_px, camera.height_px
+        rgb = np.frombuffer(self._resolve.read(components=3, alignment=1), np.uint8).reshape(h, w, 3)
+        depth01 = np.frombuffer(self._resolve.depth_attachment.read(alignment=1), np.float32).reshape(h, w)
+        from render.camera import linear_depth_from_ndc
+        depth = np.where(depth01 < 1.0, linear_depth_from_ndc(depth01, camera.near_m, camera.far_m), np.inf)
+        self.last_depth = depth[::-1].copy()
+        return rgb[::-1].copy()  # GL rows run bottom-up
+
+    def release(self) -> None:
+        for r in (self._fbo, self._resolve, self._shadow_fbo, self._shadow_tex, self._vbo, self._ibo):
+            if r is not None:
+                r.release()

@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# The virtual environment at .venv: torch 2.13.0 (the CPU wheel on this machine's disk, or PyPI's
+# CPU index elsewhere), then the project with its test extras, editable.
+set -euo pipefail
+VENV=${1:-.venv}
+python3 -m venv "$VENV"
+PIP="$VENV/bin/pip"
+"$PIP" install -q --upgrade pip
+if ! "$VENV/bin/python" -c "import torch" 2>/dev/null; then
+    WHEEL=$(ls /opt/wheels/torch-2.13.0+cpu-*.whl 2>/dev/null | head -n1 || true)
+    if [ -n "$WHEEL" ]; then
+        "$PIP" install -q "$WHEEL"
+    else
+        "$PIP" install -q torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu
+    fi
+fi
+"$PIP" install -q -e ".[test]"
+# pyrender pins PyOpenGL 3.1.0, whose EGL platform predates current Mesa's; the 3.1.7+ release works
+# with pyrender's OffscreenRenderer and keeps its API.
+"$PIP" install -q "PyOpenGL>=3.1.7"
+echo "python environment ready in $VENV"
