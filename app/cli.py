@@ -1,2 +1,46 @@
-def main():
-    raise SystemExit(0)
+"""`avatar-studio`: one entry point, a subcommand per task (DESIGN 7); options come from config dataclasses.
+
+Exit status 0 on success, 2 on bad arguments or input files (one line naming the file and the problem),
+1 on anything else.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import traceback
+
+from app.commands import COMMANDS
+from app.config_cli import add_config_arguments, config_from_args
+from app.errors import INPUT_ERRORS
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="avatar-studio", description="Make and drive neural 3D head portraits.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for cmd in COMMANDS:
+        p = sub.add_parser(cmd.name, help=cmd.summary, description=cmd.summary)
+        add_config_arguments(p, cmd.config, cmd.positional)
+        p.set_defaults(_command=cmd)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    cmd = args._command
+    try:
+        config = config_from_args(cmd.config, args)
+        return int(cmd.run(config) or 0)
+    except INPUT_ERRORS as e:
+        print(f"avatar-studio {cmd.name}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"avatar-studio {cmd.name}: interrupted", file=sys.stderr)
+        return 130
+    except Exception:
+        traceback.print_exc()
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

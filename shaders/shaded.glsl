@@ -5,11 +5,12 @@ in vec3 in_position;
 in vec3 in_normal;
 uniform mat4 u_view_projection;
 uniform mat4 u_light_view_projection;
+uniform float u_normal_offset;   // metres: look the shadow map up a little off the surface (no acne)
 out vec3 v_normal;
 out vec4 v_light_clip;
 void main() {
     v_normal = in_normal;
-    v_light_clip = u_light_view_projection * vec4(in_position, 1.0);
+    v_light_clip = u_light_view_projection * vec4(in_position + u_normal_offset * normalize(in_normal), 1.0);
     gl_Position = u_view_projection * vec4(in_position, 1.0);
 }
 #elif defined FRAGMENT_SHADER

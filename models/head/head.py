@@ -81,3 +81,10 @@ class Head(torch.nn.Module):
         """forward() on controls; a single Controls gives a batch of one."""
         controls = [controls] if isinstance(controls, Controls) else controls
         return self(**self.batch(controls))
+
+
+def posed_mesh(head: Head, controls: Controls) -> tuple[np.ndarray, np.ndarray]:
+    """Posed vertices (V,3) and landmarks (L,3) as numpy, for drawing and writing files."""
+    with torch.inference_mode():
+        verts, _, lmks = head.pose(controls)
+    return verts[0].numpy(), lmks[0].numpy()

@@ -9,7 +9,7 @@ from typing import Literal
 import moderngl
 import numpy as np
 
-from render.camera import Camera, look_at, orthographic
+from render.camera import Camera, linear_depth_from_ndc, look_at, orthographic
 from render.gl.context import GLContext
 from render.mesh import vertex_normals
 
@@ -159,7 +159,9 @@ class PreviewRenderer:
             prog["u_albedo"].value = settings.albedo
             prog["u_ambient"].value = settings.ambient
             prog["u_light_color"].value = settings.light_color
-            prog["u_shadow_bias"].value = 0.6 / settings.shadow_map_px
+            texel_m = 2 * radius / settings.shadow_map_px
+            prog["u_shadow_bias"].value = 1.0 / settings.shadow_map_px
+            prog["u_normal_offset"].value = 1.5 * texel_m
             prog["u_use_shadows"].value = int(use_shadows)
             prog["u_mode"].value = 1 if settings.pass_name == "shadow" else 0
             if use_shadows:
@@ -176,12 +178,15 @@ class PreviewRenderer:
         flat["u_view_projection"].write(vp.T.tobytes())
         if wire:
             ctx.wireframe = True
-            flat["u_color"].value = (0.05, 0.05, 0.08, 1.0)
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+            flat["u_color"].value = (0.05, 0.05, 0.08, 0.45)
             flat["u_point_size_px"].value = 1.0
             vao = self._vao("flat", False)
             vao.render(moderngl.TRIANGLES)
             vao.release()
             ctx.wireframe = False
+            ctx.disable(moderngl.BLEND)
         if settings.landmarks and frame.landmarks is not None and len(frame.landmarks):
             ctx.enable(moderngl.PROGRAM_POINT_SIZE)
             ctx.disable(moderngl.DEPTH_TEST)
@@ -197,7 +202,6 @@ class PreviewRenderer:
         w, h = camera.width_px, camera.height_px
         rgb = np.frombuffer(self._resolve.read(components=3, alignment=1), np.uint8).reshape(h, w, 3)
         depth01 = np.frombuffer(self._resolve.depth_attachment.read(alignment=1), np.float32).reshape(h, w)
-        from render.camera import linear_depth_from_ndc
         depth = np.where(depth01 < 1.0, linear_depth_from_ndc(depth01, camera.near_m, camera.far_m), np.inf)
         self.last_depth = depth[::-1].copy()
         return rgb[::-1].copy()  # GL rows run bottom-up

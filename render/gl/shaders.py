@@ -16,7 +16,7 @@ STAGES = ("VERTEX_SHADER", "FRAGMENT_SHADER")
 PROGRAMS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "shaded": (("in_position", "in_normal"),
                ("u_view_projection", "u_light_view_projection", "u_light_dir", "u_albedo", "u_ambient",
-                "u_light_color", "u_shadow_bias", "u_use_shadows", "u_mode", "u_shadow_map")),
+                "u_light_color", "u_shadow_bias", "u_normal_offset", "u_use_shadows", "u_mode", "u_shadow_map")),
     "normals": (("in_position", "in_normal"), ("u_view_projection",)),
     "depth": (("in_position",), ("u_view_projection",)),
     "flat": (("in_position",), ("u_view_projection", "u_point_size_px", "u_color")),

@@ -1,0 +1,27 @@
+"""The table of subcommands: name, summary, config dataclass, and the function that runs it."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from app import head_commands
+
+
+@dataclass(frozen=True)
+class Command:
+    name: str
+    summary: str
+    config: type
+    run: Callable[[object], int | None]
+    positional: tuple[str, ...] = ()
+
+
+COMMANDS = (
+    Command("studio", "Open the studio on an avatar (for now: render the built-in head to out/).",
+            head_commands.StudioConfig, head_commands.run_studio, positional=("avatar",)),
+    Command("preview", "Render a head model with given controls to a PNG, headless.",
+            head_commands.PreviewConfig, head_commands.run_preview),
+    Command("mesh", "Write the posed guide mesh as OBJ or PLY, in the head model's vertex order.",
+            head_commands.MeshConfig, head_commands.run_mesh),
+)

@@ -1,0 +1,14 @@
+"""The errors that mean bad input from the user: exit status 2 with a one-line reason."""
+
+from __future__ import annotations
+
+from models.head.controls import ControlsError
+from models.head.model import HeadModelError
+
+
+class UserInputError(ValueError):
+    """Bad arguments or a bad input file; the message names the file and the problem."""
+
+
+#: Exceptions that are the user's input being wrong, not the program failing.
+INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError)

@@ -1,0 +1,166 @@
+"""`preview`, `mesh` and (until the window exists) `studio`: a head model posed by controls."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from PIL import Image
+
+from app.errors import UserInputError
+from models.head.controls import Controls, ControlsError, load_controls
+from models.head.head import Head, posed_mesh
+from models.head.model import HeadModel
+from models.head.sources import load_head
+from render.camera import framing_camera
+from render.gl.context import GLContext
+from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
+
+
+@dataclass(frozen=True)
+class HeadPoseConfig:
+    head: str = "builtin"
+    """HEAD: builtin, ict:PATH (the ICT npz or a FaceXModel/ folder) or flame:PATH (a FLAME .pkl)."""
+    controls: Path | None = None
+    """JSON file of controls: shape, expression (list or {name: weight}), pose, gaze, translation."""
+    expression: tuple[str, ...] = ()
+    """Expression weights NAME=W (or INDEX=W), applied after --controls."""
+
+
+@dataclass(frozen=True)
+class PreviewConfig(HeadPoseConfig):
+    out: Path = Path("out/preview.png")
+    """Output PNG (written atomically: an existing file is replaced only by a complete image)."""
+    yaw_deg: float = 0.0
+    """Camera orbit about the vertical axis, degrees; positive moves the camera to the subject's left."""
+    pitch_deg: float = 0.0
+    """Camera elevation, degrees."""
+    size: tuple[int, int] = (512, 512)
+    """Image width and height in pixels."""
+    pass_: Literal["shaded", "normals", "wireframe", "shadow"] = "shaded"
+    """What to draw: lit mesh, normals as colours, mesh with edges, or the key light's shadow mask."""
+    landmarks: bool = False
+    """Draw the head model's landmarks."""
+    shadows: bool = True
+    """Cast shadows from the key light."""
+
+
+@dataclass(frozen=True)
+class MeshConfig(HeadPoseConfig):
+    out: Path = Path("out/head.obj")
+    """Output mesh, .obj or .ply."""
+
+
+@dataclass(frozen=True)
+class StudioConfig:
+    avatar: Path | None = None
+    """Avatar folder to open (default: the shipped demo avatar)."""
+    out: Path = Path("out")
+    """Where the head renders go until the window exists."""
+
+
+def parse_expression_args(head: HeadModel, items: tuple[str, ...], controls: Controls) -> Controls:
+    """Apply NAME=W / INDEX=W pairs to the controls."""
+    named: dict[str, float] = {}
+    expr = np.zeros(head.num_expression, np.float32)
+    expr[: len(controls.expression)] = controls.expression
+    for item in items:
+        key, sep, value = item.partition("=")
+        try:
+            w = float(value)
+        except ValueError:
+            w = None
+        if not sep or w is None or not np.isfinite(w):
+            raise UserInputError(f"--expression {item!r}: expected NAME=WEIGHT, as in smile_L=0.8")
+        if key.isdigit():
+            if int(key) >= head.num_expression:
+                raise UserInputError(f"--expression {item!r}: head '{head.name}' has {head.num_expression} "
+                                     "expression components")
+            expr[int(key)] = w
+        else:
+            named[key] = w
+    from dataclasses import replace
+    try:
+        return replace(controls, expression=expr).with_expression(head, named)
+    except ControlsError as e:
+        raise UserInputError(f"--expression: {e}") from None
+
+
+def load_posed(cfg: HeadPoseConfig) -> tuple[HeadModel, np.ndarray, np.ndarray]:
+    head = load_head(cfg.head)
+    controls = load_controls(cfg.controls, head) if cfg.controls else Controls()
+    controls = parse_expression_args(head, cfg.expression, controls)
+    try:
+        verts, lmks = posed_mesh(Head(head), controls)
+    except ControlsError as e:
+        raise UserInputError(f"{cfg.controls or 'controls'}: {e}") from None
+    return head, verts, lmks
+
+
+def _check_out(path: Path, suffixes: tuple[str, ...]) -> None:
+    if path.suffix.lower() not in suffixes:
+        raise UserInputError(f"{path}: output must end in {' or '.join(suffixes)}")
+    if path.exists() and path.is_dir():
+        raise UserInputError(f"{path}: is a folder, expected a file name")
+    path.parent.mkdir(parents=True, exist_ok=True)
+
+
+def save_png(path: Path, rgb: np.ndarray) -> None:
+    """Write a PNG atomically (temporary file, then rename)."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    Image.fromarray(rgb).save(tmp, format="PNG")
+    tmp.replace(path)
+
+
+def render_head(gl: GLContext, head: HeadModel, verts: np.ndarray, lmks: np.ndarray, cfg: PreviewConfig
+                ) -> np.ndarray:
+    camera = framing_camera(head.template, cfg.yaw_deg, cfg.pitch_deg, width_px=cfg.size[0],
+                            height_px=cfg.size[1])
+    settings = PreviewSettings(pass_name=cfg.pass_, landmarks=cfg.landmarks, shadows=cfg.shadows)
+    renderer = PreviewRenderer(gl)
+    try:
+        return renderer.render(MeshFrame(verts, head.triangles, lmks), camera, settings)
+    finally:
+        renderer.release()
+
+
+def run_preview(cfg: PreviewConfig) -> int:
+    if min(cfg.size) < 1 or max(cfg.size) > 8192:
+        raise UserInputError(f"--size {cfg.size[0]} {cfg.size[1]}: each side must be 1..8192 pixels")
+    _check_out(cfg.out, (".png",))
+    head, verts, lmks = load_posed(cfg)
+    gl = GLContext.headless()
+    t0 = time.perf_counter()
+    rgb = render_head(gl, head, verts, lmks, cfg)
+    ms = 1e3 * (time.perf_counter() - t0)
+    save_png(cfg.out, rgb)
+    print(f"wrote {cfg.out} ({cfg.size[0]}x{cfg.size[1]}, {head.name} head, {cfg.pass_} pass, {ms:.0f} ms)")
+    return 0
+
+
+def run_mesh(cfg: MeshConfig) -> int:
+    from models.head.meshio import write_mesh
+
+    _check_out(cfg.out, (".obj", ".ply"))
+    head, verts, _ = load_posed(cfg)
+    write_mesh(cfg.out, verts, head.triangles)
+    print(f"wrote {cfg.out} ({len(verts)} vertices, {len(head.triangles)} triangles)")
+    return 0
+
+
+def run_studio(cfg: StudioConfig) -> int:
+    """Until the studio window lands: render the built-in head from a few views and say where."""
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    gl = GLContext.headless()
+    views = []
+    for yaw, expr in ((0.0, ()), (30.0, ("smile_L=1", "smile_R=1")), (-35.0, ("browRaise_L=1", "browRaise_R=1"))):
+        pc = PreviewConfig(expression=expr, yaw_deg=yaw, size=(384, 384), landmarks=False)
+        head, verts, lmks = load_posed(pc)
+        views.append(render_head(gl, head, verts, lmks, pc))
+    out = cfg.out / "studio_builtin_head.png"
+    save_png(out, np.concatenate(views, 1))
+    print(f"The studio window is not built yet; rendered the built-in head to {out.resolve()}")
+    return 0
