@@ -96,8 +96,8 @@ SHAPES = ("headWidth", "headHeight", "headDepth", "noseProjection", "noseWidth",
           "browRidge", "lipFullness", "earSize", "cheekFullness", "foreheadSlope")
 
 
-def _expression_field(name: str, p: np.ndarray, side: np.ndarray) -> np.ndarray:
-    """Displacement (N,3) of one expression at weight 1 on skin positions p, metres."""
+def _expression_field(name: str, p: np.ndarray, base: np.ndarray, side: np.ndarray) -> np.ndarray:
+    """Displacement (N,3) of one expression at weight 1 on skin positions p (base: before sculpting), metres."""
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
     s = 1.0 if name.endswith("_L") else -1.0  # _L is the subject's left, +x
     front = g.front_mask(p)[:, None]
@@ -113,8 +113,10 @@ def _expression_field(name: str, p: np.ndarray, side: np.ndarray) -> np.ndarray:
         d += g.gauss(x, y, s * 0.018, 0.052, 0.014, 0.009)[:, None] * [-s * 0.003, -0.004, 0.001]
     elif name.startswith(("blink", "eyeWide")):
         up, low = g.eyelid_opening(x)
-        on_eye = (np.sign(x) == s) * np.exp(-0.5 * np.clip(y - g.EYE_Y, 0, None) ** 2 / 0.004**2)
-        upper = ((side > 0) | ((side == 0) & (y > g.EYE_Y))) * on_eye
+        # Falloff above the slit measured on the unsculpted rows, where the upper rim sits on the slit line.
+        yb = base[:, 1]
+        on_eye = (np.sign(x) == s) * np.exp(-0.5 * np.clip(yb - g.EYE_Y, 0, None) ** 2 / 0.004**2)
+        upper = ((side > 0) | ((side == 0) & (yb > g.EYE_Y))) * on_eye
         if name.startswith("blink"):
             d[:, 1] -= (up + low) * upper
             d[:, 2] += 0.0035 * (up / 0.0055) * upper
@@ -165,13 +167,13 @@ def _landmark_targets() -> list[tuple[float, float, int]]:
     pts = []
     for k in range(17):  # jaw line, subject's right (-x) to left
         b = np.pi * k / 16
-        pts.append((-0.066 * np.cos(b), 0.025 - 0.115 * np.sin(b), 0))
+        pts.append((-0.066 * np.cos(b), 0.025 - 0.105 * np.sin(b), 0))
     for lo, hi in ((-0.055, -0.012), (0.012, 0.055)):  # brows
         for t in np.linspace(0, 1, 5):
             xb = lo + (hi - lo) * t
             pts.append((xb, 0.05 + 0.007 * np.sin(np.pi * (t if lo < 0 else t))))
     pts = [(*p, 0) if len(p) == 2 else p for p in pts]
-    pts += [(0.0, yy, 0) for yy in (0.040, 0.027, 0.014, 0.001)]  # nose bridge
+    pts += [(0.0, yy, 0) for yy in (0.040, 0.027, 0.013, -0.002)]  # nose bridge down to the tip
     pts += [(xx, -0.0145 - 0.003 * (1 - abs(xx) / 0.014), 0) for xx in (-0.014, -0.007, 0.0, 0.007, 0.014)]
     for cx, order in ((-g.EYE_X, 1), (g.EYE_X, 1)):  # eyes: outer/inner corner, upper lid, lower lid
         xs = cx + np.array([-0.0125, -0.0045, 0.0045, 0.0125]) * (1 if cx < 0 else -1) * -1
@@ -248,7 +250,7 @@ def build_builtin_arrays() -> dict[str, np.ndarray]:
         return out
 
     shape = np.stack([with_rigid_eyes(_shape_field(n, skin.neutral)) for n in SHAPES], -1)
-    expr = np.stack([np.concatenate([_expression_field(n, skin.neutral, skin.side),
+    expr = np.stack([np.concatenate([_expression_field(n, skin.neutral, skin.base, skin.side),
                                      np.zeros((len(V) - n_skin, 3))]) for n in EXPRESSIONS], -1)
     return {
         "template": V.astype(np.float32),

@@ -51,7 +51,7 @@ def load_flame(path: str | Path, landmarks_path: str | Path | None = None) -> He
     template = _array(d, "v_template", path, 2)
     V = template.shape[0]
     if template.shape[1] != 3:
-        raise HeadModelError(f"{path}: v_template must be (V,3), got {template.shape}")
+        raise HeadModelError(f"{path}: FLAME field 'v_template' must be (V,3), got {template.shape}")
     faces = _array(d, "f", path, 2).astype(np.int64)
     dirs = _array(d, "shapedirs", path, 3)
     posedirs = _array(d, "posedirs", path, 3)

@@ -90,12 +90,12 @@ _ALLOWED: dict[tuple[str, str], object] = {
     ("numpy", "dtype"): _dtype,
     ("copy_reg", "_reconstructor"): _reconstructor,
     ("copyreg", "_reconstructor"): _reconstructor,
-    ("__builtin__", "object"): object,
-    ("builtins", "object"): object,
+    **{(m, t.__name__): t for m in ("__builtin__", "builtins") for t in (object, set, frozenset)},
     ("_codecs", "encode"): _codecs_encode,
     ("chumpy.ch", "Ch"): ChumpyArray,
-    **{(f"scipy.sparse.{m}", f"{m}_matrix"): SparseMatrix for m in ("csc", "csr", "_csc", "_csr")},
-    **{("scipy.sparse", f"{m}_matrix"): SparseMatrix for m in ("csc", "csr")},
+    **{(module, f"{fmt}_{kind}"): SparseMatrix
+       for fmt in ("csc", "csr") for kind in ("matrix", "array")
+       for module in ("scipy.sparse", f"scipy.sparse.{fmt}", f"scipy.sparse._{fmt}")},
 }
 
 
