@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 1.0, 0.0])) -> np.ndarray:
-    """World-to-camera 4x4 for a camera at `eye` looking at `target`."""
-    eye, target = np.asarray(eye, np.float64), np.asarray(target, np.float64)
+def look_at(eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] = (0.0, 1.0, 0.0)) -> np.ndarray:
+    """World-to-camera 4x4 for a camera at `eye` looking at `target`, +y of the image towards `up`."""
+    eye, target, up = (np.asarray(a, np.float64) for a in (eye, target, up))
     f = target - eye
     f /= np.linalg.norm(f)
     s = np.cross(f, up)

@@ -23,7 +23,7 @@ class _Skin:
     """The skin grid with its slit vertices: positions, per-vertex side flags, triangles and UVs."""
 
     def __init__(self) -> None:
-        grid, phi = g.base_skin()
+        grid, _phi = g.base_skin()
         R, C = g.ROWS + 1, g.COLUMNS
         # Row 0 collapses to the crown's pole: one vertex.
         index = np.zeros((R, C), np.int64)
@@ -81,8 +81,10 @@ def _skin_weights(p: np.ndarray, side: np.ndarray) -> np.ndarray:
     """(N,3) weights on root, neck, jaw for skin vertices."""
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
     neck = g.smoothstep(-0.16, -0.10, y)
-    below_mouth = np.where(side < 0, 1.0, np.where(side > 0, 0.0, g.smoothstep(g.MOUTH_Y + 0.004,
-                                                                                   g.MOUTH_Y - 0.008, y)))
+    # The mouth slit's lower copies ride on the jaw, its upper copies stay; the eye slits are not the jaw's.
+    at_mouth = np.abs(y - g.MOUTH_Y) < 0.01
+    below_mouth = np.where(at_mouth & (side < 0), 1.0, np.where(at_mouth & (side > 0), 0.0, g.smoothstep(
+        g.MOUTH_Y + 0.004, g.MOUTH_Y - 0.008, y)))
     jaw = below_mouth * g.smoothstep(-0.035, 0.02, z) * g.smoothstep(-0.118, -0.098, y)
     jaw *= 1 - g.smoothstep(0.05, 0.072, np.abs(x)) * g.smoothstep(-0.07, -0.03, y)
     w = np.stack([1 - neck, neck * (1 - jaw), neck * jaw], 1)
@@ -98,7 +100,7 @@ SHAPES = ("headWidth", "headHeight", "headDepth", "noseProjection", "noseWidth",
 
 def _expression_field(name: str, p: np.ndarray, base: np.ndarray, side: np.ndarray) -> np.ndarray:
     """Displacement (N,3) of one expression at weight 1 on skin positions p (base: before sculpting), metres."""
-    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    x, y = p[:, 0], p[:, 1]
     s = 1.0 if name.endswith("_L") else -1.0  # _L is the subject's left, +x
     front = g.front_mask(p)[:, None]
     d = np.zeros_like(p)
@@ -163,29 +165,25 @@ def _shape_field(name: str, p: np.ndarray) -> np.ndarray:
 
 
 def _landmark_targets() -> list[tuple[float, float, int]]:
-    """The 68 iBUG points as (x, y, side) on the neutral face; side picks a slit's upper (+1) or lower (-1) copy."""
-    pts = []
-    for k in range(17):  # jaw line, subject's right (-x) to left
+    """The 68 iBUG points as (x, y, side) on the neutral face, in the iBUG order (each group runs in
+    increasing x, the subject's right first); side picks a slit's upper (+1) or lower (-1) copy."""
+    pts: list[tuple[float, float, int]] = []
+    for k in range(17):  # 0-16 jaw line
         b = np.pi * k / 16
         pts.append((-0.066 * np.cos(b), 0.025 - 0.105 * np.sin(b), 0))
-    for lo, hi in ((-0.055, -0.012), (0.012, 0.055)):  # brows
-        for t in np.linspace(0, 1, 5):
-            xb = lo + (hi - lo) * t
-            pts.append((xb, 0.05 + 0.007 * np.sin(np.pi * (t if lo < 0 else t))))
-    pts = [(*p, 0) if len(p) == 2 else p for p in pts]
-    pts += [(0.0, yy, 0) for yy in (0.040, 0.027, 0.013, -0.002)]  # nose bridge down to the tip
+    for lo, hi in ((-0.055, -0.012), (0.012, 0.055)):  # 17-21, 22-26 brows, arched
+        pts += [(lo + (hi - lo) * t, 0.05 + 0.007 * np.sin(np.pi * t), 0) for t in np.linspace(0, 1, 5)]
+    pts += [(0.0, yy, 0) for yy in (0.040, 0.027, 0.013, -0.002)]  # 27-30 nose bridge down to the tip
     pts += [(xx, -0.0145 - 0.003 * (1 - abs(xx) / 0.014), 0) for xx in (-0.014, -0.007, 0.0, 0.007, 0.014)]
-    for cx, order in ((-g.EYE_X, 1), (g.EYE_X, 1)):  # eyes: outer/inner corner, upper lid, lower lid
-        xs = cx + np.array([-0.0125, -0.0045, 0.0045, 0.0125]) * (1 if cx < 0 else -1) * -1
-        xs = xs if cx < 0 else xs[::-1] * 1
-        pts += [(xs[0], g.EYE_Y, 0), (xs[1], g.EYE_Y + 0.004, 1), (xs[2], g.EYE_Y + 0.004, 1),
-                (xs[3], g.EYE_Y, 0), (xs[2], g.EYE_Y - 0.003, -1), (xs[1], g.EYE_Y - 0.003, -1)]
-        del order
+    for cx in (-g.EYE_X, g.EYE_X):  # 36-41, 42-47: corner, upper lid x2, corner, lower lid x2
+        x0, x1, x2, x3 = cx + np.array([-0.0125, -0.0045, 0.0045, 0.0125])
+        pts += [(x0, g.EYE_Y, 0), (x1, g.EYE_Y + 0.004, 1), (x2, g.EYE_Y + 0.004, 1),
+                (x3, g.EYE_Y, 0), (x2, g.EYE_Y - 0.003, -1), (x1, g.EYE_Y - 0.003, -1)]
     outer = [(-0.024, 0.0), (-0.015, 0.007), (-0.006, 0.010), (0.0, 0.009), (0.006, 0.010), (0.015, 0.007),
              (0.024, 0.0), (0.015, -0.008), (0.006, -0.011), (0.0, -0.012), (-0.006, -0.011), (-0.015, -0.008)]
-    pts += [(xx, g.MOUTH_Y + dy, 0) for xx, dy in outer]
+    pts += [(xx, g.MOUTH_Y + dy, 0) for xx, dy in outer]  # 48-59 outer lips
     inner = [(-0.02, 0), (-0.01, 1), (0.0, 1), (0.01, 1), (0.02, 0), (0.01, -1), (0.0, -1), (-0.01, -1)]
-    pts += [(xx, g.MOUTH_Y, sd) for xx, sd in inner]
+    pts += [(xx, g.MOUTH_Y, sd) for xx, sd in inner]  # 60-67 inner lips
     return pts
 
 
@@ -271,7 +269,7 @@ def build_builtin_arrays() -> dict[str, np.ndarray]:
 
 
 def head_model_from_arrays(a: dict[str, np.ndarray], name: str = "builtin") -> HeadModel:
-    V, J = a["weights"].shape
+    V, _J = a["weights"].shape
     return HeadModel(
         name=name, template=a["template"], triangles=a["triangles"], shape_basis=a["shape_basis"],
         expr_basis=a["expr_basis"], J_regressor=a["J_regressor"], weights=a["weights"],

@@ -85,7 +85,7 @@ def lbs(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Posed vertices (B,V,3) and joints (B,J,3), FLAME's forward pass without translation."""
     B = shape.shape[0]
-    V, J = weights.shape
+    _V, J = weights.shape
     assert full_pose.shape == (B, J, 3), f"full_pose must be (B,J,3)=({B},{J},3), got {full_pose.shape}"
     assert expression.shape[0] == B, "shape and expression batch sizes differ"
     # 1. Identity and expression blend shapes.

@@ -40,7 +40,7 @@ def test_rotations_finite_with_finite_gradients(head, joint, angle, axis):
     pose = torch.zeros(1, 5, 3, dtype=torch.float64)
     pose[0, joint] = ANGLES[angle] * torch.tensor(AXES[axis], dtype=torch.float64)
     pose.requires_grad_(True)
-    verts, joints, lmks = head(**_inputs(head, pose=pose))
+    verts, _joints, lmks = head(**_inputs(head, pose=pose))
     assert torch.isfinite(verts).all() and torch.isfinite(lmks).all()
     (grad,) = torch.autograd.grad(verts.square().sum() + lmks.sum(), pose)
     assert torch.isfinite(grad).all()
@@ -53,7 +53,7 @@ def test_half_turn_about_y_mirrors_about_the_joint(head):
     """A root rotation of exactly pi about +y maps (x, y, z) to (-x, y, -z) about the root joint."""
     pose = torch.zeros(1, 5, 3, dtype=torch.float64)
     pose[0, 0, 1] = math.pi
-    verts, joints, _ = head(**_inputs(head, pose=pose))
+    verts, _joints, _ = head(**_inputs(head, pose=pose))
     rest, rest_joints, _ = head(**_inputs(head))
     c = rest_joints[0, 0]
     expected = (rest[0] - c) * torch.tensor([-1.0, 1.0, -1.0], dtype=torch.float64) + c

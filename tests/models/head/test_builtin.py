@@ -57,8 +57,11 @@ def test_face_features_where_a_face_has_them(builtin_model):
     # Top to bottom: brows above eyes above nose tip above mouth above chin.
     mouth = lm[51]
     assert brow_l[1] > eye_l_outer[1] > nose_tip[1] > mouth[1] > chin[1]
-    # Subject's left on +x: landmarks 42-47 (left eye in the iBUG layout) have x > 0.
+    # Subject's left on +x: landmarks 42-47 (left eye in the iBUG layout) have x > 0; each eye's first
+    # point is its corner nearest the image's left (outer for the right eye, inner for the left).
     assert (lm[42:48, 0] > 0).all() and (lm[36:42, 0] < 0).all()
+    assert lm[36, 0] < lm[39, 0] and lm[42, 0] < lm[45, 0] and lm[48, 0] < lm[54, 0] and lm[0, 0] < lm[16, 0]
+    assert abs(lm[39, 0]) < abs(lm[36, 0]) and abs(lm[42, 0]) < abs(lm[45, 0])  # inner corners nearer the nose
     # Ears: skin stands out sideways beyond the head at ear height, behind the face.
     ear_zone = (np.abs(m.template[:, 1] - 0.012) < 0.02) & (np.abs(m.template[:, 2] + 0.014) < 0.012)
     assert np.abs(m.template[ear_zone, 0]).max() > 0.085
@@ -81,7 +84,7 @@ def test_jaw_opens_the_mouth(builtin_model):
     gap1 = lm1[62, 1] - lm1[66, 1]
     assert gap0 < 0.002 and gap1 > 0.015
     assert lm0[8, 1] - lm1[8, 1] > 0.012  # the chin drops
-    torch.testing.assert_close(lm1[27:31], lm0[27:31])  # the nose stays
+    torch.testing.assert_close(lm1[17:48], lm0[17:48])  # brows, nose and eyes stay
 
 
 @pytest.mark.parametrize(("name", "upper", "lower", "open_mm"), [("blink_L", 44, 46, 5.0), ("blink_R", 37, 41, 5.0)])

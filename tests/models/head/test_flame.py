@@ -101,7 +101,7 @@ def test_refuses_globals_outside_the_table(tmp_path, bad_class):
     data = f"c{module}\n{name}\n(S'1+1'\ntR.".encode()
     path = tmp_path / "x.pkl"
     path.write_bytes(data)
-    with pytest.raises(HeadModelError, match="x.pkl"):
+    with pytest.raises(HeadModelError, match=r"x\.pkl"):
         load_flame(path)
 
 

@@ -64,7 +64,7 @@ def test_rigid_transforms_chain():
     # Root turned 90 degrees about z carries the child joint at (1,0,0) to (0,1,0).
     rot = rotation_matrix_from_axis_angle(torch.tensor([[[0, 0, math.pi / 2], [0, 0, 0]]], dtype=torch.float64))
     joints = torch.tensor([[[0.0, 0, 0], [1.0, 0, 0]]], dtype=torch.float64)
-    posed, A = rigid_transforms(rot, joints, [-1, 0])
+    posed, _A = rigid_transforms(rot, joints, [-1, 0])
     torch.testing.assert_close(posed[0, 1], torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64), atol=1e-12,
                                rtol=0)
 
@@ -94,8 +94,8 @@ def test_batch_equals_singles(builtin_model):
             "expression": torch.as_tensor(rng.uniform(0, 1, (B, builtin_model.num_expression))),
             "full_pose": torch.as_tensor(rng.normal(0, 0.3, (B, 5, 3))),
             "translation": torch.as_tensor(rng.normal(0, 0.1, (B, 3)))}
-    v, j, lm = head(**args)
+    v, _j, lm = head(**args)
     for b in range(B):
-        vb, jb, lb = head(**{k: a[b : b + 1] for k, a in args.items()})
+        vb, _jb, lb = head(**{k: a[b : b + 1] for k, a in args.items()})
         torch.testing.assert_close(v[b : b + 1], vb, atol=1e-12, rtol=0)
         torch.testing.assert_close(lm[b : b + 1], lb, atol=1e-12, rtol=0)
