@@ -1,4 +1,4 @@
-// One flat colour: wireframe lines over the mesh and landmark points.
+// One flat colour: landmark points over the mesh.
 #if defined VERTEX_SHADER
 in vec3 in_position;
 uniform mat4 u_view_projection;

@@ -46,6 +46,7 @@ class GLContext:
             stages = stage_sources(read_program(name), name)
             try:
                 self._programs[name] = self.ctx.program(vertex_shader=stages["VERTEX_SHADER"],
+                                                        geometry_shader=stages.get("GEOMETRY_SHADER"),
                                                         fragment_shader=stages["FRAGMENT_SHADER"])
             except moderngl.Error as e:
                 raise GLError(f"shaders/{name}.glsl: {e}") from None

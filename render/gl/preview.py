@@ -134,70 +134,34 @@ class PreviewRenderer:
         center = 0.5 * (v.min(0) + v.max(0))
         radius = float(np.linalg.norm(v - center, axis=1).max()) * 1.05 + 1e-6
         light_vp = light_view_projection(light_dir, center, radius).astype("f4")
-        use_shadows = settings.shadows and settings.pass_name in ("shaded", "wireframe", "shadow")
+        use_shadows = settings.shadows and settings.pass_name != "normals"
         if use_shadows:
-            sfbo = self._shadow(settings.shadow_map_px)
-            sfbo.use()
-            sfbo.clear(depth=1.0)
-            depth_prog = self.gl.program("depth")
-            depth_prog["u_view_projection"].write(light_vp.T.tobytes())
-            vao = self._vao("depth", False)
-            vao.render(moderngl.TRIANGLES)
-            vao.release()
+            self._draw_shadow_map(light_vp, settings.shadow_map_px)
         fbo = self._framebuffer(camera.width_px, camera.height_px, settings.samples)
         fbo.use()
         fbo.clear(*settings.background, 1.0, depth=1.0)
-        if settings.pass_name == "normals":
-            prog = self.gl.program("normals")
-            prog["u_view_projection"].write(vp.T.tobytes())
-            vao = self._vao("normals", True)
-        else:
-            prog = self.gl.program("shaded")
-            prog["u_view_projection"].write(vp.T.tobytes())
-            prog["u_light_view_projection"].write(light_vp.T.tobytes())
-            prog["u_light_dir"].value = tuple(light_dir)
-            prog["u_albedo"].value = settings.albedo
-            prog["u_ambient"].value = settings.ambient
-            prog["u_light_color"].value = settings.light_color
-            texel_m = 2 * radius / settings.shadow_map_px
-            prog["u_shadow_bias"].value = 1.0 / settings.shadow_map_px
-            prog["u_normal_offset"].value = 1.5 * texel_m
-            prog["u_use_shadows"].value = int(use_shadows)
-            prog["u_mode"].value = 1 if settings.pass_name == "shadow" else 0
-            if use_shadows:
-                self._shadow_tex.use(location=0)
-            prog["u_shadow_map"].value = 0
-            vao = self._vao("shaded", True)
+        prog = self.gl.program("surface")
+        prog["u_view_projection"].write(vp.T.tobytes())
+        prog["u_light_view_projection"].write(light_vp.T.tobytes())
+        prog["u_light_dir"].value = tuple(light_dir)
+        prog["u_albedo"].value = settings.albedo
+        prog["u_ambient"].value = settings.ambient
+        prog["u_light_color"].value = settings.light_color
+        prog["u_shadow_bias"].value = 1.0 / settings.shadow_map_px
+        prog["u_normal_offset"].value = 1.5 * 2 * radius / settings.shadow_map_px  # 1.5 shadow-map texels
+        prog["u_use_shadows"].value = int(use_shadows)
+        prog["u_mode"].value = {"shadow": 1, "normals": 2}.get(settings.pass_name, 0)
         wire = settings.wireframe_overlay or settings.pass_name == "wireframe"
-        if wire:
-            ctx.polygon_offset = (1.0, 1.0)
+        prog["u_wire_color"].value = (0.05, 0.05, 0.08, 0.55 if wire else 0.0)
+        prog["u_wire_width_px"].value = 1.0
+        if use_shadows:
+            self._shadow_tex.use(location=0)
+        prog["u_shadow_map"].value = 0
+        vao = self._vao("surface", True)
         vao.render(moderngl.TRIANGLES)
         vao.release()
-        ctx.polygon_offset = (0.0, 0.0)
-        flat = self.gl.program("flat")
-        flat["u_view_projection"].write(vp.T.tobytes())
-        if wire:
-            ctx.wireframe = True
-            ctx.enable(moderngl.BLEND)
-            ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-            flat["u_color"].value = (0.05, 0.05, 0.08, 0.45)
-            flat["u_point_size_px"].value = 1.0
-            vao = self._vao("flat", False)
-            vao.render(moderngl.TRIANGLES)
-            vao.release()
-            ctx.wireframe = False
-            ctx.disable(moderngl.BLEND)
         if settings.landmarks and frame.landmarks is not None and len(frame.landmarks):
-            ctx.enable(moderngl.PROGRAM_POINT_SIZE)
-            ctx.disable(moderngl.DEPTH_TEST)
-            flat["u_color"].value = (0.1, 1.0, 0.3, 1.0)
-            flat["u_point_size_px"].value = max(3.0, camera.height_px / 160)
-            buf = ctx.buffer(np.asarray(frame.landmarks, "f4").tobytes())
-            vao = ctx.vertex_array(flat, [(buf, "3f", "in_position")])
-            vao.render(moderngl.POINTS)
-            vao.release()
-            buf.release()
-            ctx.enable(moderngl.DEPTH_TEST)
+            self._draw_points(frame.landmarks, vp, max(3.0, camera.height_px / 160))
         ctx.copy_framebuffer(self._resolve, fbo)
         w, h = camera.width_px, camera.height_px
         rgb = np.frombuffer(self._resolve.read(components=3, alignment=1), np.uint8).reshape(h, w, 3)
@@ -205,6 +169,31 @@ class PreviewRenderer:
         depth = np.where(depth01 < 1.0, linear_depth_from_ndc(depth01, camera.near_m, camera.far_m), np.inf)
         self.last_depth = depth[::-1].copy()
         return rgb[::-1].copy()  # GL rows run bottom-up
+
+    def _draw_shadow_map(self, light_vp: np.ndarray, px: int) -> None:
+        sfbo = self._shadow(px)
+        sfbo.use()
+        sfbo.clear(depth=1.0)
+        self.gl.program("depth")["u_view_projection"].write(light_vp.T.tobytes())
+        vao = self._vao("depth", False)
+        vao.render(moderngl.TRIANGLES)
+        vao.release()
+
+    def _draw_points(self, points: np.ndarray, vp: np.ndarray, size_px: float) -> None:
+        """Landmarks as green points, drawn over the surface (not hidden by it)."""
+        ctx = self.ctx
+        flat = self.gl.program("flat")
+        flat["u_view_projection"].write(vp.T.tobytes())
+        ctx.enable(moderngl.PROGRAM_POINT_SIZE)
+        ctx.disable(moderngl.DEPTH_TEST)
+        flat["u_color"].value = (0.1, 1.0, 0.3, 1.0)
+        flat["u_point_size_px"].value = size_px
+        buf = ctx.buffer(np.asarray(points, "f4").tobytes())
+        vao = ctx.vertex_array(flat, [(buf, "3f", "in_position")])
+        vao.render(moderngl.POINTS)
+        vao.release()
+        buf.release()
+        ctx.enable(moderngl.DEPTH_TEST)
 
     def release(self) -> None:
         for r in (self._fbo, self._resolve, self._shadow_fbo, self._shadow_tex, self._vbo, self._ibo):

@@ -11,13 +11,14 @@ from pathlib import Path
 SHADER_DIR = Path(__file__).resolve().parents[2] / "shaders"
 GLSL_VERSION = "#version 330 core"
 STAGES = ("VERTEX_SHADER", "FRAGMENT_SHADER")
+OPTIONAL_STAGES = ("GEOMETRY_SHADER",)
 
 #: program -> (attributes, uniforms) that its source must declare.
 PROGRAMS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "shaded": (("in_position", "in_normal"),
-               ("u_view_projection", "u_light_view_projection", "u_light_dir", "u_albedo", "u_ambient",
-                "u_light_color", "u_shadow_bias", "u_normal_offset", "u_use_shadows", "u_mode", "u_shadow_map")),
-    "normals": (("in_position", "in_normal"), ("u_view_projection",)),
+    "surface": (("in_position", "in_normal"),
+                ("u_view_projection", "u_light_view_projection", "u_light_dir", "u_albedo", "u_ambient",
+                 "u_light_color", "u_shadow_bias", "u_normal_offset", "u_use_shadows", "u_mode", "u_shadow_map",
+                 "u_wire_color", "u_wire_width_px")),
     "depth": (("in_position",), ("u_view_projection",)),
     "flat": (("in_position",), ("u_view_projection", "u_point_size_px", "u_color")),
 }
@@ -37,7 +38,8 @@ def read_program(name: str, directory: Path = SHADER_DIR) -> str:
 def stage_sources(source: str, name: str = "program") -> dict[str, str]:
     """The source of each stage: the version line, the stage's define, then the shared file.
 
-    Both stages must be guarded in the file; the line numbers GLSL reports stay those of the file.
+    Vertex and fragment stages must be guarded in the file, a geometry stage may be; the line numbers
+    GLSL reports stay those of the file.
     """
     if "#version" in source:
         raise ShaderSourceError(f"{name}: the version line is added by the loader; remove it from the file")
@@ -46,12 +48,15 @@ def stage_sources(source: str, name: str = "program") -> dict[str, str]:
         if not re.search(rf"#\s*(el)?if\s+defined\s+{stage}\b", source):
             raise ShaderSourceError(f"{name}: no '#if defined {stage}' section")
         out[stage] = f"{GLSL_VERSION}\n#define {stage} 1\n#line 1\n{source}"
+    for stage in OPTIONAL_STAGES:
+        if re.search(rf"#\s*(el)?if\s+defined\s+{stage}\b", source):
+            out[stage] = f"{GLSL_VERSION}\n#define {stage} 1\n#line 1\n{source}"
     return out
 
 
 def declared_names(source: str) -> set[str]:
     """Names of `in` attributes (of the vertex stage) and uniforms declared in a source."""
-    vertex = source.split("FRAGMENT_SHADER")[0]
+    vertex = re.split(r"#\s*(?:el)?if\s+defined\s+(?:GEOMETRY|FRAGMENT)_SHADER", source)[0]
     names = set(re.findall(r"^\s*in\s+\w+\s+(\w+)\s*;", vertex, re.M))
     names |= set(re.findall(r"^\s*uniform\s+\w+\s+(\w+)\s*;", source, re.M))
     return names
