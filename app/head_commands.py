@@ -115,9 +115,20 @@ def save_png(path: Path, rgb: np.ndarray) -> None:
     tmp.replace(path)
 
 
+def portrait_vertices(head: HeadModel) -> np.ndarray:
+    """The neutral vertices a portrait frames: the head down to 8 cm below the lowest landmark (the chin),
+    so a long neck or shoulders do not shrink the face. Fixed per model, so poses compare frame to frame."""
+    ids, bary = head.landmarks.as_barycentric(head.triangles)
+    if len(ids) == 0:
+        return head.template
+    lowest = float((head.template[ids] * bary[..., None]).sum(1)[:, 1].min())
+    keep = head.template[:, 1] >= lowest - 0.08
+    return head.template[keep] if keep.sum() >= 3 else head.template
+
+
 def render_head(gl: GLContext, head: HeadModel, verts: np.ndarray, lmks: np.ndarray, cfg: PreviewConfig
                 ) -> np.ndarray:
-    camera = framing_camera(head.template, cfg.yaw_deg, cfg.pitch_deg, width_px=cfg.size[0],
+    camera = framing_camera(portrait_vertices(head), cfg.yaw_deg, cfg.pitch_deg, width_px=cfg.size[0],
                             height_px=cfg.size[1])
     settings = PreviewSettings(pass_name=cfg.pass_, landmarks=cfg.landmarks, shadows=cfg.shadows)
     renderer = PreviewRenderer(gl)
