@@ -80,10 +80,13 @@ def main() -> None:
             results["skinning_meshes_per_s"][f"{name} ({m.num_vertices} v) batch {batch}"] = round(rate, 1)
             print(f"skinning {name:8s} batch {batch:3d}: {rate:8.1f} meshes/s")
     gl = GLContext.headless()
-    full = PreviewSettings(pass_name="wireframe", shadows=True)
+    cases = {
+        "shadows+wireframe, 4x MSAA": PreviewSettings(pass_name="wireframe", shadows=True, samples=4),
+        "shadows+wireframe, no MSAA": PreviewSettings(pass_name="wireframe", shadows=True, samples=1),
+        "shaded only, no MSAA": PreviewSettings(shadows=False, samples=1),
+    }
     for name, m in models.items():
-        for label, settings in (("shaded+shadows+wireframe", full), ("shaded, no shadows", PreviewSettings(
-                shadows=False))):
+        for label, settings in cases.items():
             fps = gl_fps(gl, m, (1024, 768), settings)
             results["gl_fps"][f"{name} 1024x768 {label}"] = round(fps, 1)
             print(f"GL {name:8s} 1024x768 {label}: {fps:6.1f} fps (with read-back)")

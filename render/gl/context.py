@@ -19,7 +19,7 @@ class GLContext:
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
-        self._programs: dict[str, moderngl.Program] = {}
+        self._programs: dict[tuple[str, tuple[str, ...]], moderngl.Program] = {}
 
     @classmethod
     def headless(cls) -> GLContext:
@@ -39,18 +39,20 @@ class GLContext:
     def renderer(self) -> str:
         return self.ctx.info.get("GL_RENDERER", "?")
 
-    def program(self, name: str) -> moderngl.Program:
-        if name not in self._programs:
+    def program(self, name: str, defines: tuple[str, ...] = ()) -> moderngl.Program:
+        """The compiled program of shaders/NAME.glsl with the given preprocessor defines (one variant each)."""
+        key = (name, tuple(sorted(defines)))
+        if key not in self._programs:
             if name not in PROGRAMS:
                 raise GLError(f"unknown program '{name}'")
-            stages = stage_sources(read_program(name), name)
+            stages = stage_sources(read_program(name), name, key[1])
             try:
-                self._programs[name] = self.ctx.program(vertex_shader=stages["VERTEX_SHADER"],
+                self._programs[key] = self.ctx.program(vertex_shader=stages["VERTEX_SHADER"],
                                                         geometry_shader=stages.get("GEOMETRY_SHADER"),
                                                         fragment_shader=stages["FRAGMENT_SHADER"])
             except moderngl.Error as e:
-                raise GLError(f"shaders/{name}.glsl: {e}") from None
-        return self._programs[name]
+                raise GLError(f"shaders/{name}.glsl {' '.join(defines)}: {e}") from None
+        return self._programs[key]
 
     def release(self) -> None:
         for p in self._programs.values():

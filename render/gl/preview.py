@@ -74,15 +74,16 @@ class PreviewRenderer:
         self.last_depth: np.ndarray | None = None
 
     def _framebuffer(self, w: int, h: int, samples: int) -> moderngl.Framebuffer:
+        """The framebuffer to draw into; without multisampling it is the one read back."""
+        samples = min(samples, self.ctx.max_samples) if samples > 1 else 0
         if self._size != (w, h, samples):
-            for fb in (self._fbo, self._resolve):
-                if fb is not None:
-                    fb.release()
-            samples = min(samples, self.ctx.max_samples) if samples > 1 else 0
-            self._fbo = self.ctx.framebuffer(self.ctx.renderbuffer((w, h), 4, samples=samples),
-                                             self.ctx.depth_renderbuffer((w, h), samples=samples))
+            for fb in {self._fbo, self._resolve} - {None}:
+                fb.release()
             self._resolve = self.ctx.framebuffer(self.ctx.renderbuffer((w, h), 4),
                                                  self.ctx.depth_texture((w, h)))
+            self._fbo = self._resolve if samples == 0 else self.ctx.framebuffer(
+                self.ctx.renderbuffer((w, h), 4, samples=samples),
+                self.ctx.depth_renderbuffer((w, h), samples=samples))
             self._size = (w, h, samples)
         return self._fbo
 
@@ -113,16 +114,15 @@ class PreviewRenderer:
             self._vbo.write(data)
             self._ibo.write(np.asarray(frame.triangles, np.int32).tobytes())
 
-    def _vao(self, program: str, with_normals: bool) -> moderngl.VertexArray:
-        prog = self.gl.program(program)
+    def _vao(self, prog: moderngl.Program, with_normals: bool) -> moderngl.VertexArray:
         layout = (self._vbo, "3f 3f", "in_position", "in_normal") if with_normals else \
             (self._vbo, "3f 12x", "in_position")
         return self.ctx.vertex_array(prog, [layout], index_buffer=self._ibo)
 
-    def render(self, frame: MeshFrame, camera: Camera, settings: PreviewSettings = PreviewSettings()
-               ) -> np.ndarray:
-        """RGB image (H,W,3) uint8, top row first; the camera depth (metres, inf for background)
-        is kept in `last_depth`."""
+    def render(self, frame: MeshFrame, camera: Camera, settings: PreviewSettings = PreviewSettings(),
+               read_depth: bool = False) -> np.ndarray:
+        """RGB image (H,W,3) uint8, top row first. With read_depth, the camera depth (metres along the
+        view axis, inf for background) is kept in `last_depth`."""
         self._upload(frame)
         ctx = self.ctx
         ctx.enable(moderngl.DEPTH_TEST)
@@ -140,7 +140,8 @@ class PreviewRenderer:
         fbo = self._framebuffer(camera.width_px, camera.height_px, settings.samples)
         fbo.use()
         fbo.clear(*settings.background, 1.0, depth=1.0)
-        prog = self.gl.program("surface")
+        wire = settings.wireframe_overlay or settings.pass_name == "wireframe"
+        prog = self.gl.program("surface", ("WIREFRAME",) if wire else ())
         prog["u_view_projection"].write(vp.T.tobytes())
         prog["u_light_view_projection"].write(light_vp.T.tobytes())
         prog["u_light_dir"].value = tuple(light_dir)
@@ -151,31 +152,34 @@ class PreviewRenderer:
         prog["u_normal_offset"].value = 1.5 * 2 * radius / settings.shadow_map_px  # 1.5 shadow-map texels
         prog["u_use_shadows"].value = int(use_shadows)
         prog["u_mode"].value = {"shadow": 1, "normals": 2}.get(settings.pass_name, 0)
-        wire = settings.wireframe_overlay or settings.pass_name == "wireframe"
-        prog["u_wire_color"].value = (0.05, 0.05, 0.08, 0.55 if wire else 0.0)
-        prog["u_wire_width_px"].value = 1.0
+        if wire:
+            prog["u_wire_color"].value = (0.05, 0.05, 0.08, 0.55)
+            prog["u_wire_width_px"].value = 1.0
         if use_shadows:
             self._shadow_tex.use(location=0)
         prog["u_shadow_map"].value = 0
-        vao = self._vao("surface", True)
+        vao = self._vao(prog, True)
         vao.render(moderngl.TRIANGLES)
         vao.release()
         if settings.landmarks and frame.landmarks is not None and len(frame.landmarks):
             self._draw_points(frame.landmarks, vp, max(3.0, camera.height_px / 160))
-        ctx.copy_framebuffer(self._resolve, fbo)
+        if fbo is not self._resolve:
+            ctx.copy_framebuffer(self._resolve, fbo)
         w, h = camera.width_px, camera.height_px
         rgb = np.frombuffer(self._resolve.read(components=3, alignment=1), np.uint8).reshape(h, w, 3)
-        depth01 = np.frombuffer(self._resolve.depth_attachment.read(alignment=1), np.float32).reshape(h, w)
-        depth = np.where(depth01 < 1.0, linear_depth_from_ndc(depth01, camera.near_m, camera.far_m), np.inf)
-        self.last_depth = depth[::-1].copy()
+        if read_depth:
+            depth01 = np.frombuffer(self._resolve.depth_attachment.read(alignment=1), np.float32).reshape(h, w)
+            depth = np.where(depth01 < 1.0, linear_depth_from_ndc(depth01, camera.near_m, camera.far_m), np.inf)
+            self.last_depth = depth[::-1].copy()
         return rgb[::-1].copy()  # GL rows run bottom-up
 
     def _draw_shadow_map(self, light_vp: np.ndarray, px: int) -> None:
         sfbo = self._shadow(px)
         sfbo.use()
         sfbo.clear(depth=1.0)
-        self.gl.program("depth")["u_view_projection"].write(light_vp.T.tobytes())
-        vao = self._vao("depth", False)
+        prog = self.gl.program("depth")
+        prog["u_view_projection"].write(light_vp.T.tobytes())
+        vao = self._vao(prog, False)
         vao.render(moderngl.TRIANGLES)
         vao.release()
 
@@ -196,6 +200,5 @@ class PreviewRenderer:
         ctx.enable(moderngl.DEPTH_TEST)
 
     def release(self) -> None:
-        for r in (self._fbo, self._resolve, self._shadow_fbo, self._shadow_tex, self._vbo, self._ibo):
-            if r is not None:
-                r.release()
+        for r in {self._fbo, self._resolve, self._shadow_fbo, self._shadow_tex, self._vbo, self._ibo} - {None}:
+            r.release()

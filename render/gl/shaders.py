@@ -35,22 +35,25 @@ def read_program(name: str, directory: Path = SHADER_DIR) -> str:
     return path.read_text()
 
 
-def stage_sources(source: str, name: str = "program") -> dict[str, str]:
+def stage_sources(source: str, name: str = "program", defines: tuple[str, ...] = ()) -> dict[str, str]:
     """The source of each stage: the version line, the stage's define, then the shared file.
 
-    Vertex and fragment stages must be guarded in the file, a geometry stage may be; the line numbers
-    GLSL reports stay those of the file.
+    Vertex and fragment stages must be guarded in the file, a geometry stage may be (and is compiled
+    when its guard's other conditions, such as `&& defined WIREFRAME`, hold for `defines`); the line
+    numbers GLSL reports stay those of the file.
     """
+    header = "".join(f"#define {d} 1\n" for d in defines)
     if "#version" in source:
         raise ShaderSourceError(f"{name}: the version line is added by the loader; remove it from the file")
     out = {}
     for stage in STAGES:
         if not re.search(rf"#\s*(el)?if\s+defined\s+{stage}\b", source):
             raise ShaderSourceError(f"{name}: no '#if defined {stage}' section")
-        out[stage] = f"{GLSL_VERSION}\n#define {stage} 1\n#line 1\n{source}"
+        out[stage] = f"{GLSL_VERSION}\n#define {stage} 1\n{header}#line 1\n{source}"
     for stage in OPTIONAL_STAGES:
-        if re.search(rf"#\s*(el)?if\s+defined\s+{stage}\b", source):
-            out[stage] = f"{GLSL_VERSION}\n#define {stage} 1\n#line 1\n{source}"
+        guard = re.search(rf"#\s*(?:el)?if\s+defined\s+{stage}\b(.*)", source)
+        if guard and all(d in defines for d in re.findall(r"defined\s+(\w+)", guard.group(1))):
+            out[stage] = f"{GLSL_VERSION}\n#define {stage} 1\n{header}#line 1\n{source}"
     return out
 
 

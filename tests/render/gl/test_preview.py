@@ -61,7 +61,7 @@ def test_normals_as_colours(renderer):
 @pytest.mark.gl
 def test_depth_read_back(renderer):
     v, f = quad(5.0, 0.0)
-    renderer.render(MeshFrame(v, f), camera_at(2.0), FLAT)
+    renderer.render(MeshFrame(v, f), camera_at(2.0), FLAT, read_depth=True)
     # Along the optical axis the plane is 2 m away; off axis the depth (along -z) is still 2 m.
     np.testing.assert_allclose(renderer.last_depth, 2.0, atol=1e-4)
 
@@ -154,7 +154,7 @@ def test_depth_matches_pyrender(renderer, builtin_model, tmp_path):
     w, h = 160, 120
     cam = framing_camera(builtin_model.template, yaw_deg=35, pitch_deg=10, width_px=w, height_px=h)
     rgb = renderer.render(MeshFrame(builtin_model.template, builtin_model.triangles), cam,
-                          PreviewSettings(samples=1, shadows=False))
+                          PreviewSettings(samples=1, shadows=False), read_depth=True)
     # pyrender culls back faces (the head's inside, seen through the mouth and eye slits); our shader
     # paints them one fixed colour, so those pixels are left out of the comparison.
     back_facing = np.all(np.abs(rgb.astype(int) - [20, 8, 8]) <= 1, axis=2)

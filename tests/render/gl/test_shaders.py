@@ -26,3 +26,11 @@ def test_missing_stage_guard_and_version_line_are_errors():
         stage_sources("#if defined VERTEX_SHADER\n#endif\n", "t")
     with pytest.raises(ShaderSourceError, match="version line"):
         stage_sources("#version 330\n#if defined VERTEX_SHADER\n#elif defined FRAGMENT_SHADER\n#endif", "t")
+
+
+def test_geometry_stage_only_for_its_defines():
+    src = ("#if defined VERTEX_SHADER\n#elif defined GEOMETRY_SHADER && defined WIREFRAME\n"
+           "#elif defined FRAGMENT_SHADER\n#endif\n")
+    assert "GEOMETRY_SHADER" not in stage_sources(src, "t")
+    stages = stage_sources(src, "t", ("WIREFRAME",))
+    assert "#define WIREFRAME 1" in stages["GEOMETRY_SHADER"] and "#define WIREFRAME 1" in stages["VERTEX_SHADER"]
