@@ -10,11 +10,11 @@ run: $(STAMP)
 	$(VENV)/bin/avatar-studio studio
 
 test: $(STAMP)
-	$(VENV)/bin/ruff check app render models tests scripts
+	$(VENV)/bin/ruff check app render models tests scripts benchmarks
 	$(PY) -m pytest -q
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check app render models tests scripts
+	$(VENV)/bin/ruff check app render models tests scripts benchmarks
 
 setup: $(STAMP)
 
