@@ -123,6 +123,22 @@ class PreviewRenderer:
                read_depth: bool = False) -> np.ndarray:
         """RGB image (H,W,3) uint8, top row first. With read_depth, the camera depth (metres along the
         view axis, inf for background) is kept in `last_depth`."""
+        result = self.draw(frame, camera, settings)
+        w, h = camera.width_px, camera.height_px
+        rgb = np.frombuffer(result.read(components=3, alignment=1), np.uint8).reshape(h, w, 3)
+        if read_depth:
+            depth01 = np.frombuffer(result.depth_attachment.read(alignment=1), np.float32).reshape(h, w)
+            depth = np.where(depth01 < 1.0, linear_depth_from_ndc(depth01, camera.near_m, camera.far_m), np.inf)
+            self.last_depth = depth[::-1].copy()
+        return rgb[::-1].copy()  # GL rows run bottom-up
+
+    def present(self, target: moderngl.Framebuffer) -> None:
+        """Copy the last drawn image into another framebuffer of the same size (a window's screen)."""
+        self.ctx.copy_framebuffer(target, self._resolve)
+
+    def draw(self, frame: MeshFrame, camera: Camera, settings: PreviewSettings = PreviewSettings()
+             ) -> moderngl.Framebuffer:
+        """Draw without reading back; returns the single-sample framebuffer that holds the image."""
         self._upload(frame)
         ctx = self.ctx
         ctx.enable(moderngl.DEPTH_TEST)
@@ -165,13 +181,7 @@ class PreviewRenderer:
             self._draw_points(frame.landmarks, vp, max(3.0, camera.height_px / 160))
         if fbo is not self._resolve:
             ctx.copy_framebuffer(self._resolve, fbo)
-        w, h = camera.width_px, camera.height_px
-        rgb = np.frombuffer(self._resolve.read(components=3, alignment=1), np.uint8).reshape(h, w, 3)
-        if read_depth:
-            depth01 = np.frombuffer(self._resolve.depth_attachment.read(alignment=1), np.float32).reshape(h, w)
-            depth = np.where(depth01 < 1.0, linear_depth_from_ndc(depth01, camera.near_m, camera.far_m), np.inf)
-            self.last_depth = depth[::-1].copy()
-        return rgb[::-1].copy()  # GL rows run bottom-up
+        return self._resolve
 
     def _draw_shadow_map(self, light_vp: np.ndarray, px: int) -> None:
         sfbo = self._shadow(px)
