@@ -5,7 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from app import head_commands
+from app import capture_commands, head_commands
+from models.synthetic import SynthConfig
 
 
 @dataclass(frozen=True)
@@ -24,4 +25,8 @@ COMMANDS = (
             head_commands.PreviewConfig, head_commands.run_preview),
     Command("mesh", "Write the posed guide mesh as OBJ or PLY, in the head model's vertex order.",
             head_commands.MeshConfig, head_commands.run_mesh),
+    Command("synth", "Render a synthetic capture of a head model under a lighting scene, with ground truth.",
+            SynthConfig, capture_commands.run_synth),
+    Command("dataset", "Validate a capture dataset (ours, NerFACE's or IMavatar's) and summarise its splits.",
+            capture_commands.DatasetConfig, capture_commands.run_dataset, positional=("dataset",)),
 )

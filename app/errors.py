@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from models.dataset import DatasetError
 from models.head.controls import ControlsError
 from models.head.model import HeadModelError
 
@@ -11,4 +12,4 @@ class UserInputError(ValueError):
 
 
 #: Exceptions that are the user's input being wrong, not the program failing.
-INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError)
+INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError)

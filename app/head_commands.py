@@ -13,7 +13,7 @@ from PIL import Image
 from app.errors import UserInputError
 from models.head.controls import Controls, ControlsError, load_controls
 from models.head.head import Head, posed_mesh
-from models.head.model import HeadModel
+from models.head.model import HeadModel, portrait_vertices
 from models.head.sources import load_head
 from render.camera import framing_camera
 from render.gl.context import GLContext
@@ -113,17 +113,6 @@ def save_png(path: Path, rgb: np.ndarray) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     Image.fromarray(rgb).save(tmp, format="PNG")
     tmp.replace(path)
-
-
-def portrait_vertices(head: HeadModel) -> np.ndarray:
-    """The neutral vertices a portrait frames: the head down to 8 cm below the lowest landmark (the chin),
-    so a long neck or shoulders do not shrink the face. Fixed per model, so poses compare frame to frame."""
-    ids, bary = head.landmarks.as_barycentric(head.triangles)
-    if len(ids) == 0:
-        return head.template
-    lowest = float((head.template[ids] * bary[..., None]).sum(1)[:, 1].min())
-    keep = head.template[:, 1] >= lowest - 0.08
-    return head.template[keep] if keep.sum() >= 3 else head.template
 
 
 def render_head(gl: GLContext, head: HeadModel, verts: np.ndarray, lmks: np.ndarray, cfg: PreviewConfig

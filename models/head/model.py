@@ -134,3 +134,15 @@ def check_head_model(m: HeadModel) -> None:
         fail("landmark vertex ids out of range")
     if lm.faces is not None and (lm.faces.min() < 0 or lm.faces.max() >= len(m.triangles)):
         fail("landmark faces out of range")
+
+
+def portrait_vertices(head: HeadModel, vertices: np.ndarray | None = None) -> np.ndarray:
+    """The vertices a portrait frames: the head down to 8 cm below its lowest landmark (the chin), so a
+    long neck or shoulders do not shrink the face. Chosen on the neutral template, so poses compare."""
+    v = head.template if vertices is None else vertices
+    ids, bary = head.landmarks.as_barycentric(head.triangles)
+    if len(ids) == 0:
+        return v
+    lowest = float((head.template[ids] * bary[..., None]).sum(1)[:, 1].min())
+    keep = head.template[:, 1] >= lowest - 0.08
+    return v[keep] if keep.sum() >= 3 else v

@@ -9,8 +9,9 @@ from typing import Literal
 import moderngl
 import numpy as np
 
-from render.camera import Camera, linear_depth_from_ndc, look_at, orthographic
+from render.camera import Camera, linear_depth_from_ndc
 from render.gl.context import GLContext
+from render.gl.shadow import ShadowMap, bounding_sphere, light_view_projection
 from render.mesh import vertex_normals
 
 PassName = Literal["shaded", "normals", "wireframe", "shadow"]
@@ -50,13 +51,6 @@ class MeshFrame:
     landmarks: np.ndarray | None = None  # (L,3)
 
 
-def light_view_projection(light_dir: np.ndarray, center: np.ndarray, radius_m: float) -> np.ndarray:
-    """Orthographic light camera that sees a sphere of `radius_m` about `center` from `light_dir`."""
-    d = np.asarray(light_dir, np.float64) / np.linalg.norm(light_dir)
-    eye = center + d * (3 * radius_m)
-    return orthographic(radius_m, radius_m, radius_m, 5 * radius_m) @ look_at(eye, center)
-
-
 class PreviewRenderer:
     """Draws MeshFrames; owns its GL buffers, reuses them while the mesh size stays the same."""
 
@@ -66,8 +60,7 @@ class PreviewRenderer:
         self._fbo: moderngl.Framebuffer | None = None
         self._resolve: moderngl.Framebuffer | None = None
         self._size: tuple[int, int, int] = (0, 0, 0)
-        self._shadow_fbo: moderngl.Framebuffer | None = None
-        self._shadow_tex: moderngl.Texture | None = None
+        self._shadow = ShadowMap(gl)
         self._vbo: moderngl.Buffer | None = None
         self._ibo: moderngl.Buffer | None = None
         self._vbo_size = -1
@@ -86,18 +79,6 @@ class PreviewRenderer:
                 self.ctx.depth_renderbuffer((w, h), samples=samples))
             self._size = (w, h, samples)
         return self._fbo
-
-    def _shadow(self, px: int) -> moderngl.Framebuffer:
-        if self._shadow_tex is None or self._shadow_tex.size != (px, px):
-            if self._shadow_fbo is not None:
-                self._shadow_fbo.release()
-                self._shadow_tex.release()
-            self._shadow_tex = self.ctx.depth_texture((px, px))
-            self._shadow_tex.compare_func = "<="
-            self._shadow_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            self._shadow_tex.repeat_x = self._shadow_tex.repeat_y = False
-            self._shadow_fbo = self.ctx.framebuffer(depth_attachment=self._shadow_tex)
-        return self._shadow_fbo
 
     def _upload(self, frame: MeshFrame) -> None:
         v = np.asarray(frame.vertices, np.float32)
@@ -146,13 +127,11 @@ class PreviewRenderer:
         vp = (camera.projection @ camera.view).astype("f4")
         light_dir = np.asarray(settings.light_dir, np.float64)
         light_dir /= np.linalg.norm(light_dir)
-        v = np.asarray(frame.vertices, np.float64)
-        center = 0.5 * (v.min(0) + v.max(0))
-        radius = float(np.linalg.norm(v - center, axis=1).max()) * 1.05 + 1e-6
+        center, radius = bounding_sphere(frame.vertices)
         light_vp = light_view_projection(light_dir, center, radius).astype("f4")
         use_shadows = settings.shadows and settings.pass_name != "normals"
         if use_shadows:
-            self._draw_shadow_map(light_vp, settings.shadow_map_px)
+            shadow_tex = self._shadow.draw(self._vbo, "3f 12x", self._ibo, light_vp, settings.shadow_map_px)
         fbo = self._framebuffer(camera.width_px, camera.height_px, settings.samples)
         fbo.use()
         fbo.clear(*settings.background, 1.0, depth=1.0)
@@ -172,7 +151,7 @@ class PreviewRenderer:
             prog["u_wire_color"].value = (0.05, 0.05, 0.08, 0.55)
             prog["u_wire_width_px"].value = 1.0
         if use_shadows:
-            self._shadow_tex.use(location=0)
+            shadow_tex.use(location=0)
         prog["u_shadow_map"].value = 0
         vao = self._vao(prog, True)
         vao.render(moderngl.TRIANGLES)
@@ -182,16 +161,6 @@ class PreviewRenderer:
         if fbo is not self._resolve:
             ctx.copy_framebuffer(self._resolve, fbo)
         return self._resolve
-
-    def _draw_shadow_map(self, light_vp: np.ndarray, px: int) -> None:
-        sfbo = self._shadow(px)
-        sfbo.use()
-        sfbo.clear(depth=1.0)
-        prog = self.gl.program("depth")
-        prog["u_view_projection"].write(light_vp.T.tobytes())
-        vao = self._vao(prog, False)
-        vao.render(moderngl.TRIANGLES)
-        vao.release()
 
     def _draw_points(self, points: np.ndarray, vp: np.ndarray, size_px: float) -> None:
         """Landmarks as green points, drawn over the surface (not hidden by it)."""
@@ -210,5 +179,6 @@ class PreviewRenderer:
         ctx.enable(moderngl.DEPTH_TEST)
 
     def release(self) -> None:
-        for r in {self._fbo, self._resolve, self._shadow_fbo, self._shadow_tex, self._vbo, self._ibo} - {None}:
+        for r in {self._fbo, self._resolve, self._vbo, self._ibo} - {None}:
             r.release()
+        self._shadow.release()

@@ -20,6 +20,12 @@ PROGRAMS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
                  "u_light_color", "u_shadow_bias", "u_normal_offset", "u_use_shadows", "u_mode", "u_shadow_map",
                  "u_wire_color", "u_wire_width_px")),
     "depth": (("in_position",), ("u_view_projection",)),
+    "capture": (("in_position", "in_normal", "in_canonical", "in_eye"),
+                ("u_view_projection", "u_view", "u_light_view_projection", "u_normal_offset", "u_camera_position",
+                 "u_sh", "u_light_dir", "u_light_color", "u_use_diffuse", "u_use_specular", "u_use_shadows",
+                 "u_shininess", "u_shadow_bias", "u_shadow_map", "u_skin_color", "u_lip_color", "u_brow_color",
+                 "u_iris_color", "u_lip_center", "u_lip_radii", "u_brow_center", "u_brow_radii", "u_nose_top",
+                 "u_nose_tip", "u_forehead_center", "u_forehead_radii", "u_specular_range", "u_seed")),
     "flat": (("in_position",), ("u_view_projection", "u_point_size_px", "u_color")),
 }
 
@@ -61,5 +67,5 @@ def declared_names(source: str) -> set[str]:
     """Names of `in` attributes (of the vertex stage) and uniforms declared in a source."""
     vertex = re.split(r"#\s*(?:el)?if\s+defined\s+(?:GEOMETRY|FRAGMENT)_SHADER", source)[0]
     names = set(re.findall(r"^\s*in\s+\w+\s+(\w+)\s*;", vertex, re.M))
-    names |= set(re.findall(r"^\s*uniform\s+\w+\s+(\w+)\s*;", source, re.M))
+    names |= set(re.findall(r"^\s*uniform\s+\w+\s+(\w+)\s*(?:\[\d+\])?\s*;", source, re.M))
     return names
