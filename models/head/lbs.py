@@ -18,9 +18,9 @@ def rotation_matrix_from_axis_angle(rot_vecs: torch.Tensor) -> torch.Tensor:
     rot_vecs: (..., 3) radians. Returns (..., 3, 3). Finite, with finite gradients, at t = 0 (the
     coefficients switch to their Taylor series there, 1 - t^2/6 and 1/2 - t^2/24) and at t = pi, 2 pi.
 
-    >>> R = rotation_matrix_from_axis_angle(torch.tensor([0.0, 0.0, torch.pi / 2]))
-    >>> R @ torch.tensor([1.0, 0.0, 0.0])  # +x turns to +y
-    tensor([-4.3711e-08,  1.0000e+00,  0.0000e+00])
+    >>> R = rotation_matrix_from_axis_angle(torch.tensor([0.0, 0.0, torch.pi / 2], dtype=torch.float64))
+    >>> (R @ torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64)).round(decimals=12)  # +x turns to +y
+    tensor([0., 1., 0.], dtype=torch.float64)
     """
     theta2 = (rot_vecs * rot_vecs).sum(-1, keepdim=True)  # (...,1)
     small = theta2 < _SMALL_ANGLE**2
