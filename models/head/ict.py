@@ -7,12 +7,11 @@ their centroid, and the jaw opens through the `jawOpen` blend shape.
 from __future__ import annotations
 
 import re
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from models.head.meshio import read_obj
+from models.head.meshio import read_npz, read_obj
 from models.head.model import HeadModel, HeadModelError, Landmarks
 
 ICT_JOINTS = ("root", "eye_l", "eye_r")
@@ -72,16 +71,7 @@ def build_ict(
 def load_ict_npz(path: str | Path) -> HeadModel:
     """The light ICT model as one npz (see shared data's README for its keys)."""
     path = Path(path)
-    if not path.is_file():
-        raise HeadModelError(f"{path}: no such file")
-    try:
-        with np.load(path, allow_pickle=False) as d:
-            missing = [k for k in _NPZ_KEYS if k not in d.files]
-            if missing:
-                raise HeadModelError(f"{path}: ICT npz lacks {', '.join(missing)}")
-            a = {k: d[k] for k in d.files}
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as e:
-        raise HeadModelError(f"{path}: not a readable npz ({type(e).__name__}: {e})") from None
+    a = read_npz(path, _NPZ_KEYS, "ICT")
     regions = dict(ICT_REGIONS)
     if "region_names" in a:
         regions = {str(n): (int(lo), int(hi)) for n, (lo, hi) in zip(a["region_names"], a["region_ranges"],

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,21 @@ def read_obj(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     if f.size and (f.min() < 0 or f.max() >= len(v)):
         raise HeadModelError(f"{path}: OBJ face indices outside its {len(v)} vertices")
     return v, f
+
+
+def read_npz(path: str | Path, required: tuple[str, ...], kind: str, missing_hint: str = "") -> dict[str, np.ndarray]:
+    """Every array of an npz (no pickles), after checking the `required` keys; HeadModelError otherwise."""
+    path = Path(path)
+    if not path.is_file():
+        raise HeadModelError(f"{path}: no such file{missing_hint}")
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            missing = [k for k in required if k not in d.files]
+            if missing:
+                raise HeadModelError(f"{path}: {kind} npz lacks {', '.join(missing)}")
+            return {k: d[k] for k in d.files}
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as e:
+        raise HeadModelError(f"{path}: not a readable npz ({type(e).__name__}: {e})") from None
 
 
 def _atomic_write(path: Path, data: bytes) -> None:

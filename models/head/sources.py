@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
-
-import numpy as np
 
 from models.head.builtin import SHIPPED_PATH, head_model_from_arrays
 from models.head.flame import load_flame
 from models.head.ict import load_ict_folder, load_ict_npz
+from models.head.meshio import read_npz
 from models.head.model import HeadModel, HeadModelError
 
 _BUILTIN_KEYS = ("template", "triangles", "shape_basis", "expr_basis", "expr_names", "J_regressor",
@@ -19,16 +17,7 @@ _BUILTIN_KEYS = ("template", "triangles", "shape_basis", "expr_basis", "expr_nam
 def load_builtin(path: str | Path = SHIPPED_PATH) -> HeadModel:
     """The built-in head from its npz (as written by models.head.builtin)."""
     path = Path(path)
-    if not path.is_file():
-        raise HeadModelError(f"{path}: no such file (rebuild it: python -m models.head.builtin)")
-    try:
-        with np.load(path, allow_pickle=False) as d:
-            missing = [k for k in _BUILTIN_KEYS if k not in d.files]
-            if missing:
-                raise HeadModelError(f"{path}: built-in head npz lacks {', '.join(missing)}")
-            arrays = {k: d[k] for k in d.files}
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as e:
-        raise HeadModelError(f"{path}: not a readable npz ({type(e).__name__}: {e})") from None
+    arrays = read_npz(path, _BUILTIN_KEYS, "built-in head", " (rebuild it: python -m models.head.builtin)")
     try:
         return head_model_from_arrays(arrays)
     except HeadModelError as e:

@@ -20,7 +20,7 @@ from PIL import Image
 from app.cli import main
 from models.head.controls import load_controls
 from models.head.head import Head, posed_mesh
-from tests.models.head.flame_files import flame_arrays, write_flame_2023
+from tests.models.head.flame_files import CommandRunningObject, flame_arrays, write_flame_2023
 
 CLI = [sys.executable, "-m", "app.cli"]
 
@@ -127,18 +127,10 @@ def test_bad_input_exit_2_one_line(tmp_path, case):
     assert out.read_text() == "the user's file\n"  # nothing the user had is overwritten
 
 
-class _Evil:
-    def __init__(self, marker):
-        self.marker = marker
-
-    def __reduce__(self):
-        return (os.system, (f"touch {self.marker}",))
-
-
 def test_malicious_pickle_refused_with_exit_2_and_nothing_runs(tmp_path):
     marker = tmp_path / "ran"
     evil = tmp_path / "generic_model.pkl"
-    evil.write_bytes(pickle.dumps({"f": _Evil(marker)}))
+    evil.write_bytes(pickle.dumps({"f": CommandRunningObject(marker)}))
     r = run_cli("preview", "--head", f"flame:{evil}", "--out", tmp_path / "x.png")
     assert r.returncode == 2
     assert "unsafe pickle" in r.stderr and "generic_model.pkl" in r.stderr

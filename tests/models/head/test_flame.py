@@ -3,7 +3,6 @@ tests write (both the 2020 chumpy layout and the 2023 numpy layout), and the res
 
 from __future__ import annotations
 
-import os
 import pickle
 
 import numpy as np
@@ -14,7 +13,12 @@ from models.head.controls import Controls
 from models.head.flame import load_flame
 from models.head.head import Head
 from models.head.model import HeadModelError
-from tests.models.head.flame_files import flame_arrays, write_flame_2020, write_flame_2023
+from tests.models.head.flame_files import (
+    CommandRunningObject,
+    flame_arrays,
+    write_flame_2020,
+    write_flame_2023,
+)
 
 
 @pytest.fixture(scope="module")
@@ -76,18 +80,10 @@ def test_2020_and_2023_layouts_give_the_same_model(flame_dir):
     assert a.joint_names == ("root", "neck", "jaw", "eye_l", "eye_r")
 
 
-class _RunsCommand:
-    def __init__(self, marker):
-        self.marker = marker
-
-    def __reduce__(self):
-        return (os.system, (f"touch {self.marker}",))
-
-
 def test_pickle_that_would_run_a_command_is_refused(tmp_path):
     marker = tmp_path / "pwned"
     bad = tmp_path / "generic_model.pkl"
-    bad.write_bytes(pickle.dumps({"v_template": _RunsCommand(marker)}, protocol=2))
+    bad.write_bytes(pickle.dumps({"v_template": CommandRunningObject(marker)}, protocol=2))
     with pytest.raises(HeadModelError, match=r"generic_model\.pkl: unsafe pickle.*(posix|os)\.system"):
         load_flame(bad)
     assert not marker.exists()
