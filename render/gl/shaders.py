@@ -20,6 +20,7 @@ PROGRAMS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
                  "u_light_color", "u_shadow_bias", "u_normal_offset", "u_use_shadows", "u_mode", "u_shadow_map",
                  "u_wire_color", "u_wire_width_px")),
     "depth": (("in_position",), ("u_view_projection",)),
+    "raster": (("in_position",), ("u_view_projection", "u_view")),
     "capture": (("in_position", "in_normal", "in_canonical", "in_eye"),
                 ("u_view_projection", "u_view", "u_light_view_projection", "u_normal_offset", "u_camera_position",
                  "u_sh", "u_light_dir", "u_light_color", "u_use_diffuse", "u_use_specular", "u_use_shadows",
