@@ -72,7 +72,8 @@ def save_checkpoint(folder: str | Path, meta: dict, weights: dict[str, torch.Ten
         tensors["train_state"] = train_state
     for kind, name in files.items():
         contiguous = {k: v.detach().cpu().contiguous() for k, v in tensors[kind].items()}
-        _atomic(folder, name, lambda tmp, c=contiguous: save_file(c, tmp, metadata={"format": FORMAT, "step": str(step)}))
+        metadata = {"format": FORMAT, "step": str(step)}
+        _atomic(folder, name, lambda tmp, c=contiguous, m=metadata: save_file(c, tmp, metadata=m))
     record = {**meta, "format": FORMAT, "step": step, "files": files}
     text = json.dumps(record, indent=1)
     _atomic(folder, "avatar.json", lambda tmp: Path(tmp).write_text(text))

@@ -65,7 +65,7 @@ def test_bad_folders_name_the_problem(tmp_path):
     meta = json.loads((tmp_path / "avatar.json").read_text())
     meta["files"]["weights"] = "../../etc/passwd"
     (tmp_path / "avatar.json").write_text(json.dumps(meta))
-    with pytest.raises(CheckpointError, match="files.weights' must name a file beside it"):
+    with pytest.raises(CheckpointError, match=r"files\.weights' must name a file beside it"):
         load_checkpoint(tmp_path)
     meta["files"]["weights"] = "weights-000003.safetensors"
     (tmp_path / "avatar.json").write_text(json.dumps(meta))
