@@ -41,20 +41,27 @@ class PriorSamples:
     mesh_normal: torch.Tensor  # (P,3) posed normal at x_hat
 
 
-def nearest_vertices(points: torch.Tensor, vertices: torch.Tensor) -> torch.Tensor:
+def vertex_tree(vertices: torch.Tensor) -> cKDTree:
+    """A k-d tree over (V,3) vertices, to reuse for every sample of one frame."""
+    return cKDTree(vertices.detach().cpu().double().numpy())
+
+
+def nearest_vertices(points: torch.Tensor, vertices: torch.Tensor, tree: cKDTree | None = None) -> torch.Tensor:
     """(P,) index of the nearest vertex of (V,3) `vertices` to each of (P,3) `points` (a k-d tree; no
     gradient flows through the choice)."""
-    tree = cKDTree(vertices.detach().cpu().double().numpy())
+    tree = tree if tree is not None else vertex_tree(vertices)
     pts = points.detach().cpu().double().numpy()
     pts = np.where(np.isfinite(pts), pts, 0.0)
     _, idx = tree.query(pts, k=1, workers=-1)
     return torch.as_tensor(idx, dtype=torch.long, device=points.device)
 
 
-def deformation_prior(points: torch.Tensor, meshes: PriorMeshes, falloff_m: float = 0.05) -> PriorSamples:
-    """The prior (Eq. 3-4) at (P,3) world points; differentiable in the points and the meshes."""
+def deformation_prior(points: torch.Tensor, meshes: PriorMeshes, falloff_m: float = 0.05,
+                      tree: cKDTree | None = None) -> PriorSamples:
+    """The prior (Eq. 3-4) at (P,3) world points; differentiable in the points and the meshes. `tree`:
+    a prebuilt vertex_tree of meshes.posed."""
     assert points.ndim == 2 and points.shape[1] == 3, f"points must be (P,3), got {tuple(points.shape)}"
-    idx = nearest_vertices(points, meshes.posed)
+    idx = nearest_vertices(points, meshes.posed, tree)
     x_hat = meshes.posed[idx]
     diff = points - x_hat
     # |diff| with a gradient that stays finite where a point sits exactly on a vertex.

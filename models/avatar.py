@@ -1,0 +1,189 @@
+"""The avatar (DESIGN 3): a head model, the CoDyNeRF fields and per-frame codes, rendered along rays.
+
+Rendering a frame: the posed mesh is rasterized (GL) for the distance to its surface along each pixel's ray;
+rays near the head's silhouette sample a shell about the surface (or the head's box where they miss the
+mesh), every other pixel is background. Samples take the 3DMM prior (Eq. 3-4), the fields (Eq. 2, 5, 7, 8),
+and are composited over the background (Eq. 1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from scipy.ndimage import binary_dilation
+from scipy.spatial import cKDTree
+from torch import nn
+
+from models.fields.codynerf import CoDyNeRFField, FieldConfig
+from models.fields.prior import PriorMeshes, deformation_prior, vertex_tree
+from models.head.controls import Controls
+from models.head.head import Head
+from models.head.model import HeadModel
+from render.camera import Camera
+from render.gl.raster import Rasterizer, pixel_rays
+from render.mesh import vertex_normals
+from render.sampling import RaySamples, shell_or_box_samples
+from render.volume import composite, expected_depth, weights_from_density
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """How many samples, where. Lengths in metres."""
+
+    samples_per_ray: int = 12
+    """Samples in the shell about the surface (or across the box for rays that miss the mesh)."""
+    shell_m: float = 0.03
+    """Half-thickness of the shell about the rasterized surface."""
+    box_margin_m: float = 0.03
+    """The head's box: the posed mesh's bounds grown by this much."""
+    silhouette_px: int = 3
+    """Rays within this many pixels of the mesh's silhouette are rendered; farther ones are background."""
+    prior_falloff_m: float = 0.05
+    """Length over which the 3DMM prior fades with distance from the mesh."""
+    chunk_rays: int = 4096
+    """Rays per batch when rendering an image (memory)."""
+
+
+@dataclass
+class FrameGeometry:
+    """Everything about one frame's head that the rays need: meshes, k-d tree, landmarks, box."""
+
+    meshes: PriorMeshes
+    tree: cKDTree
+    landmarks: torch.Tensor  # (1, 3L) relative to the landmarks' centre
+    box_min: torch.Tensor  # (3,)
+    box_max: torch.Tensor  # (3,)
+
+
+@dataclass
+class RayOutput:
+    rgb: torch.Tensor  # (R,3)
+    opacity: torch.Tensor  # (R,)
+    depth: torch.Tensor  # (R,)
+    normal: torch.Tensor | None  # (R,3) composited predicted normals
+    grad_normal: torch.Tensor | None  # (R,3) composited density-gradient normals
+    weights: torch.Tensor  # (R,S)
+    sigma: torch.Tensor  # (R,S)
+    samples: RaySamples
+    point_normal: torch.Tensor | None = None  # (R,S,3)
+    point_grad_normal: torch.Tensor | None = None  # (R,S,3)
+    extras: dict = field(default_factory=dict)
+
+
+def per_sample(code: torch.Tensor, R: int, S: int) -> torch.Tensor:
+    """A code per ray (R,C) or one for all (1,C), repeated for each of the S samples: (R*S, C)."""
+    return code.repeat_interleave(S, 0) if code.shape[0] > 1 else code.expand(R * S, -1)
+
+
+def mean_code(embedding: nn.Embedding) -> torch.Tensor:
+    return embedding.weight.mean(0, keepdim=True)
+
+
+class Avatar(nn.Module):
+    def __init__(self, head_model: HeadModel, field_cfg: FieldConfig, n_frames: int, background: np.ndarray,
+                 render_cfg: RenderConfig = RenderConfig()):
+        super().__init__()
+        self.head_model = head_model
+        self.head = Head(head_model)
+        self.field_cfg = field_cfg
+        self.render_cfg = render_cfg
+        self.field = CoDyNeRFField(field_cfg, max(head_model.landmarks.count, 1))
+        self.omega = nn.Embedding(n_frames, field_cfg.deform_code_dim)
+        self.phi = nn.Embedding(n_frames, field_cfg.appearance_code_dim)
+        nn.init.zeros_(self.omega.weight)
+        nn.init.zeros_(self.phi.weight)
+        self.register_buffer("background", torch.as_tensor(np.asarray(background, np.float32)))
+
+    # ---- geometry --------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def geometry(self, controls: Controls) -> FrameGeometry:
+        """The frame's canonical, expressed and posed meshes (DESIGN 3, step 1)."""
+        from dataclasses import replace
+
+        neutral = replace(controls, expression=np.zeros(0, np.float32), root=np.zeros(3, np.float32),
+                          neck=np.zeros(3, np.float32), jaw=np.zeros(3, np.float32),
+                          gaze_left=np.zeros(3, np.float32), gaze_right=np.zeros(3, np.float32),
+                          translation=np.zeros(3, np.float32))
+        unposed = replace(controls, root=neutral.root, neck=neutral.neck, jaw=neutral.jaw, gaze_left=neutral.gaze_left,
+                          gaze_right=neutral.gaze_right, translation=neutral.translation)
+        v, _, lm = self.head.pose([neutral, unposed, controls])
+        posed = v[2]
+        normals = torch.as_tensor(vertex_normals(posed.numpy(), self.head_model.triangles))
+        m = self.render_cfg.box_margin_m
+        lm_rel = lm[2] - lm[2].mean(0) if lm.shape[1] else torch.zeros(1, 3)
+        return FrameGeometry(PriorMeshes(v[0], v[1], posed, normals), vertex_tree(posed), lm_rel.reshape(1, -1),
+                             posed.min(0).values - m, posed.max(0).values + m)
+
+    # ---- rays ------------------------------------------------------------------------------------------
+    def render_rays(
+        self,
+        origins: torch.Tensor,  # (R,3)
+        directions: torch.Tensor,  # (R,3) unit
+        surface_t: torch.Tensor,  # (R,) inf where the ray misses the mesh
+        geo: FrameGeometry,
+        omega: torch.Tensor,  # (1,C) or (R,C)
+        phi: torch.Tensor,  # (1,C) or (R,C)
+        generator: torch.Generator | None = None,
+        create_graph: bool = False,
+    ) -> RayOutput:
+        rc = self.render_cfg
+        samples = shell_or_box_samples(origins, directions, surface_t, geo.box_min, geo.box_max,
+                                       rc.samples_per_ray, rc.shell_m, generator)
+        R, S = samples.t_starts.shape
+        pts = (origins[:, None] + directions[:, None] * samples.t_mid[..., None]).reshape(-1, 3)
+        prior = deformation_prior(pts, geo.meshes, rc.prior_falloff_m, geo.tree)
+        view = (-directions[:, None]).expand(R, S, 3).reshape(-1, 3)
+        out = self.field(pts, prior, view, per_sample(omega, R, S), per_sample(phi, R, S), geo.landmarks, create_graph)
+        sigma = out.sigma.reshape(R, S) * samples.valid[:, None]
+        weights, remaining = weights_from_density(sigma, samples.deltas)
+        rgb = composite(weights, out.rgb.reshape(R, S, 3), remaining, self.background)
+        normal = grad_normal = pn = pg = None
+        if out.normal is not None:
+            pn, pg = out.normal.reshape(R, S, 3), out.grad_normal.reshape(R, S, 3)
+            normal, grad_normal = composite(weights, pn), composite(weights, pg)
+        return RayOutput(rgb, weights.sum(-1), expected_depth(weights, samples.t_mid), normal, grad_normal, weights,
+                         sigma, samples, pn, pg)
+
+    # ---- images ----------------------------------------------------------------------------------------
+    def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer,
+                     frame: int | None = None) -> dict[str, np.ndarray]:
+        """RGB, opacity, depth and (with normals) predicted and density-gradient normal maps, (H,W,...).
+        `frame` picks a training frame's codes; None uses the mean code (novel controls)."""
+        geo = self.geometry(controls)
+        raster = rasterizer.rasterize(geo.meshes.posed.numpy(), self.head_model.triangles, camera)
+        origin, dirs = pixel_rays(camera)
+        fwd = -np.linalg.inv(camera.view)[:3, 2]
+        surface_t = np.where(raster.hit, raster.depth / np.maximum(dirs @ fwd, 1e-6), np.inf)
+        active = binary_dilation(raster.hit, iterations=self.render_cfg.silhouette_px) if raster.hit.any() else raster.hit
+        H, W = raster.hit.shape
+        out = {"rgb": np.tile(self.background.numpy(), (H, W, 1)), "opacity": np.zeros((H, W), np.float32),
+               "depth": np.full((H, W), np.inf, np.float32)}
+        if self.field_cfg.needs_normals:
+            out["normals"] = np.zeros((H, W, 3), np.float32)
+            out["grad_normals"] = np.zeros((H, W, 3), np.float32)
+        idx = np.nonzero(active.ravel())[0]
+        if len(idx) == 0:
+            return out
+        omega = self.omega.weight[frame:frame + 1] if frame is not None else mean_code(self.omega)
+        phi = self.phi.weight[frame:frame + 1] if frame is not None else mean_code(self.phi)
+        o = torch.as_tensor(origin, dtype=torch.float32)
+        d_all = torch.as_tensor(dirs.reshape(-1, 3)[idx], dtype=torch.float32)
+        s_all = torch.as_tensor(surface_t.ravel()[idx], dtype=torch.float32)
+        results = {k: [] for k in out}
+        grad_mode = torch.no_grad() if self.field_cfg.needs_normals else torch.inference_mode()
+        with grad_mode:
+            for a in range(0, len(idx), self.render_cfg.chunk_rays):
+                d, s = d_all[a:a + self.render_cfg.chunk_rays], s_all[a:a + self.render_cfg.chunk_rays]
+                r = self.render_rays(o.expand(len(d), 3), d, s, geo, omega.detach(), phi.detach())
+                results["rgb"].append(r.rgb)
+                results["opacity"].append(r.opacity)
+                results["depth"].append(torch.where(r.opacity > 0.5, r.depth, torch.full_like(r.depth, np.inf)))
+                if r.normal is not None:
+                    results["normals"].append(r.normal.detach())
+                    results["grad_normals"].append(r.grad_normal.detach())
+        for k, parts in results.items():
+            flat = out[k].reshape(H * W, -1) if out[k].ndim == 3 else out[k].reshape(H * W)
+            flat[idx] = torch.cat(parts).float().numpy()
+        return out

@@ -1,0 +1,144 @@
+"""The CoDyNeRF fields (paper 000, Eq. 2, 5, 7, 8): residual deformation, density, normals, dynamic
+appearance. The effect set decides the inputs and which networks exist (DESIGN 3.1):
+
+| effects   | inputs to the appearance T                 | normals network, density gradients |
+|-----------|--------------------------------------------|------------------------------------|
+| none      | tau, view direction, phi                   | not built, not computed            |
+| shading   | + n                                        | built                              |
+| specular  | + n, R                                     | built                              |
+| shadows   | + landmarks, expression/pose prior offsets | only with shading or specular      |
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from models.fields.encoding import encoded_size, frequency_encoding
+from models.fields.mlp import MLP
+from models.fields.prior import PriorSamples
+
+EFFECTS = ("shading", "specular", "shadows")
+
+
+def parse_effects(text: str) -> tuple[str, ...]:
+    """'none', 'all' or a comma list of shading, specular, shadows -> a sorted tuple."""
+    text = text.strip().lower()
+    if text in ("", "none"):
+        return ()
+    if text == "all":
+        return EFFECTS
+    parts = {p.strip() for p in text.split(",") if p.strip()}
+    unknown = sorted(parts - set(EFFECTS))
+    if unknown:
+        raise ValueError(f"unknown effect(s) {unknown}: expected none, all or a comma list of {', '.join(EFFECTS)}")
+    return tuple(e for e in EFFECTS if e in parts)
+
+
+@dataclass(frozen=True)
+class FieldConfig:
+    """Sizes of the fields. Lengths in metres."""
+
+    effects: tuple[str, ...] = ()
+    """Lighting effects the avatar models: any of shading, specular, shadows (empty: an ambient capture)."""
+    width: int = 64
+    """Hidden width of the deformation, density and appearance networks."""
+    deform_code_dim: int = 8
+    """omega: per-frame code of the residual deformation."""
+    appearance_code_dim: int = 8
+    """phi: per-frame code of the appearance (camera and exposure changes)."""
+    feature_dim: int = 16
+    """tau: features passed from the density to the appearance network."""
+    deform_frequencies: int = 4
+    prior_frequencies: int = 2
+    density_frequencies: int = 6
+    view_frequencies: int = 2
+    landmark_features: int = 16
+    scale_m: float = 0.25
+    """Half the extent that position encodings cover without aliasing."""
+
+    @property
+    def needs_normals(self) -> bool:
+        return "shading" in self.effects or "specular" in self.effects
+
+
+@dataclass
+class FieldOutput:
+    sigma: torch.Tensor  # (P,) density, 1/m
+    rgb: torch.Tensor  # (P,3) in [0,1]
+    x_canonical: torch.Tensor  # (P,3)
+    normal: torch.Tensor | None = None  # (P,3) predicted (Eq. 8)
+    grad_normal: torch.Tensor | None = None  # (P,3) -grad sigma / |grad sigma|
+
+
+def safe_normalize(v: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:
+    """v / |v|, and 0 (with a zero gradient) where v is 0: zero density gradients stay finite."""
+    n2 = (v * v).sum(-1, keepdim=True)
+    return v * torch.rsqrt(n2.clamp_min(eps)) * (n2 > eps)
+
+
+class CoDyNeRFField(nn.Module):
+    def __init__(self, cfg: FieldConfig, n_landmarks: int):
+        super().__init__()
+        self.cfg = cfg
+        c = cfg
+        d_def = encoded_size(3, c.deform_frequencies) + encoded_size(3, c.prior_frequencies) + c.deform_code_dim
+        self.deform = MLP(d_def, 3, c.width, 3, zero_last=True)
+        self.density = MLP(encoded_size(3, c.density_frequencies) + 1, 1 + c.feature_dim, c.width, 3)
+        self.normals = MLP(3 + 3 + 1, 3, 32, 2) if c.needs_normals else None
+        d_app = c.feature_dim + encoded_size(3, c.view_frequencies) + c.appearance_code_dim
+        if c.needs_normals:
+            d_app += 3
+        if "specular" in c.effects:
+            d_app += encoded_size(3, c.view_frequencies)
+        self.landmarks = None
+        if "shadows" in c.effects:
+            self.landmarks = nn.Linear(3 * n_landmarks, c.landmark_features)
+            d_app += c.landmark_features + 6
+        self.appearance = MLP(d_app, 3, c.width, 2)
+
+    def forward(
+        self,
+        x: torch.Tensor,  # (P,3) world points
+        prior: PriorSamples,
+        view_dir: torch.Tensor,  # (P,3) unit, from the point towards the camera
+        omega: torch.Tensor,  # (P, deform_code_dim)
+        phi: torch.Tensor,  # (P, appearance_code_dim)
+        landmarks: torch.Tensor | None = None,  # (1, 3L) or (P, 3L), head-centred
+        create_graph: bool = False,  # keep the graph of density gradients (training the normals)
+    ) -> FieldOutput:
+        c = self.cfg
+        s = c.scale_m
+        if c.needs_normals and not x.requires_grad:
+            x = x.detach().requires_grad_(True)
+        # Density gradients need autograd even when rendering for display (under no_grad, not inference_mode).
+        with torch.enable_grad() if c.needs_normals else contextlib.nullcontext():
+            x_prior = x + prior.offset  # Eq. 2: the prior's part of x_can
+            delta = self.deform(torch.cat([frequency_encoding(x, c.deform_frequencies, s),
+                                           frequency_encoding(prior.offset, c.prior_frequencies, s), omega], -1))
+            x_can = x_prior + delta
+            raw = self.density(torch.cat([frequency_encoding(x_can, c.density_frequencies, s),
+                                          prior.distance[:, None]], -1))
+            sigma = F.softplus(raw[:, 0] - 1.0) * 100.0  # densities of order 100 / m: opaque within ~1 cm
+            tau = raw[:, 1:]
+            normal = grad_normal = None
+            if c.needs_normals:
+                (grad,) = torch.autograd.grad(sigma.sum(), x, create_graph=create_graph)
+                grad_normal = safe_normalize(-grad)
+                normal = safe_normalize(self.normals(torch.cat([prior.mesh_normal, grad_normal,
+                                                                prior.distance[:, None]], -1)))
+        inputs = [tau, frequency_encoding(view_dir, c.view_frequencies), phi]
+        if c.needs_normals:
+            inputs.append(normal)
+        if "specular" in c.effects:
+            reflect = 2 * (view_dir * normal).sum(-1, keepdim=True) * normal - view_dir
+            inputs.append(frequency_encoding(reflect, c.view_frequencies))
+        if self.landmarks is not None:
+            lm = self.landmarks(landmarks).expand(len(x), -1)
+            inputs += [lm, prior.expression_offset / s, prior.pose_offset / s]
+        rgb = torch.sigmoid(self.appearance(torch.cat(inputs, -1)))
+        return FieldOutput(sigma, rgb, x_can, normal, grad_normal)

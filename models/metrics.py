@@ -1,0 +1,36 @@
+"""Image metrics: PSNR, SSIM, FaceMSE (over the face mask), normal angular error."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+
+def psnr(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """10 log10(1 / MSE) for images in [0, 1]."""
+    err = (np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2
+    mse = err[mask].mean() if mask is not None else err.mean()
+    return float(10 * np.log10(1.0 / max(mse, 1e-12)))
+
+
+def ssim(a: np.ndarray, b: np.ndarray, sigma: float = 1.5) -> float:
+    """Structural similarity (Wang et al. 2004) with a Gaussian window, mean over pixels and channels."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    c1, c2 = 0.01**2, 0.03**2
+    blur = lambda x: gaussian_filter(x, sigma=(sigma, sigma, 0) if x.ndim == 3 else sigma, truncate=3.5)
+    mu_a, mu_b = blur(a), blur(b)
+    va, vb, cov = blur(a * a) - mu_a**2, blur(b * b) - mu_b**2, blur(a * b) - mu_a * mu_b
+    s = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (va + vb + c2))
+    return float(s.mean())
+
+
+def face_mse(a: np.ndarray, b: np.ndarray, face_mask: np.ndarray) -> float:
+    """Mean squared error over the face mask's pixels (all channels)."""
+    return float(((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2)[face_mask].mean())
+
+
+def normal_angle_deg(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
+    """Mean angle in degrees between unit normal maps over the mask."""
+    p = pred[mask] / np.maximum(np.linalg.norm(pred[mask], axis=-1, keepdims=True), 1e-12)
+    t = truth[mask] / np.maximum(np.linalg.norm(truth[mask], axis=-1, keepdims=True), 1e-12)
+    return float(np.degrees(np.arccos(np.clip((p * t).sum(-1), -1, 1))).mean())

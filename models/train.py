@@ -1,0 +1,232 @@
+"""Training an avatar on a capture: batches of rays from random frames, the losses of Eq. 9-14, Adam,
+crash-safe checkpoints, exact resume, and a progress log the studio can read."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import torch
+
+from models import losses
+from models.avatar import Avatar, RenderConfig
+from models.checkpoint import load_checkpoint, save_checkpoint
+from models.dataset import load_split
+from models.fields.codynerf import FieldConfig, parse_effects
+from models.head.sources import load_head
+from models.train_data import FrameSet, build_frames
+from render.gl.context import GLContext
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    dataset: Path
+    """Capture folder (transforms_{train,val,test}.json with a head model)."""
+    out: Path = Path("out/avatar")
+    """Avatar folder: avatar.json, weights, progress.jsonl."""
+    effects: str = "all"
+    """Lighting effects to model: none, all, or a comma list of shading, specular, shadows."""
+    model: Literal["codynerf", "nerface"] = "codynerf"
+    """The avatar (codynerf) or the NerFACE baseline."""
+    minutes: float | None = None
+    """Time budget; training stops when it is spent (checkpointed)."""
+    steps: int | None = None
+    """Step budget (instead of, or as well as, --minutes)."""
+    resume: bool = False
+    """Continue the checkpoint in --out exactly where it stopped."""
+    device: Literal["cpu", "cuda"] = "cpu"
+    """Where the networks run."""
+    seed: int = 0
+    """Seed of initialisation and ray sampling."""
+    rays_per_step: int = 1024
+    frames_per_step: int = 4
+    lr: float = 5e-3
+    """Adam learning rate at the start; it decays tenfold over the run."""
+    checkpoint_seconds: float = 60.0
+    """How often to checkpoint."""
+
+
+@dataclass(frozen=True)
+class LossWeights:
+    mesh_normals: float = 0.02  # Eq. 9
+    normals_facing: float = 0.05  # Eq. 10
+    normal_consistency: float = 0.1  # Eq. 13
+    cauchy: float = 1e-4  # Eq. 14
+    cauchy_c: float = 100.0
+    codes: float = 1e-3
+    mesh_normal_vertices: int = 256
+
+
+def _adam_state_tensors(opt: torch.optim.Adam) -> dict[str, torch.Tensor]:
+    out = {}
+    for i, (p, st) in enumerate(((p, opt.state[p]) for g in opt.param_groups for p in g["params"])):
+        del p
+        for k, v in st.items():
+            out[f"adam.{i}.{k}"] = v if torch.is_tensor(v) else torch.tensor(v)
+    return out
+
+
+def _load_adam_state(opt: torch.optim.Adam, tensors: dict[str, torch.Tensor]) -> None:
+    for i, p in enumerate(p for g in opt.param_groups for p in g["params"]):
+        st = {k.split(".", 2)[2]: v for k, v in tensors.items() if k.startswith(f"adam.{i}.")}
+        if st:
+            opt.state[p] = {k: v.clone() for k, v in st.items()}
+
+
+class Trainer:
+    """A training run; its state (step, weights, optimiser, sampler) is a value that can be saved and resumed."""
+
+    def __init__(self, cfg: TrainConfig, gl: GLContext, weights: LossWeights = LossWeights()):
+        self.cfg = cfg
+        self.w = weights
+        self.split = load_split(cfg.dataset, "train")
+        self.val_split = load_split(cfg.dataset, "val")
+        if not self.split.trains_codynerf:
+            from app.errors import UserInputError
+
+            raise UserInputError(f"{cfg.dataset}: a capture without a head model trains only --model nerface")
+        self.head_spec = self.split.head_model
+        head = load_head(self.head_spec)
+        bg = self.split.background if isinstance(self.split.background, np.ndarray) else np.ones(3)
+        torch.manual_seed(cfg.seed)
+        self.field_cfg = FieldConfig(effects=parse_effects(cfg.effects))
+        self.avatar = Avatar(head, self.field_cfg, len(self.split.frames), bg, RenderConfig())
+        self.frames: FrameSet = build_frames(self.split, self.avatar, gl)
+        self.opt = torch.optim.Adam(self.avatar.parameters(), lr=cfg.lr)
+        self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.step = 0
+        self.elapsed = 0.0
+        if cfg.resume:
+            self._resume()
+
+    # ---- state -----------------------------------------------------------------------------------------
+    def meta(self) -> dict:
+        return {"model": self.cfg.model, "head_model": self.head_spec, "effects": list(self.field_cfg.effects),
+                "field": asdict(self.field_cfg), "render": asdict(self.avatar.render_cfg),
+                "frames": len(self.split.frames), "background": self.avatar.background.tolist(),
+                "provenance": {"dataset": str(Path(self.cfg.dataset).resolve()), "steps": self.step,
+                               "seconds": round(self.elapsed, 1), "config": {k: str(v) for k, v in
+                                                                            asdict(self.cfg).items()}}}
+
+    def save(self) -> None:
+        state = _adam_state_tensors(self.opt)
+        state["generator"] = self.generator.get_state()
+        state["elapsed"] = torch.tensor(self.elapsed, dtype=torch.float64)
+        save_checkpoint(self.cfg.out, self.meta(), self.avatar.state_dict(), self.step, state)
+
+    def _resume(self) -> None:
+        ck = load_checkpoint(self.cfg.out, with_train_state=True)
+        self.avatar.load_state_dict(ck.weights)
+        _load_adam_state(self.opt, ck.train_state)
+        self.generator.set_state(ck.train_state["generator"])
+        self.elapsed = float(ck.train_state["elapsed"])
+        self.step = ck.step
+
+    # ---- one step --------------------------------------------------------------------------------------
+    def lr_at(self, progress: float) -> float:
+        return self.cfg.lr * 0.1 ** min(max(progress, 0.0), 1.0)
+
+    def train_step(self, progress: float) -> dict[str, float]:
+        fs, g, cfg = self.frames, self.generator, self.cfg
+        for group in self.opt.param_groups:
+            group["lr"] = self.lr_at(progress)
+        frame_ids = torch.randint(len(fs), (cfg.frames_per_step,), generator=g)
+        terms: dict[str, torch.Tensor] = {}
+        total = torch.zeros(())
+        per_frame = cfg.rays_per_step // cfg.frames_per_step
+        for fid in frame_ids.tolist():
+            pix = torch.nonzero(fs.active[fid].ravel()).squeeze(1)
+            if len(pix) == 0:
+                continue
+            pick = pix[torch.randint(len(pix), (per_frame,), generator=g)]
+            dirs = fs.directions[fid].reshape(-1, 3)[pick]
+            target = fs.images[fid].reshape(-1, 3)[pick]
+            surf = fs.surface_t[fid].reshape(-1)[pick]
+            code = torch.tensor([fid])
+            out = self.avatar.render_rays(fs.origins[fid].expand(len(dirs), 3), dirs, surf, fs.geometry[fid],
+                                          self.avatar.omega(code), self.avatar.phi(code), g,
+                                          create_graph=self.field_cfg.needs_normals)
+            parts = {"photometric": losses.photometric(out.rgb, target),
+                     "cauchy": self.w.cauchy * losses.cauchy_sparsity(out.sigma, self.w.cauchy_c),
+                     "codes": self.w.codes * losses.code_l2(self.avatar.omega(code), self.avatar.phi(code))}
+            if out.point_normal is not None:
+                parts["normals_facing"] = self.w.normals_facing * losses.normals_facing_camera(
+                    out.weights, out.point_normal, dirs)
+                parts["normal_consistency"] = self.w.normal_consistency * losses.top_k_normal_consistency(
+                    out.weights, out.point_normal, out.point_grad_normal)
+                parts["mesh_normals"] = self.w.mesh_normals * self._mesh_normal_term(fid)
+            for k, v in parts.items():
+                terms[k] = terms.get(k, 0.0) + v.detach() / len(frame_ids)
+                total = total + v / len(frame_ids)
+        self.opt.zero_grad(set_to_none=True)
+        total.backward()
+        self.opt.step()
+        self.step += 1
+        return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}
+
+    def _mesh_normal_term(self, fid: int) -> torch.Tensor:
+        """Eq. 9 on a random subset of the frame's posed vertices (DistToMesh = 0 there)."""
+        geo = self.frames.geometry[fid]
+        idx = torch.randint(len(geo.meshes.posed), (self.w.mesh_normal_vertices,), generator=self.generator)
+        from models.fields.prior import deformation_prior
+
+        pts = geo.meshes.posed[idx]
+        prior = deformation_prior(pts, geo.meshes, self.avatar.render_cfg.prior_falloff_m, geo.tree)
+        code = torch.tensor([fid])
+        out = self.avatar.field(pts, prior, geo.meshes.normals[idx], self.avatar.omega(code).expand(len(idx), -1),
+                                self.avatar.phi(code).expand(len(idx), -1), geo.landmarks, create_graph=True)
+        return losses.mesh_normal_consistency(out.normal, geo.meshes.normals[idx])
+
+    # ---- validation ------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def validation_psnr(self, gl: GLContext) -> float:
+        from models.metrics import psnr
+        from models.train_data import camera_of, load_rgb
+        from render.gl.raster import Rasterizer
+
+        f = self.val_split.frames[0]
+        r = Rasterizer(gl)
+        img = self.avatar.render_image(f.controls, camera_of(self.val_split, f.camera_to_world), r)["rgb"]
+        r.release()
+        return psnr(img, load_rgb(f.image_path, self.avatar.background.numpy()))
+
+    # ---- the loop --------------------------------------------------------------------------------------
+    def run(self, gl: GLContext, on_progress: Callable[[dict], None] | None = None) -> dict:
+        cfg = self.cfg
+        budget_s = cfg.minutes * 60 if cfg.minutes else math.inf
+        budget_steps = cfg.steps if cfg.steps else math.inf
+        if budget_s == math.inf and budget_steps == math.inf:
+            budget_steps = 2000
+        log = Path(cfg.out) / "progress.jsonl"
+        Path(cfg.out).mkdir(parents=True, exist_ok=True)
+        last_ck = time.perf_counter()
+        start_elapsed, t0 = self.elapsed, time.perf_counter()
+        record: dict = {}
+        while self.step < budget_steps and self.elapsed < budget_s:
+            progress = max(self.step / budget_steps if budget_steps != math.inf else 0.0,
+                           self.elapsed / budget_s if budget_s != math.inf else 0.0)
+            terms = self.train_step(progress)
+            self.elapsed = start_elapsed + time.perf_counter() - t0
+            if self.step % 50 == 0 or self.step == 1:
+                rate = self.step / max(self.elapsed, 1e-9)
+                eta = min((budget_steps - self.step) / max(rate, 1e-9) if budget_steps != math.inf else math.inf,
+                          budget_s - self.elapsed)
+                record = {"step": self.step, **{k: round(v, 6) for k, v in terms.items()},
+                          "elapsed_s": round(self.elapsed, 1), "eta_s": round(eta, 1)}
+                if self.step % 250 == 0:
+                    record["val_psnr"] = round(self.validation_psnr(gl), 2)
+                with open(log, "a") as f:
+                    f.write(json.dumps(record) + "\n")
+                if on_progress:
+                    on_progress(record)
+            if time.perf_counter() - last_ck > cfg.checkpoint_seconds:
+                self.save()
+                last_ck = time.perf_counter()
+        self.save()
+        return record

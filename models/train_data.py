@@ -1,0 +1,85 @@
+"""A capture split in memory for training and evaluation: images, rays, per-frame head geometry and the
+rasterized surface distance of every pixel."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from PIL import Image
+from scipy.ndimage import binary_dilation
+
+from models.avatar import Avatar, FrameGeometry
+from models.dataset import CaptureSplit, DatasetError
+from render.camera import Camera
+from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
+
+
+def camera_of(split: CaptureSplit, c2w: np.ndarray) -> Camera:
+    fx, fy, cx, cy = split.intrinsics
+    if abs(cx - split.width / 2) > 0.5 or abs(cy - split.height / 2) > 0.5:
+        raise DatasetError(f"{split.folder}: principal point ({cx}, {cy}) off the image centre is not supported yet")
+    fov = math.degrees(2 * math.atan(0.5 * split.height / fy))
+    return Camera(np.linalg.inv(c2w), fov, split.width, split.height, near_m=0.05, far_m=10.0)
+
+
+def camera_directions(split: CaptureSplit) -> np.ndarray:
+    """(H,W,3) camera-space ray directions (unit), OpenGL axes."""
+    fx, fy, cx, cy = split.intrinsics
+    j, i = np.meshgrid(np.arange(split.width) + 0.5, np.arange(split.height) + 0.5)
+    d = np.stack([(j - cx) / fx, -(i - cy) / fy, -np.ones_like(j)], -1)
+    return (d / np.linalg.norm(d, axis=-1, keepdims=True)).astype(np.float32)
+
+
+def load_rgb(path, background: np.ndarray | None = None) -> np.ndarray:
+    with Image.open(path) as im:
+        a = np.asarray(im.convert("RGBA" if im.mode in ("RGBA", "LA") else "RGB"), np.float32) / 255.0
+    if a.shape[-1] == 4:
+        bg = np.ones(3, np.float32) if background is None else background
+        a = a[..., :3] * a[..., 3:] + bg * (1 - a[..., 3:])
+    return a
+
+
+@dataclass
+class FrameSet:
+    """N frames of one split, H x W."""
+
+    split: CaptureSplit
+    images: torch.Tensor  # (N,H,W,3)
+    masks: torch.Tensor | None  # (N,H,W) coverage, if the capture has masks
+    origins: torch.Tensor  # (N,3)
+    directions: torch.Tensor  # (N,H,W,3) world, unit
+    surface_t: torch.Tensor  # (N,H,W) inf where the pixel misses the mesh
+    active: torch.Tensor  # (N,H,W) bool: pixels rendered (near the mesh's silhouette)
+    geometry: list[FrameGeometry]
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+
+def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet:
+    bg = avatar.background.numpy()
+    images, masks, origins, dirs, surf, active, geos = [], [], [], [], [], [], []
+    dirs_cam = camera_directions(split)
+    raster = Rasterizer(gl)
+    for f in split.frames:
+        images.append(load_rgb(f.image_path, bg))
+        if "mask_path" in f.extra:
+            masks.append(np.asarray(Image.open(f.extra["mask_path"]).convert("L"), np.float32) / 255.0)
+        geo = avatar.geometry(f.controls)
+        cam = camera_of(split, f.camera_to_world)
+        r = raster.rasterize(geo.meshes.posed.numpy(), avatar.head_model.triangles, cam)
+        d_world = dirs_cam @ f.camera_to_world[:3, :3].T
+        cos = -dirs_cam[..., 2]  # the view axis component of each unit direction
+        surf.append(np.where(r.hit, r.depth / cos, np.inf).astype(np.float32))
+        active.append(binary_dilation(r.hit, iterations=avatar.render_cfg.silhouette_px))
+        origins.append(f.camera_to_world[:3, 3])
+        dirs.append(d_world)
+        geos.append(geo)
+    raster.release()
+    t = lambda a, dt=torch.float32: torch.as_tensor(np.stack(a), dtype=dt)
+    return FrameSet(split, t(images), t(masks) if len(masks) == len(images) else None, t(origins), t(dirs), t(surf),
+                    t(active, torch.bool), geos)
