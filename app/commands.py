@@ -5,8 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from app import capture_commands, head_commands
+from app import avatar_commands, capture_commands, head_commands
 from models.synthetic import SynthConfig
+from models.train import TrainConfig
 
 
 @dataclass(frozen=True)
@@ -29,4 +30,10 @@ COMMANDS = (
             SynthConfig, capture_commands.run_synth),
     Command("dataset", "Validate a capture dataset (ours, NerFACE's or IMavatar's) and summarise its splits.",
             capture_commands.DatasetConfig, capture_commands.run_dataset, positional=("dataset",)),
+    Command("train", "Train an avatar on a capture (in the background of a terminal: a progress bar).",
+            TrainConfig, avatar_commands.run_train, positional=("dataset",)),
+    Command("eval", "Measure an avatar on a capture split: metrics.json and side-by-side images.",
+            avatar_commands.EvalConfig, avatar_commands.run_eval, positional=("avatar", "dataset")),
+    Command("render", "Render an avatar with given controls and camera to a PNG.",
+            avatar_commands.RenderCommandConfig, avatar_commands.run_render, positional=("avatar",)),
 )

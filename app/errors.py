@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from models.checkpoint import CheckpointError
 from models.dataset import DatasetError
 from models.head.controls import ControlsError
 from models.head.model import HeadModelError
@@ -12,4 +13,4 @@ class UserInputError(ValueError):
 
 
 #: Exceptions that are the user's input being wrong, not the program failing.
-INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError)
+INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError, CheckpointError)

@@ -1,0 +1,169 @@
+"""`train`, `eval` and `render`: make an avatar from a capture, measure it, draw it."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from app.errors import UserInputError
+from app.head_commands import save_png
+from models.avatar_io import load_avatar
+from models.dataset import load_split
+from models.head.controls import Controls, load_controls
+from models.metrics import face_mse, normal_angle_deg, psnr, ssim
+from models.synthetic import read_png16
+from models.train import TrainConfig, Trainer
+from models.train_data import camera_of, load_rgb
+from render.camera import framing_camera
+from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
+
+PRESETS = {"draft": (0.5, 6), "preview": (1.0, 8), "final": (1.0, 16)}
+"""Quality presets: image scale and samples per ray."""
+
+
+def run_train(cfg: TrainConfig) -> int:
+    if cfg.model == "nerface":
+        raise UserInputError("--model nerface: the NerFACE baseline is not built yet")
+    if cfg.device == "cuda":
+        import torch
+
+        if not torch.cuda.is_available():
+            raise UserInputError("--device cuda: no CUDA device is available on this machine")
+    if not cfg.resume and (cfg.out / "avatar.json").exists():
+        raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
+    gl = GLContext.headless()
+    trainer = Trainer(cfg, gl)
+    tty = sys.stderr.isatty()
+
+    def show(r: dict) -> None:
+        if tty:
+            sys.stderr.write(f"\rstep {r['step']}  loss {r['loss']:.5f}  {r['elapsed_s']:.0f} s  eta {r['eta_s']:.0f} s"
+                             + (f"  val PSNR {r['val_psnr']:.2f}" if "val_psnr" in r else "") + "   ")
+            sys.stderr.flush()
+
+    last = trainer.run(gl, show)
+    if tty:
+        sys.stderr.write("\n")
+    print(f"wrote {cfg.out}: {trainer.step} steps in {trainer.elapsed / 60:.1f} min, last loss {last.get('loss', 0):.5f}")
+    return 0
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    avatar: Path
+    """Avatar folder."""
+    dataset: Path
+    """Capture folder to evaluate on."""
+    split: Literal["train", "val", "test"] = "test"
+    out: Path = Path("out/eval")
+    """Folder for metrics.json and side-by-side images."""
+    max_frames: int = 0
+    """Evaluate at most this many frames (0: all)."""
+
+
+def face_mask_of(frame, image_shape) -> np.ndarray:
+    """Pixels of the face: the capture's mask inside its landmark box (the whole mask if no box)."""
+    h, w = image_shape[:2]
+    if "mask_path" in frame.extra:
+        mask = load_rgb(frame.extra["mask_path"])[..., 0] > 0.5
+    else:
+        mask = np.ones((h, w), bool)
+    if frame.bbox is not None:
+        top, bottom, left, right = frame.bbox
+        box = np.zeros((h, w), bool)
+        box[int(top * h):int(np.ceil(bottom * h)), int(left * w):int(np.ceil(right * w))] = True
+        mask &= box
+    return mask
+
+
+def run_eval(cfg: EvalConfig) -> int:
+    avatar, meta = load_avatar(cfg.avatar)
+    split = load_split(cfg.dataset, cfg.split)
+    gl = GLContext.headless()
+    raster = Rasterizer(gl)
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    rows, times = [], []
+    frames = split.frames[: cfg.max_frames] if cfg.max_frames else split.frames
+    for f in frames:
+        truth = load_rgb(f.image_path, avatar.background.numpy())
+        t0 = time.perf_counter()
+        out = avatar.render_image(f.controls, camera_of(split, f.camera_to_world), raster)
+        times.append(time.perf_counter() - t0)
+        face = face_mask_of(f, truth.shape)
+        row = {"frame": f.index, "psnr": psnr(out["rgb"], truth), "ssim": ssim(out["rgb"], truth),
+               "face_mse": face_mse(out["rgb"], truth, face)}
+        panels = [truth, out["rgb"], np.clip(np.abs(out["rgb"] - truth) * 4, 0, 1)]
+        if "normals" in out:
+            panels.append(out["normals"] * 0.5 + 0.5)
+            if "normal_path" in f.extra:
+                gt_n = read_png16(f.extra["normal_path"]) * 2 - 1
+                on = face & (out["opacity"] > 0.5)
+                if on.any():
+                    row["normal_deg"] = normal_angle_deg(out["normals"], gt_n, on)
+        rows.append(row)
+        save_png(cfg.out / f"{cfg.split}_{f.index:04d}.png",
+                 (np.concatenate(panels, 1) * 255).round().astype(np.uint8))
+    metrics = {k: float(np.mean([r[k] for r in rows if k in r])) for k in ("psnr", "ssim", "face_mse", "normal_deg")
+               if any(k in r for r in rows)}
+    metrics["render_ms"] = 1e3 * float(np.median(times))
+    report = {"avatar": str(cfg.avatar), "dataset": str(cfg.dataset), "split": cfg.split, "frames": len(rows),
+              "effects": meta.get("effects"), "training": meta.get("provenance"), "metrics": metrics, "per_frame": rows}
+    (cfg.out / "metrics.json").write_text(json.dumps(report, indent=1))
+    print(json.dumps(metrics))
+    return 0
+
+
+@dataclass(frozen=True)
+class RenderCommandConfig:
+    avatar: Path
+    """Avatar folder."""
+    out: Path = Path("out/render.png")
+    controls: Path | None = None
+    """JSON controls (DESIGN 2.1); neutral when left out."""
+    yaw_deg: float = 0.0
+    """Camera orbit about the vertical axis, degrees."""
+    pitch_deg: float = 0.0
+    buffer: Literal["rgb", "normals", "grad_normals", "depth", "opacity"] = "rgb"
+    """Which buffer to write."""
+    preset: Literal["draft", "preview", "final"] = "preview"
+    """Quality: draft (half size, 6 samples a ray), preview (8), final (16)."""
+    size: int = 128
+    """Image width and height in pixels at the preview and final presets."""
+
+
+def run_render(cfg: RenderCommandConfig) -> int:
+    avatar, _ = load_avatar(cfg.avatar)
+    controls = load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls()
+    scale, samples = PRESETS[cfg.preset]
+    avatar.render_cfg = replace(avatar.render_cfg, samples_per_ray=samples)
+    size = max(8, int(cfg.size * scale))
+    cam = framing_camera(avatar.head_model.template, cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
+                         height_px=size)
+    gl = GLContext.headless()
+    t0 = time.perf_counter()
+    out = avatar.render_image(controls, cam, Rasterizer(gl))
+    ms = 1e3 * (time.perf_counter() - t0)
+    if cfg.buffer not in out:
+        raise UserInputError(f"--buffer {cfg.buffer}: this avatar's effect set has no normals network")
+    b = out[cfg.buffer]
+    if cfg.buffer in ("normals", "grad_normals"):
+        img = b * 0.5 + 0.5
+    elif cfg.buffer == "depth":
+        finite = np.isfinite(b)
+        lo, hi = (b[finite].min(), b[finite].max()) if finite.any() else (0, 1)
+        img = np.where(finite, 1 - (b - lo) / max(hi - lo, 1e-6), 0)[..., None].repeat(3, 2)
+    elif cfg.buffer == "opacity":
+        img = b[..., None].repeat(3, 2)
+    else:
+        img = b
+    cfg.out.parent.mkdir(parents=True, exist_ok=True)
+    save_png(cfg.out, (np.clip(img, 0, 1) * 255).round().astype(np.uint8))
+    print(f"wrote {cfg.out} ({size}x{size}, {cfg.buffer}, {cfg.preset}: {ms:.0f} ms)")
+    return 0
