@@ -39,7 +39,8 @@ class RenderConfig:
     box_margin_m: float = 0.03
     """The head's box: the posed mesh's bounds grown by this much."""
     silhouette_px: int = 3
-    """Rays within this many pixels of the mesh's silhouette are rendered; farther ones are background."""
+    """Rays within this many pixels of the mesh's silhouette are rendered (at least as many as the shell
+    spans at the head's distance); farther ones are background."""
     prior_falloff_m: float = 0.05
     """Length over which the 3DMM prior fades with distance from the mesh."""
     chunk_rays: int = 4096
@@ -70,6 +71,15 @@ class RayOutput:
     point_normal: torch.Tensor | None = None  # (R,S,3)
     point_grad_normal: torch.Tensor | None = None  # (R,S,3)
     extras: dict = field(default_factory=dict)
+
+
+def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -> int:
+    """Pixels around the mesh's silhouette to render: the shell's width at the nearest surface, at least
+    cfg.silhouette_px (density lives within shell_m of the mesh)."""
+    finite = depth[np.isfinite(depth)]
+    if len(finite) == 0:
+        return cfg.silhouette_px
+    return max(cfg.silhouette_px, int(np.ceil(cfg.shell_m * camera.focal_px() / max(finite.min(), 1e-3))))
 
 
 def per_sample(code: torch.Tensor, R: int, S: int) -> torch.Tensor:
@@ -127,16 +137,25 @@ class Avatar(nn.Module):
         phi: torch.Tensor,  # (1,C) or (R,C)
         generator: torch.Generator | None = None,
         create_graph: bool = False,
+        dense_samples: int | None = None,
     ) -> RayOutput:
+        """Composited colour, opacity, depth (and normals) of R rays. dense_samples: ignore the mesh and
+        spread that many samples over the head's box instead (the slow reference the shell sampler is
+        checked against)."""
         rc = self.render_cfg
+        if dense_samples:
+            surface_t = torch.full_like(surface_t, float("inf"))
         samples = shell_or_box_samples(origins, directions, surface_t, geo.box_min, geo.box_max,
-                                       rc.samples_per_ray, rc.shell_m, generator)
+                                       dense_samples or rc.samples_per_ray, rc.shell_m, generator)
         R, S = samples.t_starts.shape
         pts = (origins[:, None] + directions[:, None] * samples.t_mid[..., None]).reshape(-1, 3)
         prior = deformation_prior(pts, geo.meshes, rc.prior_falloff_m, geo.tree)
         view = (-directions[:, None]).expand(R, S, 3).reshape(-1, 3)
         out = self.field(pts, prior, view, per_sample(omega, R, S), per_sample(phi, R, S), geo.landmarks, create_graph)
-        sigma = out.sigma.reshape(R, S) * samples.valid[:, None]
+        # The field's support: density fades to zero at shell_m from the mesh, so every sampler (the shell,
+        # the box, the dense reference) sees the same field, and nothing floats far from the head.
+        support = ((rc.shell_m - prior.distance) / (0.25 * rc.shell_m)).clamp(0.0, 1.0).reshape(R, S)
+        sigma = out.sigma.reshape(R, S) * support * samples.valid[:, None]
         weights, remaining = weights_from_density(sigma, samples.deltas)
         rgb = composite(weights, out.rgb.reshape(R, S, 3), remaining, self.background)
         normal = grad_normal = pn = pg = None
@@ -148,7 +167,7 @@ class Avatar(nn.Module):
 
     # ---- images ----------------------------------------------------------------------------------------
     def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer,
-                     frame: int | None = None) -> dict[str, np.ndarray]:
+                     frame: int | None = None, dense_samples: int | None = None) -> dict[str, np.ndarray]:
         """RGB, opacity, depth and (with normals) predicted and density-gradient normal maps, (H,W,...).
         `frame` picks a training frame's codes; None uses the mean code (novel controls)."""
         geo = self.geometry(controls)
@@ -156,7 +175,12 @@ class Avatar(nn.Module):
         origin, dirs = pixel_rays(camera)
         fwd = -np.linalg.inv(camera.view)[:3, 2]
         surface_t = np.where(raster.hit, raster.depth / np.maximum(dirs @ fwd, 1e-6), np.inf)
-        active = binary_dilation(raster.hit, iterations=self.render_cfg.silhouette_px) if raster.hit.any() else raster.hit
+        if dense_samples:  # the reference renders every pixel whose ray crosses the head's box
+            active = np.ones_like(raster.hit)
+        elif raster.hit.any():
+            active = binary_dilation(raster.hit, iterations=silhouette_margin_px(self.render_cfg, camera, raster.depth))
+        else:
+            active = raster.hit
         H, W = raster.hit.shape
         out = {"rgb": np.tile(self.background.numpy(), (H, W, 1)), "opacity": np.zeros((H, W), np.float32),
                "depth": np.full((H, W), np.inf, np.float32)}
@@ -176,7 +200,8 @@ class Avatar(nn.Module):
         with grad_mode:
             for a in range(0, len(idx), self.render_cfg.chunk_rays):
                 d, s = d_all[a:a + self.render_cfg.chunk_rays], s_all[a:a + self.render_cfg.chunk_rays]
-                r = self.render_rays(o.expand(len(d), 3), d, s, geo, omega.detach(), phi.detach())
+                r = self.render_rays(o.expand(len(d), 3), d, s, geo, omega.detach(), phi.detach(),
+                                     dense_samples=dense_samples)
                 results["rgb"].append(r.rgb)
                 results["opacity"].append(r.opacity)
                 results["depth"].append(torch.where(r.opacity > 0.5, r.depth, torch.full_like(r.depth, np.inf)))

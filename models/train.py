@@ -65,7 +65,7 @@ class LossWeights:
 
 def _adam_state_tensors(opt: torch.optim.Adam) -> dict[str, torch.Tensor]:
     out = {}
-    for i, (p, st) in enumerate(((p, opt.state[p]) for g in opt.param_groups for p in g["params"])):
+    for i, (p, st) in enumerate((p, opt.state[p]) for g in opt.param_groups for p in g["params"]):
         del p
         for k, v in st.items():
             out[f"adam.{i}.{k}"] = v if torch.is_tensor(v) else torch.tensor(v)

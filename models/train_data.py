@@ -11,7 +11,7 @@ import torch
 from PIL import Image
 from scipy.ndimage import binary_dilation
 
-from models.avatar import Avatar, FrameGeometry
+from models.avatar import Avatar, FrameGeometry, silhouette_margin_px
 from models.dataset import CaptureSplit, DatasetError
 from render.camera import Camera
 from render.gl.context import GLContext
@@ -75,7 +75,8 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet
         d_world = dirs_cam @ f.camera_to_world[:3, :3].T
         cos = -dirs_cam[..., 2]  # the view axis component of each unit direction
         surf.append(np.where(r.hit, r.depth / cos, np.inf).astype(np.float32))
-        active.append(binary_dilation(r.hit, iterations=avatar.render_cfg.silhouette_px))
+        active.append(binary_dilation(r.hit, iterations=silhouette_margin_px(avatar.render_cfg, cam, r.depth))
+                      if r.hit.any() else r.hit)
         origins.append(f.camera_to_world[:3, 3])
         dirs.append(d_world)
         geos.append(geo)

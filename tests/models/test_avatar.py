@@ -1,0 +1,134 @@
+"""The avatar end to end on a tiny synthetic capture: the loss falls, checkpoints round-trip bit for bit,
+resume continues exactly, the shell sampler agrees with a dense reference, effect sets build only what
+they need, and hard cases stay finite."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from models.avatar_io import load_avatar
+from models.fields.codynerf import parse_effects
+from models.head.controls import Controls
+from models.head.sources import load_builtin
+from models.synthetic import SynthConfig, synthesize
+from models.train import TrainConfig, Trainer
+from render.camera import Camera, look_at
+from render.gl.raster import Rasterizer
+
+pytestmark = pytest.mark.gl
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory, gl) -> Path:
+    out = tmp_path_factory.mktemp("cap") / "sun32"
+    synthesize(SynthConfig(scene="sun", frames=24, size=32, out=out), load_builtin(), gl)
+    return out
+
+
+@pytest.fixture(scope="module")
+def trained(capture, gl, tmp_path_factory):
+    """150 steps of the effect set none on the 32x32 capture; the photometric loss before and after."""
+    cfg = TrainConfig(dataset=capture, out=tmp_path_factory.mktemp("av") / "none", effects="none", steps=150,
+                      rays_per_step=512, checkpoint_seconds=1e9)
+    t = Trainer(cfg, gl)
+    first = np.mean([t.train_step(0.0)["photometric"] for _ in range(5)])
+    for k in range(5, 150):
+        t.train_step(k / 150)
+    last = np.mean([t.train_step(1.0)["photometric"] for _ in range(5)])
+    t.save()
+    return t, first, last
+
+
+def test_loss_falls(trained):
+    _, first, last = trained
+    # 155 steps on 32x32 frames: the photometric loss falls at least threefold (measured: 3.7x).
+    assert last < first / 3, (first, last)
+
+
+def test_checkpoint_round_trip_bit_exact(trained):
+    t, _, _ = trained
+    avatar, meta = load_avatar(t.cfg.out)
+    ours = t.avatar.state_dict()
+    for k, v in avatar.state_dict().items():
+        assert torch.equal(v, ours[k]), k
+    assert meta["effects"] == [] and meta["provenance"]["steps"] == t.step
+
+
+def test_resume_is_exact(capture, gl, tmp_path):
+    cfg = TrainConfig(dataset=capture, out=tmp_path / "a", effects="shading", steps=8, rays_per_step=128,
+                      checkpoint_seconds=1e9)
+    straight = Trainer(cfg, gl)
+    for k in range(8):
+        straight.train_step(k / 8)
+    halves = Trainer(replace(cfg, out=tmp_path / "b"), gl)
+    for k in range(4):
+        halves.train_step(k / 8)
+    halves.save()
+    resumed = Trainer(replace(cfg, out=tmp_path / "b", resume=True), gl)
+    assert resumed.step == 4
+    for k in range(4, 8):
+        resumed.train_step(k / 8)
+    for k, v in straight.avatar.state_dict().items():
+        assert torch.equal(v, resumed.avatar.state_dict()[k]), k
+
+
+def test_shell_sampler_matches_dense_reference(trained, gl):
+    """The trained field rendered with 12 samples in the shell about the mesh and with 256 samples across
+    the whole box: the images agree within 0.02 mean absolute error (the field has learned to put its
+    density at the surface, where the shell looks)."""
+    t, _, _ = trained
+    f = t.split.frames[3]
+    from models.train_data import camera_of
+
+    cam = camera_of(t.split, f.camera_to_world)
+    r = Rasterizer(gl)
+    fast = t.avatar.render_image(f.controls, cam, r, frame=3)["rgb"]
+    dense = t.avatar.render_image(f.controls, cam, r, frame=3, dense_samples=256)["rgb"]
+    err = np.abs(fast - dense)
+    print("fast vs dense: mean abs error", err.mean(), "99%", np.quantile(err, 0.99))
+    assert err.mean() < 0.02
+
+
+def test_effect_sets_build_only_what_they_need(capture, gl, tmp_path):
+    none = Trainer(TrainConfig(dataset=capture, out=tmp_path / "n", effects="none", steps=1), gl)
+    assert none.avatar.field.normals is None and none.avatar.field.landmarks is None
+    shadows = Trainer(TrainConfig(dataset=capture, out=tmp_path / "s", effects="shadows", steps=1), gl)
+    assert shadows.avatar.field.normals is None and shadows.avatar.field.landmarks is not None
+    full = Trainer(TrainConfig(dataset=capture, out=tmp_path / "a", effects="all", steps=1), gl)
+    assert full.avatar.field.normals is not None
+    # No density gradients for `none`: it renders under inference_mode, where autograd cannot run at all.
+    f = none.split.frames[0]
+    from models.train_data import camera_of
+
+    with torch.inference_mode():
+        out = none.avatar.render_image(f.controls, camera_of(none.split, f.camera_to_world), Rasterizer(gl))
+    assert "normals" not in out and np.isfinite(out["rgb"]).all()
+    assert parse_effects("specular, shading") == ("shading", "specular")
+    with pytest.raises(ValueError, match="unknown effect"):
+        parse_effects("shading,glitter")
+
+
+def test_hard_cases_stay_finite(trained, gl):
+    """A camera inside the head, extreme controls, rays that graze the box: outputs finite."""
+    t, _, _ = trained
+    av = t.avatar
+    inside = Camera(look_at(np.array([0.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])), 60.0, 24, 24)
+    extreme = Controls(expression=np.full(16, 10.0, np.float32), root=np.array([0.0, np.pi, 0.0], np.float32),
+                       jaw=np.array([1.5, 0, 0], np.float32))
+    for controls, cam in ((Controls(), inside), (extreme, t.split and inside)):
+        out = av.render_image(controls, cam, Rasterizer(gl))
+        assert all(np.isfinite(v[np.isfinite(v)]).all() for v in out.values())
+        assert np.isfinite(out["rgb"]).all()
+    geo = av.geometry(Controls())
+    o = torch.tensor([[0.0, 0.0, 5.0]] * 2)
+    edge = geo.box_max.clone()
+    d = torch.stack([torch.tensor([0.0, 0.0, -1.0]), torch.tensor([0.0, 1.0, 0.0])])
+    o[0, :2] = edge[:2]  # along the box's edge: a grazing ray
+    out = av.render_rays(o, d, torch.full((2,), float("inf")), geo, av.omega.weight[:1], av.phi.weight[:1])
+    assert torch.isfinite(out.rgb).all() and torch.isfinite(out.depth).all()
+    torch.testing.assert_close(out.rgb[1], av.background)  # the ray that misses the box sees the background
