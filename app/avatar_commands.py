@@ -51,7 +51,8 @@ def run_train(cfg: TrainConfig) -> int:
     last = trainer.run(gl, show)
     if tty:
         sys.stderr.write("\n")
-    print(f"wrote {cfg.out}: {trainer.step} steps in {trainer.elapsed / 60:.1f} min, last loss {last.get('loss', 0):.5f}")
+    print(f"wrote {cfg.out}: {trainer.step} steps in {trainer.elapsed / 60:.1f} min, "
+          f"last loss {last.get('loss', 0):.5f}")
     return 0
 
 

@@ -19,7 +19,7 @@ from render.gl.raster import Rasterizer
 
 
 def camera_of(split: CaptureSplit, c2w: np.ndarray) -> Camera:
-    fx, fy, cx, cy = split.intrinsics
+    _, fy, cx, cy = split.intrinsics
     if abs(cx - split.width / 2) > 0.5 or abs(cy - split.height / 2) > 0.5:
         raise DatasetError(f"{split.folder}: principal point ({cx}, {cy}) off the image centre is not supported yet")
     fov = math.degrees(2 * math.atan(0.5 * split.height / fy))
