@@ -15,6 +15,7 @@ from app.errors import UserInputError
 from app.head_commands import save_png
 from models.avatar_io import load_avatar
 from models.dataset import load_split
+from models.fields.codynerf import parse_effects
 from models.head.controls import Controls, load_controls
 from models.metrics import face_mse, normal_angle_deg, psnr, ssim
 from models.synthetic import read_png16
@@ -36,6 +37,10 @@ def run_train(cfg: TrainConfig) -> int:
 
         if not torch.cuda.is_available():
             raise UserInputError("--device cuda: no CUDA device is available on this machine")
+    try:
+        parse_effects(cfg.effects)
+    except ValueError as e:
+        raise UserInputError(f"--effects {cfg.effects}: {e}") from None
     if not cfg.resume and (cfg.out / "avatar.json").exists():
         raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
     gl = GLContext.headless()

@@ -12,9 +12,12 @@ def photometric(rgb: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 def normals_facing_camera(weights: torch.Tensor, normals: torch.Tensor, ray_dirs: torch.Tensor) -> torch.Tensor:
     """Eq. 10: sum_i w_i max(0, n_i . d)^2 per ray, averaged over rays. d points away from the camera, so a
-    normal that faces away from it is penalised. weights (R,S), normals (R,S,3), ray_dirs (R,3)."""
+    normal that faces away from it is penalised. weights (R,S), normals (R,S,3), ray_dirs (R,3).
+
+    The weights only say where to look: they are detached, or the cheapest way to lower the term is to
+    remove the density (with random early normals, training collapsed to an empty field within 300 steps)."""
     facing = (normals * ray_dirs[:, None]).sum(-1).clamp_min(0.0)
-    return (weights * facing**2).sum(-1).mean()
+    return (weights.detach() * facing**2).sum(-1).mean()
 
 
 def top_k_normal_consistency(weights: torch.Tensor, normals: torch.Tensor, grad_normals: torch.Tensor,
@@ -22,7 +25,7 @@ def top_k_normal_consistency(weights: torch.Tensor, normals: torch.Tensor, grad_
     """Eq. 13: sum over the k highest-weighted samples of each ray of w_i |N(x_i) - Grad_n(x_i)|, averaged
     over rays. Only samples near the surface tie the two normals together."""
     k = min(k, weights.shape[-1])
-    w, idx = weights.topk(k, dim=-1)
+    w, idx = weights.detach().topk(k, dim=-1)  # where to look, not something to shrink (see Eq. 10's note)
     gather = lambda t: t.gather(1, idx[..., None].expand(-1, -1, 3))
     return (w * (gather(normals) - gather(grad_normals)).norm(dim=-1)).sum(-1).mean()
 

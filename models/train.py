@@ -17,7 +17,7 @@ import torch
 from models import losses
 from models.avatar import Avatar, RenderConfig
 from models.checkpoint import load_checkpoint, save_checkpoint
-from models.dataset import load_split
+from models.dataset import DatasetError, load_split
 from models.fields.codynerf import FieldConfig, parse_effects
 from models.head.sources import load_head
 from models.train_data import FrameSet, build_frames
@@ -50,12 +50,14 @@ class TrainConfig:
     """Adam learning rate at the start; it decays tenfold over the run."""
     checkpoint_seconds: float = 60.0
     """How often to checkpoint."""
+    grad_clip: float = 1.0
+    """Largest gradient norm of a step."""
 
 
 @dataclass(frozen=True)
 class LossWeights:
-    mesh_normals: float = 0.02  # Eq. 9
-    normals_facing: float = 0.05  # Eq. 10
+    mesh_normals: float = 0.1  # Eq. 9
+    normals_facing: float = 0.1  # Eq. 10
     normal_consistency: float = 0.1  # Eq. 13
     cauchy: float = 1e-4  # Eq. 14
     cauchy_c: float = 100.0
@@ -88,9 +90,7 @@ class Trainer:
         self.split = load_split(cfg.dataset, "train")
         self.val_split = load_split(cfg.dataset, "val")
         if not self.split.trains_codynerf:
-            from app.errors import UserInputError
-
-            raise UserInputError(f"{cfg.dataset}: a capture without a head model trains only --model nerface")
+            raise DatasetError(f"{cfg.dataset}: a capture without a head model trains only --model nerface")
         self.head_spec = self.split.head_model
         head = load_head(self.head_spec)
         bg = self.split.background if isinstance(self.split.background, np.ndarray) else np.ones(3)
@@ -166,6 +166,8 @@ class Trainer:
                 total = total + v / len(frame_ids)
         self.opt.zero_grad(set_to_none=True)
         total.backward()
+        # Second derivatives (density-gradient normals) can spike; a bounded step keeps the field alive.
+        torch.nn.utils.clip_grad_norm_(self.avatar.parameters(), self.cfg.grad_clip)
         self.opt.step()
         self.step += 1
         return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}

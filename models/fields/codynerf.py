@@ -89,7 +89,9 @@ class CoDyNeRFField(nn.Module):
         d_def = encoded_size(3, c.deform_frequencies) + encoded_size(3, c.prior_frequencies) + c.deform_code_dim
         self.deform = MLP(d_def, 3, c.width, 3, zero_last=True)
         self.density = MLP(encoded_size(3, c.density_frequencies) + 1, 1 + c.feature_dim, c.width, 3)
-        self.normals = MLP(3 + 3 + 1, 3, 32, 2) if c.needs_normals else None
+        # N starts as the mesh normal and learns a correction (zero-initialised last layer): Eq. 9 holds at
+        # the start and the appearance sees sensible normals from the first step.
+        self.normals = MLP(3 + 3 + 1, 3, 32, 2, zero_last=True) if c.needs_normals else None
         d_app = c.feature_dim + encoded_size(3, c.view_frequencies) + c.appearance_code_dim
         if c.needs_normals:
             d_app += 3
@@ -129,8 +131,8 @@ class CoDyNeRFField(nn.Module):
             if c.needs_normals:
                 (grad,) = torch.autograd.grad(sigma.sum(), x, create_graph=create_graph)
                 grad_normal = safe_normalize(-grad)
-                normal = safe_normalize(self.normals(torch.cat([prior.mesh_normal, grad_normal,
-                                                                prior.distance[:, None]], -1)))
+                normal = safe_normalize(prior.mesh_normal + self.normals(torch.cat(
+                    [prior.mesh_normal, grad_normal, prior.distance[:, None] / c.scale_m], -1)))
         inputs = [tau, frequency_encoding(view_dir, c.view_frequencies), phi]
         if c.needs_normals:
             inputs.append(normal)
