@@ -33,10 +33,7 @@ def run_train(cfg: TrainConfig) -> int:
     if cfg.model == "nerface":
         raise UserInputError("--model nerface: the NerFACE baseline is not built yet")
     if cfg.device == "cuda":
-        import torch
-
-        if not torch.cuda.is_available():
-            raise UserInputError("--device cuda: no CUDA device is available on this machine")
+        raise UserInputError("--device cuda: training on a GPU is not built yet; the avatar trains on the CPU")
     try:
         parse_effects(cfg.effects)
     except ValueError as e:
