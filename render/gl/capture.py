@@ -98,54 +98,55 @@ class CaptureRenderer:
 
     def render(self, mesh: CaptureMesh, camera: Camera, lighting: CaptureLighting, look: Appearance
                ) -> CaptureBuffers:
-        ctx = self.gl.ctx
-        s = self.supersample
-        W, H = camera.width_px * s, camera.height_px * s
-        n = vertex_normals(mesh.vertices, mesh.triangles)
-        data = np.concatenate([mesh.vertices, n, mesh.canonical, mesh.eye], 1).astype("f4")
-        vbo = ctx.buffer(data.tobytes())
-        ibo = ctx.buffer(np.asarray(mesh.triangles, "i4").tobytes())
-        light_dir = np.asarray(lighting.light_dir, np.float64) / np.linalg.norm(lighting.light_dir)
-        center, radius = bounding_sphere(mesh.vertices)
-        light_vp = light_view_projection(light_dir, center, radius).astype("f4")
-        if lighting.shadows:
-            self._shadow.draw(vbo, "3f 40x", ibo, light_vp, lighting.shadow_map_px)  # 13 floats a vertex
-        fbo = self._framebuffer(W, H)
-        fbo.use()
-        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        ctx.enable(moderngl.DEPTH_TEST)
-        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
-        prog = self.gl.program("capture")
-        vp = (camera.projection @ camera.view).astype("f4")
-        prog["u_view_projection"].write(vp.T.tobytes())
-        prog["u_view"].write(camera.view.astype("f4").T.tobytes())
-        prog["u_light_view_projection"].write(light_vp.T.tobytes())
-        prog["u_normal_offset"].value = 1.5 * 2 * radius / lighting.shadow_map_px
-        prog["u_shadow_bias"].value = 1.0 / lighting.shadow_map_px
-        prog["u_camera_position"].value = tuple(camera.position)
-        prog["u_sh"].write(np.asarray(lighting.sh, "f4").tobytes())
-        prog["u_light_dir"].value = tuple(light_dir)
-        prog["u_light_color"].value = tuple(np.asarray(lighting.light_color, float))
-        prog["u_use_diffuse"].value = int(lighting.diffuse)
-        prog["u_use_specular"].value = int(lighting.specular)
-        prog["u_use_shadows"].value = int(lighting.shadows)
-        prog["u_shininess"].value = float(lighting.shininess)
-        if lighting.shadows:
-            self._shadow.texture.use(location=0)
-        prog["u_shadow_map"].value = 0
-        for name in ("skin_color", "lip_color", "brow_color", "iris_color", "lip_center", "lip_radii", "brow_radii",
-                     "nose_top", "nose_tip", "forehead_center", "forehead_radii", "specular_range"):
-            prog[f"u_{name}"].value = tuple(float(x) for x in np.ravel(getattr(look, name)))
-        prog["u_brow_center"].write(np.asarray(look.brow_centers, "f4").tobytes())
-        prog["u_seed"].value = float(look.seed)
-        vao = ctx.vertex_array(prog, [(vbo, "3f 3f 3f 4f", "in_position", "in_normal", "in_canonical", "in_eye")],
-                               index_buffer=ibo)
-        vao.render(moderngl.TRIANGLES)
-        vao.release()
-        vbo.release()
-        ibo.release()
-        maps = [np.frombuffer(t.read(), np.float32).reshape(H, W, 4)[::-1] for t in self._targets]
-        return self._downsample(*maps)
+        with self.gl.current():
+            ctx = self.gl.ctx
+            s = self.supersample
+            W, H = camera.width_px * s, camera.height_px * s
+            n = vertex_normals(mesh.vertices, mesh.triangles)
+            data = np.concatenate([mesh.vertices, n, mesh.canonical, mesh.eye], 1).astype("f4")
+            vbo = ctx.buffer(data.tobytes())
+            ibo = ctx.buffer(np.asarray(mesh.triangles, "i4").tobytes())
+            light_dir = np.asarray(lighting.light_dir, np.float64) / np.linalg.norm(lighting.light_dir)
+            center, radius = bounding_sphere(mesh.vertices)
+            light_vp = light_view_projection(light_dir, center, radius).astype("f4")
+            if lighting.shadows:
+                self._shadow.draw(vbo, "3f 40x", ibo, light_vp, lighting.shadow_map_px)  # 13 floats a vertex
+            fbo = self._framebuffer(W, H)
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+            prog = self.gl.program("capture")
+            vp = (camera.projection @ camera.view).astype("f4")
+            prog["u_view_projection"].write(vp.T.tobytes())
+            prog["u_view"].write(camera.view.astype("f4").T.tobytes())
+            prog["u_light_view_projection"].write(light_vp.T.tobytes())
+            prog["u_normal_offset"].value = 1.5 * 2 * radius / lighting.shadow_map_px
+            prog["u_shadow_bias"].value = 1.0 / lighting.shadow_map_px
+            prog["u_camera_position"].value = tuple(camera.position)
+            prog["u_sh"].write(np.asarray(lighting.sh, "f4").tobytes())
+            prog["u_light_dir"].value = tuple(light_dir)
+            prog["u_light_color"].value = tuple(np.asarray(lighting.light_color, float))
+            prog["u_use_diffuse"].value = int(lighting.diffuse)
+            prog["u_use_specular"].value = int(lighting.specular)
+            prog["u_use_shadows"].value = int(lighting.shadows)
+            prog["u_shininess"].value = float(lighting.shininess)
+            if lighting.shadows:
+                self._shadow.texture.use(location=0)
+            prog["u_shadow_map"].value = 0
+            for name in ("skin_color", "lip_color", "brow_color", "iris_color", "lip_center", "lip_radii", "brow_radii",
+                         "nose_top", "nose_tip", "forehead_center", "forehead_radii", "specular_range"):
+                prog[f"u_{name}"].value = tuple(float(x) for x in np.ravel(getattr(look, name)))
+            prog["u_brow_center"].write(np.asarray(look.brow_centers, "f4").tobytes())
+            prog["u_seed"].value = float(look.seed)
+            vao = ctx.vertex_array(prog, [(vbo, "3f 3f 3f 4f", "in_position", "in_normal", "in_canonical", "in_eye")],
+                                   index_buffer=ibo)
+            vao.render(moderngl.TRIANGLES)
+            vao.release()
+            vbo.release()
+            ibo.release()
+            maps = [np.frombuffer(t.read(), np.float32).reshape(H, W, 4)[::-1] for t in self._targets]
+            return self._downsample(*maps)
 
     def _downsample(self, color: np.ndarray, normal: np.ndarray, albedo: np.ndarray, light: np.ndarray
                     ) -> CaptureBuffers:
@@ -182,5 +183,6 @@ class CaptureRenderer:
         self._targets, self._fbo = [], None
 
     def release(self) -> None:
-        self._release_targets()
-        self._shadow.release()
+        with self.gl.current():
+            self._release_targets()
+            self._shadow.release()

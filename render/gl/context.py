@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
 import moderngl
 
 from render.gl.shaders import PROGRAMS, read_program, stage_sources
@@ -19,6 +22,7 @@ class GLContext:
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
+        self._depth = 0
         self._programs: dict[tuple[str, tuple[str, ...]], moderngl.Program] = {}
 
     @classmethod
@@ -34,6 +38,21 @@ class GLContext:
     def from_current_window(cls) -> GLContext:
         """Wrap the context a window made current (glfw)."""
         return cls(moderngl.create_context(require=330))
+
+    @contextlib.contextmanager
+    def current(self) -> Iterator[moderngl.Context]:
+        """Make this context current for the block (re-entrant). Every GL call goes through one: a process
+        may hold several contexts (a studio's window and a headless one, or one per command in tests), and
+        a GL object made or used while another context is current is silently wrong."""
+        if self._depth == 0:
+            self.ctx.__enter__()
+        self._depth += 1
+        try:
+            yield self.ctx
+        finally:
+            self._depth -= 1
+            if self._depth == 0:
+                self.ctx.__exit__(None, None, None)
 
     @property
     def renderer(self) -> str:
@@ -55,7 +74,8 @@ class GLContext:
         return self._programs[key]
 
     def release(self) -> None:
-        for p in self._programs.values():
-            p.release()
-        self._programs.clear()
+        with self.current():
+            for p in self._programs.values():
+                p.release()
+            self._programs.clear()
         self.ctx.release()

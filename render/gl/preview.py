@@ -104,63 +104,66 @@ class PreviewRenderer:
                read_depth: bool = False) -> np.ndarray:
         """RGB image (H,W,3) uint8, top row first. With read_depth, the camera depth (metres along the
         view axis, inf for background) is kept in `last_depth`."""
-        result = self.draw(frame, camera, settings)
-        w, h = camera.width_px, camera.height_px
-        rgb = np.frombuffer(result.read(components=3, alignment=1), np.uint8).reshape(h, w, 3)
-        if read_depth:
-            depth01 = np.frombuffer(result.depth_attachment.read(alignment=1), np.float32).reshape(h, w)
-            depth = np.where(depth01 < 1.0, linear_depth_from_ndc(depth01, camera.near_m, camera.far_m), np.inf)
-            self.last_depth = depth[::-1].copy()
-        return rgb[::-1].copy()  # GL rows run bottom-up
+        with self.gl.current():
+            result = self.draw(frame, camera, settings)
+            w, h = camera.width_px, camera.height_px
+            rgb = np.frombuffer(result.read(components=3, alignment=1), np.uint8).reshape(h, w, 3)
+            if read_depth:
+                depth01 = np.frombuffer(result.depth_attachment.read(alignment=1), np.float32).reshape(h, w)
+                depth = np.where(depth01 < 1.0, linear_depth_from_ndc(depth01, camera.near_m, camera.far_m), np.inf)
+                self.last_depth = depth[::-1].copy()
+            return rgb[::-1].copy()  # GL rows run bottom-up
 
     def present(self, target: moderngl.Framebuffer) -> None:
         """Copy the last drawn image into another framebuffer of the same size (a window's screen)."""
-        self.ctx.copy_framebuffer(target, self._resolve)
+        with self.gl.current():
+            self.ctx.copy_framebuffer(target, self._resolve)
 
     def draw(self, frame: MeshFrame, camera: Camera, settings: PreviewSettings = PreviewSettings()
              ) -> moderngl.Framebuffer:
         """Draw without reading back; returns the single-sample framebuffer that holds the image."""
-        self._upload(frame)
-        ctx = self.ctx
-        ctx.enable(moderngl.DEPTH_TEST)
-        ctx.disable(moderngl.CULL_FACE)
-        vp = (camera.projection @ camera.view).astype("f4")
-        light_dir = np.asarray(settings.light_dir, np.float64)
-        light_dir /= np.linalg.norm(light_dir)
-        center, radius = bounding_sphere(frame.vertices)
-        light_vp = light_view_projection(light_dir, center, radius).astype("f4")
-        use_shadows = settings.shadows and settings.pass_name != "normals"
-        if use_shadows:
-            shadow_tex = self._shadow.draw(self._vbo, "3f 12x", self._ibo, light_vp, settings.shadow_map_px)
-        fbo = self._framebuffer(camera.width_px, camera.height_px, settings.samples)
-        fbo.use()
-        fbo.clear(*settings.background, 1.0, depth=1.0)
-        wire = settings.wireframe_overlay or settings.pass_name == "wireframe"
-        prog = self.gl.program("surface", ("WIREFRAME",) if wire else ())
-        prog["u_view_projection"].write(vp.T.tobytes())
-        prog["u_light_view_projection"].write(light_vp.T.tobytes())
-        prog["u_light_dir"].value = tuple(light_dir)
-        prog["u_albedo"].value = settings.albedo
-        prog["u_ambient"].value = settings.ambient
-        prog["u_light_color"].value = settings.light_color
-        prog["u_shadow_bias"].value = 1.0 / settings.shadow_map_px
-        prog["u_normal_offset"].value = 1.5 * 2 * radius / settings.shadow_map_px  # 1.5 shadow-map texels
-        prog["u_use_shadows"].value = int(use_shadows)
-        prog["u_mode"].value = {"shadow": 1, "normals": 2}.get(settings.pass_name, 0)
-        if wire:
-            prog["u_wire_color"].value = (0.05, 0.05, 0.08, 0.55)
-            prog["u_wire_width_px"].value = 1.0
-        if use_shadows:
-            shadow_tex.use(location=0)
-        prog["u_shadow_map"].value = 0
-        vao = self._vao(prog, True)
-        vao.render(moderngl.TRIANGLES)
-        vao.release()
-        if settings.landmarks and frame.landmarks is not None and len(frame.landmarks):
-            self._draw_points(frame.landmarks, vp, max(3.0, camera.height_px / 160))
-        if fbo is not self._resolve:
-            ctx.copy_framebuffer(self._resolve, fbo)
-        return self._resolve
+        with self.gl.current():
+            self._upload(frame)
+            ctx = self.ctx
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.CULL_FACE)
+            vp = (camera.projection @ camera.view).astype("f4")
+            light_dir = np.asarray(settings.light_dir, np.float64)
+            light_dir /= np.linalg.norm(light_dir)
+            center, radius = bounding_sphere(frame.vertices)
+            light_vp = light_view_projection(light_dir, center, radius).astype("f4")
+            use_shadows = settings.shadows and settings.pass_name != "normals"
+            if use_shadows:
+                shadow_tex = self._shadow.draw(self._vbo, "3f 12x", self._ibo, light_vp, settings.shadow_map_px)
+            fbo = self._framebuffer(camera.width_px, camera.height_px, settings.samples)
+            fbo.use()
+            fbo.clear(*settings.background, 1.0, depth=1.0)
+            wire = settings.wireframe_overlay or settings.pass_name == "wireframe"
+            prog = self.gl.program("surface", ("WIREFRAME",) if wire else ())
+            prog["u_view_projection"].write(vp.T.tobytes())
+            prog["u_light_view_projection"].write(light_vp.T.tobytes())
+            prog["u_light_dir"].value = tuple(light_dir)
+            prog["u_albedo"].value = settings.albedo
+            prog["u_ambient"].value = settings.ambient
+            prog["u_light_color"].value = settings.light_color
+            prog["u_shadow_bias"].value = 1.0 / settings.shadow_map_px
+            prog["u_normal_offset"].value = 1.5 * 2 * radius / settings.shadow_map_px  # 1.5 shadow-map texels
+            prog["u_use_shadows"].value = int(use_shadows)
+            prog["u_mode"].value = {"shadow": 1, "normals": 2}.get(settings.pass_name, 0)
+            if wire:
+                prog["u_wire_color"].value = (0.05, 0.05, 0.08, 0.55)
+                prog["u_wire_width_px"].value = 1.0
+            if use_shadows:
+                shadow_tex.use(location=0)
+            prog["u_shadow_map"].value = 0
+            vao = self._vao(prog, True)
+            vao.render(moderngl.TRIANGLES)
+            vao.release()
+            if settings.landmarks and frame.landmarks is not None and len(frame.landmarks):
+                self._draw_points(frame.landmarks, vp, max(3.0, camera.height_px / 160))
+            if fbo is not self._resolve:
+                ctx.copy_framebuffer(self._resolve, fbo)
+            return self._resolve
 
     def _draw_points(self, points: np.ndarray, vp: np.ndarray, size_px: float) -> None:
         """Landmarks as green points, drawn over the surface (not hidden by it)."""
@@ -179,6 +182,7 @@ class PreviewRenderer:
         ctx.enable(moderngl.DEPTH_TEST)
 
     def release(self) -> None:
-        for r in {self._fbo, self._resolve, self._vbo, self._ibo} - {None}:
-            r.release()
-        self._shadow.release()
+        with self.gl.current():
+            for r in {self._fbo, self._resolve, self._vbo, self._ibo} - {None}:
+                r.release()
+            self._shadow.release()

@@ -59,43 +59,45 @@ class Rasterizer:
         self._size = (0, 0)
 
     def rasterize(self, vertices: np.ndarray, triangles: np.ndarray, camera: Camera) -> Raster:
-        ctx = self.gl.ctx
-        w, h = camera.width_px, camera.height_px
-        if self._size != (w, h):
-            self.release()
-            self._depth = ctx.texture((w, h), 1, dtype="f4")
-            self._tri = ctx.texture((w, h), 1, dtype="i4")
-            self._fbo = ctx.framebuffer([self._depth, self._tri], ctx.depth_renderbuffer((w, h)))
-            self._size = (w, h)
-        v = np.asarray(vertices, "f4")
-        vbo = ctx.buffer(v.tobytes())
-        ibo = ctx.buffer(np.asarray(triangles, "i4").tobytes())
-        prog = self.gl.program("raster")
-        prog["u_view_projection"].write((camera.projection @ camera.view).astype("f4").T.tobytes())
-        prog["u_view"].write(camera.view.astype("f4").T.tobytes())
-        vao = ctx.vertex_array(prog, [(vbo, "3f", "in_position")], index_buffer=ibo)
-        self._fbo.use()
-        self._fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        ctx.enable(moderngl.DEPTH_TEST)
-        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
-        vao.render(moderngl.TRIANGLES)
-        vao.release()
-        vbo.release()
-        ibo.release()
-        tri = np.frombuffer(self._tri.read(), np.int32).reshape(h, w)[::-1] - 1
-        depth = np.frombuffer(self._depth.read(), np.float32).reshape(h, w)[::-1]
-        hit = tri >= 0
-        bary = np.zeros((h, w, 3), np.float32)
-        if hit.any():
-            origin, dirs = pixel_rays(camera)
-            corners = np.asarray(vertices, np.float64)[np.asarray(triangles)[tri[hit]]]
-            bary[hit] = ray_triangle_barycentric(origin, dirs[hit], corners)
-        return Raster(tri.copy(), np.where(hit, depth, np.inf), bary)
+        with self.gl.current():
+            ctx = self.gl.ctx
+            w, h = camera.width_px, camera.height_px
+            if self._size != (w, h):
+                self.release()
+                self._depth = ctx.texture((w, h), 1, dtype="f4")
+                self._tri = ctx.texture((w, h), 1, dtype="i4")
+                self._fbo = ctx.framebuffer([self._depth, self._tri], ctx.depth_renderbuffer((w, h)))
+                self._size = (w, h)
+            v = np.asarray(vertices, "f4")
+            vbo = ctx.buffer(v.tobytes())
+            ibo = ctx.buffer(np.asarray(triangles, "i4").tobytes())
+            prog = self.gl.program("raster")
+            prog["u_view_projection"].write((camera.projection @ camera.view).astype("f4").T.tobytes())
+            prog["u_view"].write(camera.view.astype("f4").T.tobytes())
+            vao = ctx.vertex_array(prog, [(vbo, "3f", "in_position")], index_buffer=ibo)
+            self._fbo.use()
+            self._fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+            vao.render(moderngl.TRIANGLES)
+            vao.release()
+            vbo.release()
+            ibo.release()
+            tri = np.frombuffer(self._tri.read(), np.int32).reshape(h, w)[::-1] - 1
+            depth = np.frombuffer(self._depth.read(), np.float32).reshape(h, w)[::-1]
+            hit = tri >= 0
+            bary = np.zeros((h, w, 3), np.float32)
+            if hit.any():
+                origin, dirs = pixel_rays(camera)
+                corners = np.asarray(vertices, np.float64)[np.asarray(triangles)[tri[hit]]]
+                bary[hit] = ray_triangle_barycentric(origin, dirs[hit], corners)
+            return Raster(tri.copy(), np.where(hit, depth, np.inf), bary)
 
     def release(self) -> None:
-        if self._fbo is not None:
-            self._fbo.release()
-            self._depth.release()
-            self._tri.release()
-        self._fbo = None
-        self._size = (0, 0)
+        with self.gl.current():
+            if self._fbo is not None:
+                self._fbo.release()
+                self._depth.release()
+                self._tri.release()
+            self._fbo = None
+            self._size = (0, 0)

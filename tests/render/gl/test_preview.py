@@ -186,3 +186,21 @@ def test_depth_matches_pyrender(renderer, builtin_model, tmp_path):
     inside = (ref[interior] >= lo[interior] - 1e-4) & (ref[interior] <= hi[interior] + 1e-4)
     assert inside.mean() > 0.995, f"{(~inside).sum()} of {interior.sum()} pixels outside the neighbourhood range"
     assert np.median(np.abs(ours[interior] - ref[interior])) < 2e-3
+
+
+@pytest.mark.gl
+def test_two_contexts_in_one_process(gl):
+    """A second context made current in between (another command, a window) must not disturb the first."""
+    from render.gl.context import GLContext
+
+    v, f = quad(5.0, 0.0)
+    first = PreviewRenderer(gl)
+    expected = first.render(MeshFrame(v, f), camera_at(1.0, 90.0), FLAT)
+    other = GLContext.headless()  # becomes current
+    small = Camera(look_at(np.array([0.0, 0.0, 1.0]), np.zeros(3)), 90.0, 32, 24)
+    PreviewRenderer(other).render(MeshFrame(v[::-1].copy(), f), small, PreviewSettings(pass_name="normals"))
+    again = first.render(MeshFrame(v, f), camera_at(1.0, 90.0), FLAT)
+    assert np.array_equal(again, expected) and abs(int(again[8, 8, 0]) - 102) <= 1
+    fresh = PreviewRenderer(gl).render(MeshFrame(v, f), camera_at(1.0, 90.0), FLAT)  # objects made now too
+    assert np.array_equal(fresh, expected)
+    other.release()
