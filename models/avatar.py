@@ -8,7 +8,7 @@ and are composited over the background (Eq. 1).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -110,8 +110,6 @@ class Avatar(nn.Module):
     @torch.no_grad()
     def geometry(self, controls: Controls) -> FrameGeometry:
         """The frame's canonical, expressed and posed meshes (DESIGN 3, step 1)."""
-        from dataclasses import replace
-
         neutral = replace(controls, expression=np.zeros(0, np.float32), root=np.zeros(3, np.float32),
                           neck=np.zeros(3, np.float32), jaw=np.zeros(3, np.float32),
                           gaze_left=np.zeros(3, np.float32), gaze_right=np.zeros(3, np.float32),

@@ -19,9 +19,12 @@ from models.avatar import Avatar, RenderConfig
 from models.checkpoint import load_checkpoint, save_checkpoint
 from models.dataset import DatasetError, load_split
 from models.fields.codynerf import FieldConfig, parse_effects
+from models.fields.prior import deformation_prior
 from models.head.sources import load_head
-from models.train_data import FrameSet, build_frames
+from models.metrics import psnr
+from models.train_data import FrameSet, build_frames, camera_of, load_rgb
 from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
 
 
 @dataclass(frozen=True)
@@ -176,8 +179,6 @@ class Trainer:
         """Eq. 9 on a random subset of the frame's posed vertices (DistToMesh = 0 there)."""
         geo = self.frames.geometry[fid]
         idx = torch.randint(len(geo.meshes.posed), (self.w.mesh_normal_vertices,), generator=self.generator)
-        from models.fields.prior import deformation_prior
-
         pts = geo.meshes.posed[idx]
         prior = deformation_prior(pts, geo.meshes, self.avatar.render_cfg.prior_falloff_m, geo.tree)
         code = torch.tensor([fid])
@@ -188,10 +189,6 @@ class Trainer:
     # ---- validation ------------------------------------------------------------------------------------
     @torch.no_grad()
     def validation_psnr(self, gl: GLContext) -> float:
-        from models.metrics import psnr
-        from models.train_data import camera_of, load_rgb
-        from render.gl.raster import Rasterizer
-
         f = self.val_split.frames[0]
         r = Rasterizer(gl)
         img = self.avatar.render_image(f.controls, camera_of(self.val_split, f.camera_to_world), r)["rgb"]

@@ -39,3 +39,17 @@ def gl():
     ctx = GLContext.headless()
     yield ctx
     ctx.release()
+
+
+@pytest.fixture(scope="module")
+def synth_capture(tmp_path_factory, gl):
+    """make(scene, frames, size): a small synthetic capture of the built-in head, made once per module."""
+    from models.head.sources import load_builtin
+    from models.synthetic import SynthConfig, synthesize
+
+    def make(scene: str, frames: int, size: int) -> Path:
+        out = tmp_path_factory.mktemp("capture") / f"{scene}_{frames}_{size}"
+        synthesize(SynthConfig(scene=scene, frames=frames, size=size, out=out), load_builtin(), gl)
+        return out
+
+    return make

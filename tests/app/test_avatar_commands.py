@@ -11,17 +11,13 @@ import pytest
 from PIL import Image
 
 from app.cli import main
-from models.head.sources import load_builtin
-from models.synthetic import SynthConfig, synthesize
 
 pytestmark = pytest.mark.gl
 
 
 @pytest.fixture(scope="module")
-def capture(tmp_path_factory, gl) -> Path:
-    out = tmp_path_factory.mktemp("cap") / "c"
-    synthesize(SynthConfig(scene="studio", frames=12, size=24, out=out), load_builtin(), gl)
-    return out
+def capture(synth_capture) -> Path:
+    return synth_capture("studio", 12, 24)
 
 
 def test_train_eval_render(capture, tmp_path, capsys):

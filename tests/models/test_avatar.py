@@ -14,8 +14,6 @@ import torch
 from models.avatar_io import load_avatar
 from models.fields.codynerf import parse_effects
 from models.head.controls import Controls
-from models.head.sources import load_builtin
-from models.synthetic import SynthConfig, synthesize
 from models.train import TrainConfig, Trainer
 from render.camera import Camera, look_at
 from render.gl.raster import Rasterizer
@@ -24,10 +22,8 @@ pytestmark = pytest.mark.gl
 
 
 @pytest.fixture(scope="module")
-def capture(tmp_path_factory, gl) -> Path:
-    out = tmp_path_factory.mktemp("cap") / "sun32"
-    synthesize(SynthConfig(scene="sun", frames=24, size=32, out=out), load_builtin(), gl)
-    return out
+def capture(synth_capture) -> Path:
+    return synth_capture("sun", 24, 32)
 
 
 @pytest.fixture(scope="module")
