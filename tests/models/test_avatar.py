@@ -116,10 +116,10 @@ def test_hard_cases_stay_finite(trained, gl):
     inside = Camera(look_at(np.array([0.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])), 60.0, 24, 24)
     extreme = Controls(expression=np.full(16, 10.0, np.float32), root=np.array([0.0, np.pi, 0.0], np.float32),
                        jaw=np.array([1.5, 0, 0], np.float32))
-    for controls, cam in ((Controls(), inside), (extreme, t.split and inside)):
-        out = av.render_image(controls, cam, Rasterizer(gl))
-        assert all(np.isfinite(v[np.isfinite(v)]).all() for v in out.values())
-        assert np.isfinite(out["rgb"]).all()
+    for controls in (Controls(), extreme):
+        out = av.render_image(controls, inside, Rasterizer(gl))
+        assert np.isfinite(out["rgb"]).all() and np.isfinite(out["opacity"]).all()
+        assert not np.isnan(out["depth"]).any()  # inf (nothing seen) is allowed, nan is not
     geo = av.geometry(Controls())
     o = torch.tensor([[0.0, 0.0, 5.0]] * 2)
     edge = geo.box_max.clone()
