@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal
 
@@ -11,6 +11,7 @@ import numpy as np
 from PIL import Image
 
 from app.errors import UserInputError
+from models.files import atomic_write
 from models.head.controls import Controls, ControlsError, load_controls
 from models.head.head import Head, posed_mesh
 from models.head.model import HeadModel, portrait_vertices
@@ -82,7 +83,6 @@ def parse_expression_args(head: HeadModel, items: tuple[str, ...], controls: Con
             expr[int(key)] = w
         else:
             named[key] = w
-    from dataclasses import replace
     try:
         return replace(controls, expression=expr).with_expression(head, named)
     except ControlsError as e:
@@ -110,9 +110,7 @@ def _check_out(path: Path, suffixes: tuple[str, ...]) -> None:
 
 def save_png(path: Path, rgb: np.ndarray) -> None:
     """Write a PNG atomically (temporary file, then rename)."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    Image.fromarray(rgb).save(tmp, format="PNG")
-    tmp.replace(path)
+    atomic_write(path, lambda tmp: Image.fromarray(rgb).save(tmp, format="PNG"))
 
 
 def render_head(gl: GLContext, head: HeadModel, verts: np.ndarray, lmks: np.ndarray, cfg: PreviewConfig

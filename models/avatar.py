@@ -8,7 +8,7 @@ and are composited over the background (Eq. 1).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -22,7 +22,7 @@ from models.head.controls import Controls
 from models.head.head import Head
 from models.head.model import HeadModel
 from render.camera import Camera
-from render.gl.raster import Rasterizer, pixel_rays
+from render.gl.raster import Raster, Rasterizer, pixel_rays, surface_distance
 from render.mesh import vertex_normals
 from render.sampling import RaySamples, shell_or_box_samples
 from render.volume import composite, expected_depth, weights_from_density
@@ -70,7 +70,6 @@ class RayOutput:
     samples: RaySamples
     point_normal: torch.Tensor | None = None  # (R,S,3)
     point_grad_normal: torch.Tensor | None = None  # (R,S,3)
-    extras: dict = field(default_factory=dict)
 
 
 def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -> int:
@@ -80,6 +79,13 @@ def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -
     if len(finite) == 0:
         return cfg.silhouette_px
     return max(cfg.silhouette_px, int(np.ceil(cfg.shell_m * camera.focal_px() / max(finite.min(), 1e-3))))
+
+
+def active_pixels(cfg: RenderConfig, camera: Camera, raster: Raster) -> np.ndarray:
+    """(H,W) pixels whose rays are rendered: those within the silhouette margin of the rasterized mesh."""
+    if not raster.hit.any():
+        return raster.hit
+    return binary_dilation(raster.hit, iterations=silhouette_margin_px(cfg, camera, raster.depth))
 
 
 def per_sample(code: torch.Tensor, R: int, S: int) -> torch.Tensor:
@@ -110,12 +116,8 @@ class Avatar(nn.Module):
     @torch.no_grad()
     def geometry(self, controls: Controls) -> FrameGeometry:
         """The frame's canonical, expressed and posed meshes (DESIGN 3, step 1)."""
-        neutral = replace(controls, expression=np.zeros(0, np.float32), root=np.zeros(3, np.float32),
-                          neck=np.zeros(3, np.float32), jaw=np.zeros(3, np.float32),
-                          gaze_left=np.zeros(3, np.float32), gaze_right=np.zeros(3, np.float32),
-                          translation=np.zeros(3, np.float32))
-        unposed = replace(controls, root=neutral.root, neck=neutral.neck, jaw=neutral.jaw, gaze_left=neutral.gaze_left,
-                          gaze_right=neutral.gaze_right, translation=neutral.translation)
+        neutral = Controls(shape=controls.shape)
+        unposed = Controls(shape=controls.shape, expression=controls.expression)
         v, _, lm = self.head.pose([neutral, unposed, controls])
         posed = v[2]
         normals = torch.as_tensor(vertex_normals(posed.numpy(), self.head_model.triangles))
@@ -171,14 +173,9 @@ class Avatar(nn.Module):
         geo = self.geometry(controls)
         raster = rasterizer.rasterize(geo.meshes.posed.numpy(), self.head_model.triangles, camera)
         origin, dirs = pixel_rays(camera)
-        fwd = -np.linalg.inv(camera.view)[:3, 2]
-        surface_t = np.where(raster.hit, raster.depth / np.maximum(dirs @ fwd, 1e-6), np.inf)
-        if dense_samples:  # the reference renders every pixel whose ray crosses the head's box
-            active = np.ones_like(raster.hit)
-        elif raster.hit.any():
-            active = binary_dilation(raster.hit, iterations=silhouette_margin_px(self.render_cfg, camera, raster.depth))
-        else:
-            active = raster.hit
+        surface_t = surface_distance(raster, dirs @ -np.linalg.inv(camera.view)[:3, 2])
+        # The dense reference renders every pixel whose ray crosses the head's box.
+        active = np.ones_like(raster.hit) if dense_samples else active_pixels(self.render_cfg, camera, raster)
         H, W = raster.hit.shape
         out = {"rgb": np.tile(self.background.numpy(), (H, W, 1)), "opacity": np.zeros((H, W), np.float32),
                "depth": np.full((H, W), np.inf, np.float32)}

@@ -11,13 +11,14 @@ from __future__ import annotations
 import json
 import os
 import re
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
+
+from models.files import atomic_write
 
 FORMAT = "avatar-studio/checkpoint/1"
 _NAME = re.compile(r"(weights|train_state)-\d{6,}\.safetensors")
@@ -47,19 +48,6 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
-def _atomic(folder: Path, name: str, write) -> None:
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, folder / name)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def save_checkpoint(folder: str | Path, meta: dict, weights: dict[str, torch.Tensor], step: int,
                     train_state: dict[str, torch.Tensor] | None = None) -> Path:
     """Write a checkpoint at `step`; `meta` must be JSON data (config, head model, effects, provenance)."""
@@ -73,10 +61,10 @@ def save_checkpoint(folder: str | Path, meta: dict, weights: dict[str, torch.Ten
     for kind, name in files.items():
         contiguous = {k: v.detach().cpu().contiguous() for k, v in tensors[kind].items()}
         metadata = {"format": FORMAT, "step": str(step)}
-        _atomic(folder, name, lambda tmp, c=contiguous, m=metadata: save_file(c, tmp, metadata=m))
+        atomic_write(folder / name, lambda tmp, c=contiguous, m=metadata: save_file(c, tmp, metadata=m))
     record = {**meta, "format": FORMAT, "step": step, "files": files}
     text = json.dumps(record, indent=1)
-    _atomic(folder, "avatar.json", lambda tmp: Path(tmp).write_text(text))
+    atomic_write(folder / "avatar.json", lambda tmp: Path(tmp).write_text(text))
     _fsync_dir(folder)
     for old in folder.glob("*.safetensors"):
         if _NAME.fullmatch(old.name) and old.name not in files.values():

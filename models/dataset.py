@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from models.files import atomic_write
 from models.head.controls import Controls, ControlsError, controls_from_dict
 
 SPLITS = ("train", "val", "test")
@@ -266,13 +267,7 @@ def load_imavatar(folder: Path, split: str = "train", test_fraction: float = 0.1
 
 def write_split(folder: Path, split: str, header: dict, frames: list[dict]) -> Path:
     """Write transforms_{split}.json atomically (temporary file, fsync, rename)."""
-    import os
-
     path = folder / f"transforms_{split}.json"
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w") as f:
-        json.dump({**header, "frames": frames}, f, indent=1)
-        f.flush()
-        os.fsync(f.fileno())
-    tmp.replace(path)
+    text = json.dumps({**header, "frames": frames}, indent=1)
+    atomic_write(path, lambda tmp: Path(tmp).write_text(text))
     return path

@@ -40,7 +40,7 @@ class TrainConfig:
     minutes: float | None = None
     """Time budget; training stops when it is spent (checkpointed)."""
     steps: int | None = None
-    """Step budget (instead of, or as well as, --minutes)."""
+    """Step budget (instead of, or as well as, --minutes); with neither, 2000 steps."""
     resume: bool = False
     """Continue the checkpoint in --out exactly where it stopped."""
     device: Literal["cpu", "cuda"] = "cpu"
@@ -144,7 +144,7 @@ class Trainer:
         total = torch.zeros(())
         per_frame = cfg.rays_per_step // cfg.frames_per_step
         for fid in frame_ids.tolist():
-            pix = torch.nonzero(fs.active[fid].ravel()).squeeze(1)
+            pix = fs.active_index[fid]
             if len(pix) == 0:
                 continue
             pick = pix[torch.randint(len(pix), (per_frame,), generator=g)]

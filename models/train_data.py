@@ -9,13 +9,12 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from PIL import Image
-from scipy.ndimage import binary_dilation
 
-from models.avatar import Avatar, FrameGeometry, silhouette_margin_px
+from models.avatar import Avatar, FrameGeometry, active_pixels
 from models.dataset import CaptureSplit, DatasetError
 from render.camera import Camera
 from render.gl.context import GLContext
-from render.gl.raster import Rasterizer
+from render.gl.raster import Rasterizer, surface_distance
 
 
 def camera_of(split: CaptureSplit, c2w: np.ndarray) -> Camera:
@@ -55,6 +54,7 @@ class FrameSet:
     surface_t: torch.Tensor  # (N,H,W) inf where the pixel misses the mesh
     active: torch.Tensor  # (N,H,W) bool: pixels rendered (near the mesh's silhouette)
     geometry: list[FrameGeometry]
+    active_index: list[torch.Tensor]  # per frame, the flat indices of its active pixels (training draws rays here)
 
     def __len__(self) -> int:
         return len(self.images)
@@ -73,14 +73,13 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet
         cam = camera_of(split, f.camera_to_world)
         r = raster.rasterize(geo.meshes.posed.numpy(), avatar.head_model.triangles, cam)
         d_world = dirs_cam @ f.camera_to_world[:3, :3].T
-        cos = -dirs_cam[..., 2]  # the view axis component of each unit direction
-        surf.append(np.where(r.hit, r.depth / cos, np.inf).astype(np.float32))
-        active.append(binary_dilation(r.hit, iterations=silhouette_margin_px(avatar.render_cfg, cam, r.depth))
-                      if r.hit.any() else r.hit)
+        surf.append(surface_distance(r, -dirs_cam[..., 2]))  # -z: the view-axis part of each unit direction
+        active.append(active_pixels(avatar.render_cfg, cam, r))
         origins.append(f.camera_to_world[:3, 3])
         dirs.append(d_world)
         geos.append(geo)
     raster.release()
     t = lambda a, dt=torch.float32: torch.as_tensor(np.stack(a), dtype=dt)
+    active_t = t(active, torch.bool)
     return FrameSet(split, t(images), t(masks) if len(masks) == len(images) else None, t(origins), t(dirs), t(surf),
-                    t(active, torch.bool), geos)
+                    active_t, geos, [torch.nonzero(a.ravel()).squeeze(1) for a in active_t])

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from models.files import atomic_write_bytes
 from models.head.model import HeadModelError
 
 
@@ -56,20 +55,6 @@ def read_npz(path: str | Path, required: tuple[str, ...], kind: str, missing_hin
         raise HeadModelError(f"{path}: not a readable npz ({type(e).__name__}: {e})") from None
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    """Write via a temporary file in the same folder, so a crash never leaves half a file."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_mesh(path: str | Path, vertices: np.ndarray, triangles: np.ndarray) -> None:
     """Write (V,3) vertices and (F,3) triangles as OBJ or PLY (by suffix), vertex order kept."""
     path = Path(path)
@@ -90,4 +75,4 @@ def write_mesh(path: str | Path, vertices: np.ndarray, triangles: np.ndarray) ->
         data = header.encode() + v.astype("<f4").tobytes() + face_rec.tobytes()
     else:
         raise ValueError(f"{path}: mesh output must end in .obj or .ply")
-    _atomic_write(path, data)
+    atomic_write_bytes(path, data)

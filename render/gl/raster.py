@@ -36,6 +36,12 @@ def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     return c2w[:3, 3], d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+def surface_distance(raster: Raster, cos_view: np.ndarray) -> np.ndarray:
+    """(H,W) distance along each pixel's unit ray to the visible surface, inf where it misses: the view
+    depth over the cosine between the ray and the view axis (cos_view, (H,W))."""
+    return np.where(raster.hit, raster.depth / np.maximum(cos_view, 1e-6), np.inf).astype(np.float32)
+
+
 def ray_triangle_barycentric(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Barycentric coordinates (N,3) where rays (origin, (N,3) dirs) meet the planes of (N,3,3) triangles
     (Moller-Trumbore without the inside test: the rasterizer already chose the triangle)."""
