@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from pykdtree.kdtree import KDTree
 from scipy.ndimage import binary_dilation
-from scipy.spatial import cKDTree
 from torch import nn
 
 from models.fields.codynerf import CoDyNeRFField, FieldConfig
@@ -52,7 +52,7 @@ class FrameGeometry:
     """Everything about one frame's head that the rays need: meshes, k-d tree, landmarks, box."""
 
     meshes: PriorMeshes
-    tree: cKDTree
+    tree: KDTree
     landmarks: torch.Tensor  # (1, 3L) relative to the landmarks' centre
     box_min: torch.Tensor  # (3,)
     box_max: torch.Tensor  # (3,)
@@ -95,6 +95,30 @@ def per_sample(code: torch.Tensor, R: int, S: int) -> torch.Tensor:
 
 def mean_code(embedding: nn.Embedding) -> torch.Tensor:
     return embedding.weight.mean(0, keepdim=True)
+
+
+def image_rays(camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
+    """The camera's origin (1,3) and its pixels' unit ray directions (H*W,3), rows top first."""
+    origin, dirs = pixel_rays(camera)
+    return torch.as_tensor(origin, dtype=torch.float32)[None], torch.as_tensor(dirs.reshape(-1, 3), dtype=torch.float32)
+
+
+def scatter_rays(parts: dict[str, list[torch.Tensor]], camera: Camera, idx: np.ndarray, background: np.ndarray
+                 ) -> dict[str, np.ndarray]:
+    """Images (H,W,...) from per-ray results computed in chunks for the flat pixel indices `idx`; pixels not
+    rendered are background (rgb), 0 (opacity, normals) or inf (depth)."""
+    H, W = camera.height_px, camera.width_px
+    fill = {"rgb": background, "depth": np.inf}
+    out = {}
+    for k, chunks in parts.items():
+        values = torch.cat(chunks).float().cpu().numpy() if chunks else np.zeros((0,), np.float32)
+        channels = (3,) if k in ("rgb", "normals", "grad_normals") else ()
+        img = np.zeros((H * W, *channels), np.float32)
+        img[:] = fill.get(k, 0.0)
+        if len(idx):
+            img[idx] = values.reshape(len(idx), *channels)
+        out[k] = img.reshape(H, W, *channels)
+    return out
 
 
 class Avatar(nn.Module):
@@ -172,38 +196,29 @@ class Avatar(nn.Module):
         `frame` picks a training frame's codes; None uses the mean code (novel controls)."""
         geo = self.geometry(controls)
         raster = rasterizer.rasterize(geo.meshes.posed.numpy(), self.head_model.triangles, camera)
-        origin, dirs = pixel_rays(camera)
-        surface_t = surface_distance(raster, dirs @ -np.linalg.inv(camera.view)[:3, 2])
+        origin, dirs = image_rays(camera)
+        cos_view = (dirs.numpy() @ -np.linalg.inv(camera.view)[:3, 2]).reshape(raster.hit.shape)
+        surface_t = surface_distance(raster, cos_view)
         # The dense reference renders every pixel whose ray crosses the head's box.
         active = np.ones_like(raster.hit) if dense_samples else active_pixels(self.render_cfg, camera, raster)
-        H, W = raster.hit.shape
-        out = {"rgb": np.tile(self.background.numpy(), (H, W, 1)), "opacity": np.zeros((H, W), np.float32),
-               "depth": np.full((H, W), np.inf, np.float32)}
-        if self.field_cfg.needs_normals:
-            out["normals"] = np.zeros((H, W, 3), np.float32)
-            out["grad_normals"] = np.zeros((H, W, 3), np.float32)
         idx = np.nonzero(active.ravel())[0]
-        if len(idx) == 0:
-            return out
         omega = self.omega.weight[frame:frame + 1] if frame is not None else mean_code(self.omega)
         phi = self.phi.weight[frame:frame + 1] if frame is not None else mean_code(self.phi)
-        o = torch.as_tensor(origin, dtype=torch.float32)
-        d_all = torch.as_tensor(dirs.reshape(-1, 3)[idx], dtype=torch.float32)
+        d_all = dirs[idx]
         s_all = torch.as_tensor(surface_t.ravel()[idx], dtype=torch.float32)
-        results = {k: [] for k in out}
+        parts: dict[str, list[torch.Tensor]] = {"rgb": [], "opacity": [], "depth": []}
+        if self.field_cfg.needs_normals:
+            parts |= {"normals": [], "grad_normals": []}
         grad_mode = torch.no_grad() if self.field_cfg.needs_normals else torch.inference_mode()
         with grad_mode:
             for a in range(0, len(idx), self.render_cfg.chunk_rays):
                 d, s = d_all[a:a + self.render_cfg.chunk_rays], s_all[a:a + self.render_cfg.chunk_rays]
-                r = self.render_rays(o.expand(len(d), 3), d, s, geo, omega.detach(), phi.detach(),
+                r = self.render_rays(origin.expand(len(d), 3), d, s, geo, omega.detach(), phi.detach(),
                                      dense_samples=dense_samples)
-                results["rgb"].append(r.rgb)
-                results["opacity"].append(r.opacity)
-                results["depth"].append(torch.where(r.opacity > 0.5, r.depth, torch.full_like(r.depth, np.inf)))
+                parts["rgb"].append(r.rgb)
+                parts["opacity"].append(r.opacity)
+                parts["depth"].append(torch.where(r.opacity > 0.5, r.depth, torch.full_like(r.depth, np.inf)))
                 if r.normal is not None:
-                    results["normals"].append(r.normal.detach())
-                    results["grad_normals"].append(r.grad_normal.detach())
-        for k, parts in results.items():
-            flat = out[k].reshape(H * W, -1) if out[k].ndim == 3 else out[k].reshape(H * W)
-            flat[idx] = torch.cat(parts).float().numpy()
-        return out
+                    parts["normals"].append(r.normal.detach())
+                    parts["grad_normals"].append(r.grad_normal.detach())
+        return scatter_rays(parts, camera, idx, self.background.numpy())

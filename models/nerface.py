@@ -1,0 +1,203 @@
+"""The NerFACE baseline (paper 001): a radiance field in head-canonical space conditioned on the expression
+and a learned per-frame latent code, rendered by dense coarse-to-fine sampling, in the same harness as the
+avatar (same datasets, trainer, checkpoints, eval and render commands).
+
+What it keeps from the paper: rays are moved into the head's canonical frame by the tracked rigid pose; an
+8x256 MLP with a skip at layer 4 reads 10-frequency positions with the expression and the latent code, and a
+colour branch reads 4-frequency view directions; 64 stratified coarse samples and 64 fine samples drawn from
+the coarse weights, with a coarse and a fine network; the background is the colour of the last sample (what
+light passes every sample); training rays fall mostly inside the face's box.
+
+The expression vector is the head model's expression coefficients with the non-rigid joint rotations (neck,
+jaw, eyes) appended; the rigid pose is the best-fit rotation and translation (Kabsch) taking the expressed,
+unposed mesh onto the posed one, so any head model works without knowing its joint layout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from models.avatar import RayOutput, image_rays, scatter_rays
+from models.fields.encoding import encoded_size, frequency_encoding
+from models.head.controls import Controls
+from models.head.head import Head
+from models.head.model import HeadModel
+from render.camera import Camera
+from render.gl.raster import Rasterizer
+from render.sampling import RaySamples, stratified
+from render.volume import composite, expected_depth, ray_aabb_intersect, sample_pdf, weights_from_density
+
+NONRIGID_JOINTS = ("neck", "jaw", "eye_l", "eye_r")
+
+
+@dataclass(frozen=True)
+class NerfaceConfig:
+    """NerFACE's published sizes."""
+
+    width: int = 256
+    depth: int = 8
+    """Hidden layers of the density branch (a skip joins the input again after half of them)."""
+    position_frequencies: int = 10
+    view_frequencies: int = 4
+    latent_dim: int = 32
+    coarse_samples: int = 64
+    fine_samples: int = 64
+    box_margin_m: float = 0.05
+    """The canonical head box (the template's bounds grown by this much) bounds every ray."""
+    face_ray_fraction: float = 0.95
+    """Share of training rays drawn inside the face's box; the rest anywhere in the image."""
+    chunk_rays: int = 1024
+
+
+class NerfaceMLP(nn.Module):
+    """Density and colour of canonical points given a condition vector (expression and latent code)."""
+
+    def __init__(self, cfg: NerfaceConfig, condition_dim: int):
+        super().__init__()
+        self.cfg = cfg
+        d_in = encoded_size(3, cfg.position_frequencies) + condition_dim
+        half = cfg.depth // 2
+        self.first = nn.ModuleList(nn.Linear(d_in if k == 0 else cfg.width, cfg.width) for k in range(half))
+        self.second = nn.ModuleList(nn.Linear(cfg.width + d_in if k == 0 else cfg.width, cfg.width)
+                                    for k in range(cfg.depth - half))
+        self.sigma = nn.Linear(cfg.width, 1)
+        self.feature = nn.Linear(cfg.width, cfg.width)
+        self.colour = nn.Sequential(nn.Linear(cfg.width + encoded_size(3, cfg.view_frequencies), cfg.width // 2),
+                                    nn.ReLU(inplace=True), nn.Linear(cfg.width // 2, 3))
+
+    def forward(self, x: torch.Tensor, view: torch.Tensor, condition: torch.Tensor, scale: float
+                ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(P,3) canonical points, (P,3) unit view directions, (P,C) conditions -> sigma (P,), rgb (P,3)."""
+        h_in = torch.cat([frequency_encoding(x, self.cfg.position_frequencies, scale), condition], -1)
+        h = h_in
+        for layer in self.first:
+            h = F.relu(layer(h))
+        h = torch.cat([h, h_in], -1)
+        for layer in self.second:
+            h = F.relu(layer(h))
+        sigma = F.softplus(self.sigma(h)[:, 0] - 1.0) * 100.0  # the avatar's density scale, per metre
+        view_enc = frequency_encoding(view, self.cfg.view_frequencies)
+        rgb = torch.sigmoid(self.colour(torch.cat([self.feature(h), view_enc], -1)))
+        return sigma, rgb
+
+
+@dataclass
+class NerfaceGeometry:
+    """One frame as NerFACE sees it: the rigid head pose and the expression vector."""
+
+    rotation: torch.Tensor  # (3,3) canonical -> world
+    translation: torch.Tensor  # (3,)
+    expression: torch.Tensor  # (1,E)
+
+
+def kabsch(source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The rotation R and translation t minimising |R source + t - target| over (V,3) point sets."""
+    cs, ct = source.mean(0), target.mean(0)
+    u, _, vh = torch.linalg.svd((source - cs).T.double() @ (target - ct).double())
+    d = torch.sign(torch.linalg.det(vh.T @ u.T))
+    r = (vh.T @ torch.diag(torch.tensor([1.0, 1.0, float(d)], dtype=torch.float64)) @ u.T).float()
+    return r, ct - r @ cs
+
+
+class NerfaceAvatar(nn.Module):
+    """The baseline, with the avatar's interface: geometry, render_rays, render_image."""
+
+    model_name = "nerface"
+
+    def __init__(self, head_model: HeadModel, cfg: NerfaceConfig, n_frames: int, background: np.ndarray):
+        super().__init__()
+        self.head_model = head_model
+        self.head = Head(head_model)
+        self.cfg = cfg
+        self.expression_dim = head_model.num_expression + 3 * len(NONRIGID_JOINTS)
+        condition = self.expression_dim + cfg.latent_dim
+        self.coarse = NerfaceMLP(cfg, condition)
+        self.fine = NerfaceMLP(cfg, condition)
+        self.latent = nn.Embedding(n_frames, cfg.latent_dim)
+        nn.init.zeros_(self.latent.weight)
+        self.register_buffer("background", torch.as_tensor(np.asarray(background, np.float32)))
+        template = torch.as_tensor(head_model.template, dtype=torch.float32)
+        self.register_buffer("box_min", template.min(0).values - cfg.box_margin_m)
+        self.register_buffer("box_max", template.max(0).values + cfg.box_margin_m)
+        self.scale_m = float((self.box_max - self.box_min).max()) / 2
+
+    @property
+    def needs_normals(self) -> bool:
+        return False
+
+    @torch.no_grad()
+    def geometry(self, controls: Controls) -> NerfaceGeometry:
+        unposed = Controls(shape=controls.shape, expression=controls.expression)
+        v, _, _ = self.head.pose([unposed, controls])
+        rotation, translation = kabsch(v[0], v[1])
+        expr = np.zeros(self.expression_dim, np.float32)
+        n = min(len(controls.expression), self.head_model.num_expression)
+        expr[:n] = controls.expression[:n]
+        for k, joint in enumerate(NONRIGID_JOINTS):
+            expr[self.head_model.num_expression + 3 * k:self.head_model.num_expression + 3 * k + 3] = \
+                controls.rotation(joint)
+        return NerfaceGeometry(rotation, translation, torch.as_tensor(expr)[None])
+
+    def codes(self, frame: torch.Tensor | None) -> torch.Tensor:
+        """The latent code of training frames (1,) or the mean code (novel controls)."""
+        return self.latent(frame) if frame is not None else self.latent.weight.mean(0, keepdim=True)
+
+    def render_rays(self, origins: torch.Tensor, directions: torch.Tensor, geo: NerfaceGeometry,
+                    latent: torch.Tensor, generator: torch.Generator | None = None
+                    ) -> tuple[RayOutput, torch.Tensor]:
+        """The fine pass's output and the coarse pass's colours (R,3) (both are trained)."""
+        c = self.cfg
+        R = len(origins)
+        rot, tr = geo.rotation, geo.translation
+        o = (origins - tr) @ rot  # R^T (o - t), row vectors
+        d = directions @ rot
+        near, far, hits = ray_aabb_intersect(o, d, self.box_min, self.box_max)
+        near, far = torch.where(hits, near, 0.0), torch.where(hits, far, 0.0)
+        condition = torch.cat([geo.expression, latent], -1).expand(R, -1)
+
+        def run(net: NerfaceMLP, t0: torch.Tensor, t1: torch.Tensor):
+            S = t0.shape[1]
+            t_mid = 0.5 * (t0 + t1)
+            pts = (o[:, None] + d[:, None] * t_mid[..., None]).reshape(-1, 3)
+            view = (-d[:, None]).expand(R, S, 3).reshape(-1, 3)
+            sigma, rgb = net(pts, view, condition.repeat_interleave(S, 0), self.scale_m)
+            sigma = sigma.reshape(R, S) * hits[:, None]
+            weights, remaining = weights_from_density(sigma, t1 - t0)
+            return weights, remaining, rgb.reshape(R, S, 3), sigma, t_mid
+
+        t0, t1 = stratified(near, far, c.coarse_samples, generator)
+        w_c, rem_c, rgb_c, _, _ = run(self.coarse, t0, t1)
+        coarse_rgb = composite(w_c, rgb_c, rem_c, self.background)
+        edges = torch.cat([t0, t1[:, -1:]], 1)
+        t_fine = sample_pdf(edges, w_c.detach(), c.fine_samples, generator)
+        t_all = torch.sort(torch.cat([0.5 * (t0 + t1), t_fine.detach()], 1), dim=1).values
+        # Intervals about the sorted samples, bounded by the box.
+        mids = 0.5 * (t_all[:, 1:] + t_all[:, :-1])
+        f0 = torch.cat([near[:, None], mids], 1)
+        f1 = torch.cat([mids, far[:, None]], 1)
+        w, rem, rgb, sigma, t_mid = run(self.fine, f0, f1)
+        out = RayOutput(composite(w, rgb, rem, self.background), w.sum(-1), expected_depth(w, t_mid), None, None, w,
+                        sigma, RaySamples(f0, f1, hits))
+        return out, coarse_rgb
+
+    @torch.inference_mode()
+    def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer | None = None,
+                     frame: int | None = None, dense_samples: int | None = None) -> dict[str, np.ndarray]:
+        """RGB, opacity and depth (H,W,...) of every pixel whose ray crosses the head's box."""
+        del rasterizer, dense_samples  # NerFACE samples every ray densely; it does not need the mesh
+        geo = self.geometry(controls)
+        origin, dirs = image_rays(camera)
+        latent = self.codes(torch.tensor([frame]) if frame is not None else None)
+        parts: dict[str, list[torch.Tensor]] = {"rgb": [], "opacity": [], "depth": []}
+        for a in range(0, len(dirs), self.cfg.chunk_rays):
+            d = dirs[a:a + self.cfg.chunk_rays]
+            r, _ = self.render_rays(origin.expand(len(d), 3), d, geo, latent)
+            parts["rgb"].append(r.rgb)
+            parts["opacity"].append(r.opacity)
+            parts["depth"].append(torch.where(r.opacity > 0.5, r.depth, torch.full_like(r.depth, np.inf)))
+        return scatter_rays(parts, camera, np.arange(camera.width_px * camera.height_px), self.background.numpy())
