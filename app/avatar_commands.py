@@ -13,8 +13,10 @@ import numpy as np
 
 from app.errors import UserInputError
 from app.head_commands import save_png
+from models.avatar import Avatar
 from models.avatar_io import load_avatar
 from models.dataset import load_split
+from models.device import device_of
 from models.fields.codynerf import parse_effects
 from models.head.controls import Controls, load_controls
 from models.metrics import face_mse, normal_angle_deg, psnr, ssim
@@ -30,10 +32,7 @@ PRESETS = {"draft": (0.5, 6), "preview": (1.0, 8), "final": (1.0, 16)}
 
 
 def run_train(cfg: TrainConfig) -> int:
-    if cfg.model == "nerface":
-        raise UserInputError("--model nerface: the NerFACE baseline is not built yet")
-    if cfg.device == "cuda":
-        raise UserInputError("--device cuda: training on a GPU is not built yet; the avatar trains on the CPU")
+    device_of(cfg.device)  # before any work: a clear error where there is no GPU
     try:
         parse_effects(cfg.effects)
     except ValueError as e:
@@ -69,6 +68,10 @@ class EvalConfig:
     """Folder for metrics.json and side-by-side images."""
     max_frames: int = 0
     """Evaluate at most this many frames (0: all)."""
+    every: int = 1
+    """Evaluate every n-th frame of the split (a slow model on a long split)."""
+    device: Literal["cpu", "cuda"] = "cpu"
+    """Where the networks run."""
 
 
 def face_mask_of(frame, image_shape) -> np.ndarray:
@@ -87,13 +90,14 @@ def face_mask_of(frame, image_shape) -> np.ndarray:
 
 
 def run_eval(cfg: EvalConfig) -> int:
-    avatar, meta = load_avatar(cfg.avatar)
+    avatar, meta = load_avatar(cfg.avatar, cfg.device)
     split = load_split(cfg.dataset, cfg.split)
     gl = GLContext.headless()
     raster = Rasterizer(gl)
     cfg.out.mkdir(parents=True, exist_ok=True)
     rows, times = [], []
-    frames = split.frames[: cfg.max_frames] if cfg.max_frames else split.frames
+    frames = split.frames[:: max(cfg.every, 1)]
+    frames = frames[: cfg.max_frames] if cfg.max_frames else frames
     for f in frames:
         truth = load_rgb(f.image_path, avatar.background.numpy())
         t0 = time.perf_counter()
@@ -139,13 +143,16 @@ class RenderCommandConfig:
     """Quality: draft (half size, 6 samples a ray), preview (8), final (16)."""
     size: int = 128
     """Image width and height in pixels at the preview and final presets."""
+    device: Literal["cpu", "cuda"] = "cpu"
+    """Where the networks run."""
 
 
 def run_render(cfg: RenderCommandConfig) -> int:
-    avatar, _ = load_avatar(cfg.avatar)
+    avatar, _ = load_avatar(cfg.avatar, cfg.device)
     controls = load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls()
     scale, samples = PRESETS[cfg.preset]
-    avatar.render_cfg = replace(avatar.render_cfg, samples_per_ray=samples)
+    if isinstance(avatar, Avatar):  # the NerFACE baseline always samples densely
+        avatar.render_cfg = replace(avatar.render_cfg, samples_per_ray=samples)
     size = max(8, int(cfg.size * scale))
     cam = framing_camera(avatar.head_model.template, cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
                          height_px=size)

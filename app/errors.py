@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from models.checkpoint import CheckpointError
 from models.dataset import DatasetError
+from models.device import DeviceError
 from models.head.controls import ControlsError
 from models.head.model import HeadModelError
 
@@ -13,4 +14,4 @@ class UserInputError(ValueError):
 
 
 #: Exceptions that are the user's input being wrong, not the program failing.
-INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError, CheckpointError)
+INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError, CheckpointError, DeviceError)

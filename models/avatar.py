@@ -16,8 +16,9 @@ from pykdtree.kdtree import KDTree
 from scipy.ndimage import binary_dilation
 from torch import nn
 
-from models.fields.codynerf import CoDyNeRFField, FieldConfig
-from models.fields.prior import PriorMeshes, deformation_prior, vertex_tree
+from models.fields.codynerf import CoDyNeRFField, FieldConfig, FieldOutput
+from models.fields.occupancy import OccupancyGrid
+from models.fields.prior import PriorMeshes, deformation_prior, nearest_vertices, vertex_tree
 from models.head.controls import Controls
 from models.head.head import Head
 from models.head.model import HeadModel
@@ -43,6 +44,10 @@ class RenderConfig:
     spans at the head's distance); farther ones are background."""
     prior_falloff_m: float = 0.05
     """Length over which the 3DMM prior fades with distance from the mesh."""
+    bf16: bool = False
+    """Display runs the networks in bfloat16 (training is always float32)."""
+    min_weight: float = 1e-4
+    """Display skips the colour of samples that add less than this to their pixel (training never does)."""
     chunk_rays: int = 4096
     """Rays per batch when rendering an image (memory)."""
 
@@ -56,6 +61,12 @@ class FrameGeometry:
     landmarks: torch.Tensor  # (1, 3L) relative to the landmarks' centre
     box_min: torch.Tensor  # (3,)
     box_max: torch.Tensor  # (3,)
+
+    def to(self, device: torch.device | str) -> FrameGeometry:
+        """The same geometry with its tensors on `device` (the k-d tree stays on the CPU)."""
+        m = self.meshes
+        return FrameGeometry(PriorMeshes(*(t.to(device) for t in (m.canonical, m.expressed, m.posed, m.normals))),
+                             self.tree, self.landmarks.to(device), self.box_min.to(device), self.box_max.to(device))
 
 
 @dataclass
@@ -135,6 +146,29 @@ class Avatar(nn.Module):
         nn.init.zeros_(self.omega.weight)
         nn.init.zeros_(self.phi.weight)
         self.register_buffer("background", torch.as_tensor(np.asarray(background, np.float32)))
+        template = torch.as_tensor(head_model.template, dtype=torch.float32)
+        margin = render_cfg.shell_m + 0.02
+        self.occupancy = OccupancyGrid(template.min(0).values - margin, template.max(0).values + margin)
+
+    def support(self, distance: torch.Tensor) -> torch.Tensor:
+        """The field's support: 1 near the mesh, fading to 0 at shell_m from it, so every sampler (the shell,
+        the box, the dense reference) sees the same field and nothing floats far from the head."""
+        rc = self.render_cfg
+        return ((rc.shell_m - distance) / (0.25 * rc.shell_m)).clamp(0.0, 1.0)
+
+    @torch.no_grad()
+    def build_occupancy(self, canonical: torch.Tensor, threshold: float = 0.5) -> float:
+        """Fill the occupancy grid from the trained density about a canonical mesh (V,3) (the capture's
+        identity, no expression, no pose). threshold: density (1/m) below which a cell counts as empty; at
+        the shell sampler's spacing (5 mm) such a sample is at most 0.25% opaque. Returns the occupied share."""
+        tree = vertex_tree(canonical)
+
+        def density(x: torch.Tensor) -> torch.Tensor:
+            idx = nearest_vertices(x, canonical, tree)
+            distance = (x - canonical[idx]).norm(dim=-1)
+            return self.field.canonical_density(x, distance)[0] * self.support(distance)
+
+        return self.occupancy.build(density, threshold, generator=torch.Generator().manual_seed(0))
 
     # ---- geometry --------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -144,9 +178,9 @@ class Avatar(nn.Module):
         unposed = Controls(shape=controls.shape, expression=controls.expression)
         v, _, lm = self.head.pose([neutral, unposed, controls])
         posed = v[2]
-        normals = torch.as_tensor(vertex_normals(posed.numpy(), self.head_model.triangles))
+        normals = torch.as_tensor(vertex_normals(posed.cpu().numpy(), self.head_model.triangles)).to(posed.device)
         m = self.render_cfg.box_margin_m
-        lm_rel = lm[2] - lm[2].mean(0) if lm.shape[1] else torch.zeros(1, 3)
+        lm_rel = lm[2] - lm[2].mean(0) if lm.shape[1] else torch.zeros(1, 3, device=posed.device)
         return FrameGeometry(PriorMeshes(v[0], v[1], posed, normals), vertex_tree(posed), lm_rel.reshape(1, -1),
                              posed.min(0).values - m, posed.max(0).values + m)
 
@@ -162,6 +196,8 @@ class Avatar(nn.Module):
         generator: torch.Generator | None = None,
         create_graph: bool = False,
         dense_samples: int | None = None,
+        min_weight: float = 0.0,
+        skip_empty: bool = False,
     ) -> RayOutput:
         """Composited colour, opacity, depth (and normals) of R rays. dense_samples: ignore the mesh and
         spread that many samples over the head's box instead (the slow reference the shell sampler is
@@ -174,17 +210,34 @@ class Avatar(nn.Module):
         R, S = samples.t_starts.shape
         pts = (origins[:, None] + directions[:, None] * samples.t_mid[..., None]).reshape(-1, 3)
         prior = deformation_prior(pts, geo.meshes, rc.prior_falloff_m, geo.tree)
-        view = (-directions[:, None]).expand(R, S, 3).reshape(-1, 3)
-        out = self.field(pts, prior, view, per_sample(omega, R, S), per_sample(phi, R, S), geo.landmarks, create_graph)
-        # The field's support: density fades to zero at shell_m from the mesh, so every sampler (the shell,
-        # the box, the dense reference) sees the same field, and nothing floats far from the head.
-        support = ((rc.shell_m - prior.distance) / (0.25 * rc.shell_m)).clamp(0.0, 1.0).reshape(R, S)
-        sigma = out.sigma.reshape(R, S) * support * samples.valid[:, None]
+        # Samples outside the field's support are not evaluated at all (exactly: their density is zero); for
+        # display, nor are those whose prior-deformed position lies in an empty cell of the occupancy grid.
+        support = self.support(prior.distance) * samples.valid.repeat_interleave(S)
+        evaluate = support > 0
+        if skip_empty:
+            evaluate &= self.occupancy.lookup(pts + prior.offset)
+        keep = torch.nonzero(evaluate).squeeze(1)
+        prior_k = prior.take(keep)
+        g = self.field.geometry(pts[keep], prior_k, per_sample(omega, R, S)[keep], create_graph)
+        scatter = lambda values: values.new_zeros(R * S, *values.shape[1:]).index_copy(0, keep, values)
+        sigma = scatter(g.sigma * support[keep]).reshape(R, S)
         weights, remaining = weights_from_density(sigma, samples.deltas)
-        rgb = composite(weights, out.rgb.reshape(R, S, 3), remaining, self.background)
+        # Colour where a sample shows (display may skip samples that add less than min_weight to a pixel).
+        shown = torch.nonzero(weights.reshape(-1)[keep] > min_weight).squeeze(1) if min_weight > 0 else None
+        view = (-directions[:, None]).expand(R, S, 3).reshape(-1, 3)[keep]
+        phi_k = per_sample(phi, R, S)[keep]
+        if shown is not None:
+            g_shown = FieldOutput(g.sigma[shown], g.rgb[shown], g.x_canonical[shown],
+                                  None if g.normal is None else g.normal[shown])
+            rgb_k = g.rgb.new_zeros(len(keep), 3).index_copy(
+                0, shown, self.field.appearance(g_shown, prior_k.take(shown), view[shown], phi_k[shown],
+                                                geo.landmarks))
+        else:
+            rgb_k = self.field.appearance(g, prior_k, view, phi_k, geo.landmarks)
+        rgb = composite(weights, scatter(rgb_k).reshape(R, S, 3), remaining, self.background)
         normal = grad_normal = pn = pg = None
-        if out.normal is not None:
-            pn, pg = out.normal.reshape(R, S, 3), out.grad_normal.reshape(R, S, 3)
+        if g.normal is not None:
+            pn, pg = scatter(g.normal).reshape(R, S, 3), scatter(g.grad_normal).reshape(R, S, 3)
             normal, grad_normal = composite(weights, pn), composite(weights, pg)
         return RayOutput(rgb, weights.sum(-1), expected_depth(weights, samples.t_mid), normal, grad_normal, weights,
                          sigma, samples, pn, pg)
@@ -195,7 +248,7 @@ class Avatar(nn.Module):
         """RGB, opacity, depth and (with normals) predicted and density-gradient normal maps, (H,W,...).
         `frame` picks a training frame's codes; None uses the mean code (novel controls)."""
         geo = self.geometry(controls)
-        raster = rasterizer.rasterize(geo.meshes.posed.numpy(), self.head_model.triangles, camera)
+        raster = rasterizer.rasterize(geo.meshes.posed.cpu().numpy(), self.head_model.triangles, camera)
         origin, dirs = image_rays(camera)
         cos_view = (dirs.numpy() @ -np.linalg.inv(camera.view)[:3, 2]).reshape(raster.hit.shape)
         surface_t = surface_distance(raster, cos_view)
@@ -204,21 +257,23 @@ class Avatar(nn.Module):
         idx = np.nonzero(active.ravel())[0]
         omega = self.omega.weight[frame:frame + 1] if frame is not None else mean_code(self.omega)
         phi = self.phi.weight[frame:frame + 1] if frame is not None else mean_code(self.phi)
-        d_all = dirs[idx]
-        s_all = torch.as_tensor(surface_t.ravel()[idx], dtype=torch.float32)
+        device = self.background.device
+        origin, d_all = origin.to(device), dirs[idx].to(device)
+        s_all = torch.as_tensor(surface_t.ravel()[idx], dtype=torch.float32).to(device)
         parts: dict[str, list[torch.Tensor]] = {"rgb": [], "opacity": [], "depth": []}
         if self.field_cfg.needs_normals:
             parts |= {"normals": [], "grad_normals": []}
         grad_mode = torch.no_grad() if self.field_cfg.needs_normals else torch.inference_mode()
-        with grad_mode:
+        with grad_mode, torch.autocast(d_all.device.type, torch.bfloat16, enabled=self.render_cfg.bf16):
             for a in range(0, len(idx), self.render_cfg.chunk_rays):
                 d, s = d_all[a:a + self.render_cfg.chunk_rays], s_all[a:a + self.render_cfg.chunk_rays]
                 r = self.render_rays(origin.expand(len(d), 3), d, s, geo, omega.detach(), phi.detach(),
-                                     dense_samples=dense_samples)
+                                     dense_samples=dense_samples, min_weight=self.render_cfg.min_weight,
+                                     skip_empty=not dense_samples)
                 parts["rgb"].append(r.rgb)
                 parts["opacity"].append(r.opacity)
                 parts["depth"].append(torch.where(r.opacity > 0.5, r.depth, torch.full_like(r.depth, np.inf)))
                 if r.normal is not None:
                     parts["normals"].append(r.normal.detach())
                     parts["grad_normals"].append(r.grad_normal.detach())
-        return scatter_rays(parts, camera, idx, self.background.numpy())
+        return scatter_rays(parts, camera, idx, self.background.cpu().numpy())

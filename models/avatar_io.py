@@ -8,20 +8,26 @@ import numpy as np
 
 from models.avatar import Avatar, RenderConfig
 from models.checkpoint import CheckpointError, load_checkpoint
+from models.device import device_of
 from models.fields.codynerf import FieldConfig
 from models.head.sources import load_head
+from models.nerface import NerfaceAvatar, NerfaceConfig
 
 
-def load_avatar(folder: str | Path) -> tuple[Avatar, dict]:
+def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar | NerfaceAvatar, dict]:
+    """The avatar (CoDyNeRF or the NerFACE baseline, as avatar.json says) on `device`, in eval mode."""
     ck = load_checkpoint(folder)
     meta = ck.meta
     try:
-        field_cfg = FieldConfig(**{**meta["field"], "effects": tuple(meta["field"]["effects"])})
-        render_cfg = RenderConfig(**meta["render"])
         head = load_head(meta["head_model"])
-        avatar = Avatar(head, field_cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32), render_cfg)
+        background = np.asarray(meta["background"], np.float32)
+        if meta.get("model") == "nerface":
+            avatar = NerfaceAvatar(head, NerfaceConfig(**meta["nerface"]), int(meta["frames"]), background)
+        else:
+            field_cfg = FieldConfig(**{**meta["field"], "effects": tuple(meta["field"]["effects"])})
+            avatar = Avatar(head, field_cfg, int(meta["frames"]), background, RenderConfig(**meta["render"]))
         avatar.load_state_dict(ck.weights)
     except (KeyError, TypeError, RuntimeError) as e:
         raise CheckpointError(f"{Path(folder) / 'avatar.json'}: does not describe these weights ({e})") from None
     avatar.eval()
-    return avatar, meta
+    return avatar.to(device_of(device)), meta

@@ -94,6 +94,9 @@ class NerfaceGeometry:
     translation: torch.Tensor  # (3,)
     expression: torch.Tensor  # (1,E)
 
+    def to(self, device: torch.device | str) -> NerfaceGeometry:
+        return NerfaceGeometry(self.rotation.to(device), self.translation.to(device), self.expression.to(device))
+
 
 def kabsch(source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """The rotation R and translation t minimising |R source + t - target| over (V,3) point sets."""
@@ -141,7 +144,7 @@ class NerfaceAvatar(nn.Module):
         for k, joint in enumerate(NONRIGID_JOINTS):
             expr[self.head_model.num_expression + 3 * k:self.head_model.num_expression + 3 * k + 3] = \
                 controls.rotation(joint)
-        return NerfaceGeometry(rotation, translation, torch.as_tensor(expr)[None])
+        return NerfaceGeometry(rotation, translation, torch.as_tensor(expr)[None].to(rotation.device))
 
     def codes(self, frame: torch.Tensor | None) -> torch.Tensor:
         """The latent code of training frames (1,) or the mean code (novel controls)."""
@@ -192,7 +195,9 @@ class NerfaceAvatar(nn.Module):
         del rasterizer, dense_samples  # NerFACE samples every ray densely; it does not need the mesh
         geo = self.geometry(controls)
         origin, dirs = image_rays(camera)
-        latent = self.codes(torch.tensor([frame]) if frame is not None else None)
+        device = self.background.device
+        origin, dirs = origin.to(device), dirs.to(device)
+        latent = self.codes(torch.tensor([frame], device=device) if frame is not None else None)
         parts: dict[str, list[torch.Tensor]] = {"rgb": [], "opacity": [], "depth": []}
         for a in range(0, len(dirs), self.cfg.chunk_rays):
             d = dirs[a:a + self.cfg.chunk_rays]
@@ -200,4 +205,5 @@ class NerfaceAvatar(nn.Module):
             parts["rgb"].append(r.rgb)
             parts["opacity"].append(r.opacity)
             parts["depth"].append(torch.where(r.opacity > 0.5, r.depth, torch.full_like(r.depth, np.inf)))
-        return scatter_rays(parts, camera, np.arange(camera.width_px * camera.height_px), self.background.numpy())
+        return scatter_rays(parts, camera, np.arange(camera.width_px * camera.height_px),
+                            self.background.cpu().numpy())

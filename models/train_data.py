@@ -12,6 +12,8 @@ from PIL import Image
 
 from models.avatar import Avatar, FrameGeometry, active_pixels
 from models.dataset import CaptureSplit, DatasetError
+from models.head.head import posed_mesh
+from models.nerface import NerfaceAvatar, NerfaceGeometry
 from render.camera import Camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer, surface_distance
@@ -52,15 +54,25 @@ class FrameSet:
     origins: torch.Tensor  # (N,3)
     directions: torch.Tensor  # (N,H,W,3) world, unit
     surface_t: torch.Tensor  # (N,H,W) inf where the pixel misses the mesh
-    active: torch.Tensor  # (N,H,W) bool: pixels rendered (near the mesh's silhouette)
-    geometry: list[FrameGeometry]
+    active: torch.Tensor  # (N,H,W) bool: pixels rendered (near the mesh's silhouette; NerFACE: the face box)
+    geometry: list[FrameGeometry | NerfaceGeometry]
     active_index: list[torch.Tensor]  # per frame, the flat indices of its active pixels (training draws rays here)
 
     def __len__(self) -> int:
         return len(self.images)
 
 
-def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet:
+def face_box(hit: np.ndarray, margin_px: int) -> np.ndarray:
+    """(H,W) the bounding box of the mesh's pixels grown by margin_px: where NerFACE draws most rays."""
+    box = np.zeros_like(hit)
+    if hit.any():
+        rows, cols = np.nonzero(hit.any(1))[0], np.nonzero(hit.any(0))[0]
+        top, left = max(rows[0] - margin_px, 0), max(cols[0] - margin_px, 0)
+        box[top:rows[-1] + margin_px + 1, left:cols[-1] + margin_px + 1] = True
+    return box
+
+
+def build_frames(split: CaptureSplit, avatar: Avatar | NerfaceAvatar, gl: GLContext) -> FrameSet:
     bg = avatar.background.numpy()
     images, masks, origins, dirs, surf, active, geos = [], [], [], [], [], [], []
     dirs_cam = camera_directions(split)
@@ -71,10 +83,13 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet
             masks.append(np.asarray(Image.open(f.extra["mask_path"]).convert("L"), np.float32) / 255.0)
         geo = avatar.geometry(f.controls)
         cam = camera_of(split, f.camera_to_world)
-        r = raster.rasterize(geo.meshes.posed.numpy(), avatar.head_model.triangles, cam)
+        r = raster.rasterize(posed_mesh(avatar.head, f.controls)[0], avatar.head_model.triangles, cam)
         d_world = dirs_cam @ f.camera_to_world[:3, :3].T
         surf.append(surface_distance(r, -dirs_cam[..., 2]))  # -z: the view-axis part of each unit direction
-        active.append(active_pixels(avatar.render_cfg, cam, r))
+        if isinstance(avatar, NerfaceAvatar):
+            active.append(face_box(r.hit, margin_px=max(2, split.width // 32)))
+        else:
+            active.append(active_pixels(avatar.render_cfg, cam, r))
         origins.append(f.camera_to_world[:3, 3])
         dirs.append(d_world)
         geos.append(geo)

@@ -34,7 +34,8 @@ def stratified(t_near: torch.Tensor, t_far: torch.Tensor, n: int, generator: tor
     edges are jittered inside its stratum (training), without it they are even (display)."""
     edges = torch.linspace(0, 1, n + 1, dtype=t_near.dtype, device=t_near.device).expand(len(t_near), n + 1)
     if generator is not None:
-        jitter = (torch.rand(len(t_near), n - 1, generator=generator, dtype=t_near.dtype) - 0.5) / n
+        # Drawn on the generator's device (the CPU: its state is saved with checkpoints), used on the rays'.
+        jitter = (torch.rand(len(t_near), n - 1, generator=generator, dtype=t_near.dtype).to(t_near.device) - 0.5) / n
         edges = torch.cat([edges[:, :1], edges[:, 1:-1] + jitter, edges[:, -1:]], 1)
     t = t_near[:, None] + edges * (t_far - t_near)[:, None]
     return t[:, :-1], t[:, 1:]

@@ -115,7 +115,7 @@ def sample_pdf(
         u = torch.linspace(0.5 / n_samples, 1 - 0.5 / n_samples, n_samples, dtype=bins.dtype, device=bins.device)
         u = u.expand(R, n_samples).contiguous()
     else:
-        u = torch.rand(R, n_samples, generator=generator, dtype=bins.dtype, device=bins.device)
+        u = torch.rand(R, n_samples, generator=generator, dtype=bins.dtype).to(bins.device)
         u, _ = torch.sort(u, dim=-1)
     idx = torch.searchsorted(cdf.detach().contiguous(), u, right=True).clamp(1, S)
     cdf_lo, cdf_hi = cdf.gather(-1, idx - 1), cdf.gather(-1, idx)

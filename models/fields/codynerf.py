@@ -69,7 +69,7 @@ class FieldConfig:
 @dataclass
 class FieldOutput:
     sigma: torch.Tensor  # (P,) density, 1/m
-    rgb: torch.Tensor  # (P,3) in [0,1]
+    rgb: torch.Tensor  # (P,3) in [0,1] (from `geometry` alone: tau, the features for the appearance)
     x_canonical: torch.Tensor  # (P,3)
     normal: torch.Tensor | None = None  # (P,3) predicted (Eq. 8)
     grad_normal: torch.Tensor | None = None  # (P,3) -grad sigma / |grad sigma|
@@ -101,18 +101,16 @@ class CoDyNeRFField(nn.Module):
         if "shadows" in c.effects:
             self.landmarks = nn.Linear(3 * n_landmarks, c.landmark_features)
             d_app += c.landmark_features + 6
-        self.appearance = MLP(d_app, 3, c.width, 2)
+        self.appearance_net = MLP(d_app, 3, c.width, 2)
 
-    def forward(
+    def geometry(
         self,
         x: torch.Tensor,  # (P,3) world points
         prior: PriorSamples,
-        view_dir: torch.Tensor,  # (P,3) unit, from the point towards the camera
         omega: torch.Tensor,  # (P, deform_code_dim)
-        phi: torch.Tensor,  # (P, appearance_code_dim)
-        landmarks: torch.Tensor | None = None,  # (1, 3L) or (P, 3L), head-centred
-        create_graph: bool = False,  # keep the graph of density gradients (training the normals)
+        create_graph: bool = False,  # keep the graph of density gradients (training through the normals)
     ) -> FieldOutput:
+        """Deformation, density and normals (Eq. 2, 5, 8); rgb is left empty for `appearance` to fill."""
         c = self.cfg
         s = c.scale_m
         if c.needs_normals and not x.requires_grad:
@@ -123,24 +121,53 @@ class CoDyNeRFField(nn.Module):
             delta = self.deform(torch.cat([frequency_encoding(x, c.deform_frequencies, s),
                                            frequency_encoding(prior.offset, c.prior_frequencies, s), omega], -1))
             x_can = x_prior + delta
-            raw = self.density(torch.cat([frequency_encoding(x_can, c.density_frequencies, s),
-                                          prior.distance[:, None]], -1))
-            sigma = F.softplus(raw[:, 0] - 1.0) * 100.0  # densities of order 100 / m: opaque within ~1 cm
-            tau = raw[:, 1:]
+            sigma, tau = self.canonical_density(x_can, prior.distance)
             normal = grad_normal = None
             if c.needs_normals:
                 (grad,) = torch.autograd.grad(sigma.sum(), x, create_graph=create_graph, retain_graph=True)
                 grad_normal = safe_normalize(-grad)
                 normal = safe_normalize(prior.mesh_normal + self.normals(torch.cat(
                     [prior.mesh_normal, grad_normal, prior.distance[:, None] / c.scale_m], -1)))
-        inputs = [tau, frequency_encoding(view_dir, c.view_frequencies), phi]
+        return FieldOutput(sigma, tau, x_can, normal, grad_normal)
+
+    def canonical_density(self, x_can: torch.Tensor, distance: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Density (P,) and features tau (P,F) at canonical points, given their distance to the mesh (Eq. 5)."""
+        c = self.cfg
+        raw = self.density(torch.cat([frequency_encoding(x_can, c.density_frequencies, c.scale_m),
+                                      distance[:, None]], -1))
+        return F.softplus(raw[:, 0] - 1.0) * 100.0, raw[:, 1:]  # densities of order 100 / m: opaque within ~1 cm
+
+    def appearance(
+        self,
+        geo: FieldOutput,  # from `geometry` (rgb holds tau there)
+        prior: PriorSamples,
+        view_dir: torch.Tensor,  # (P,3) unit, from the point towards the camera
+        phi: torch.Tensor,  # (P, appearance_code_dim)
+        landmarks: torch.Tensor | None = None,  # (1, 3L) head-centred
+    ) -> torch.Tensor:
+        """Colour (P,3) in [0,1] (Eq. 7)."""
+        c = self.cfg
+        inputs = [geo.rgb, frequency_encoding(view_dir, c.view_frequencies), phi]
         if c.needs_normals:
-            inputs.append(normal)
+            inputs.append(geo.normal)
         if "specular" in c.effects:
-            reflect = 2 * (view_dir * normal).sum(-1, keepdim=True) * normal - view_dir
+            reflect = 2 * (view_dir * geo.normal).sum(-1, keepdim=True) * geo.normal - view_dir
             inputs.append(frequency_encoding(reflect, c.view_frequencies))
         if self.landmarks is not None:
-            lm = self.landmarks(landmarks).expand(len(x), -1)
-            inputs += [lm, prior.expression_offset / s, prior.pose_offset / s]
-        rgb = torch.sigmoid(self.appearance(torch.cat(inputs, -1)))
-        return FieldOutput(sigma, rgb, x_can, normal, grad_normal)
+            lm = self.landmarks(landmarks).expand(len(view_dir), -1)
+            inputs += [lm, prior.expression_offset / c.scale_m, prior.pose_offset / c.scale_m]
+        return torch.sigmoid(self.appearance_net(torch.cat(inputs, -1)))
+
+    def forward(
+        self,
+        x: torch.Tensor,  # (P,3) world points
+        prior: PriorSamples,
+        view_dir: torch.Tensor,  # (P,3) unit, from the point towards the camera
+        omega: torch.Tensor,  # (P, deform_code_dim)
+        phi: torch.Tensor,  # (P, appearance_code_dim)
+        landmarks: torch.Tensor | None = None,  # (1, 3L), head-centred
+        create_graph: bool = False,
+    ) -> FieldOutput:
+        out = self.geometry(x, prior, omega, create_graph)
+        out.rgb = self.appearance(out, prior, view_dir, phi, landmarks)
+        return out

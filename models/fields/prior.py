@@ -12,7 +12,7 @@ pose part (-> posed), the separate inputs of the dynamic appearance (Eq. 7).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
@@ -39,6 +39,10 @@ class PriorSamples:
     expression_offset: torch.Tensor  # (P,3) its expression-only part
     pose_offset: torch.Tensor  # (P,3) its pose-only part
     mesh_normal: torch.Tensor  # (P,3) posed normal at x_hat
+
+    def take(self, idx: torch.Tensor) -> PriorSamples:
+        """The prior at a subset of the points (indices)."""
+        return PriorSamples(*(getattr(self, f.name)[idx] for f in fields(self)))
 
 
 def vertex_tree(vertices: torch.Tensor) -> KDTree:
