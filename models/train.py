@@ -96,7 +96,8 @@ def _load_adam_state(opt: torch.optim.Adam, tensors: dict[str, torch.Tensor]) ->
 class Trainer:
     """A training run; its state (step, weights, optimiser, sampler) is a value that can be saved and resumed."""
 
-    def __init__(self, cfg: TrainConfig, gl: GLContext, weights: LossWeights = LossWeights()):
+    def __init__(self, cfg: TrainConfig, gl: GLContext, weights: LossWeights = LossWeights(),
+                 nerface: NerfaceConfig | None = None):
         self.cfg = cfg
         self.w = weights
         self.split = load_split(cfg.dataset, "train")
@@ -112,7 +113,7 @@ class Trainer:
         self.field_cfg = FieldConfig(effects=() if self.nerface else parse_effects(cfg.effects))
         self.rays_per_step = cfg.rays_per_step or (256 if self.nerface else 1024)
         self.avatar: Avatar | NerfaceAvatar = (
-            NerfaceAvatar(head, NerfaceConfig(), len(self.split.frames), bg) if self.nerface
+            NerfaceAvatar(head, nerface or NerfaceConfig(), len(self.split.frames), bg) if self.nerface
             else Avatar(head, self.field_cfg, len(self.split.frames), bg, RenderConfig()))
         self.frames: FrameSet = build_frames(self.split, self.avatar, gl)
         # The networks and each frame's geometry go to the device; images, rays, the k-d trees and the random

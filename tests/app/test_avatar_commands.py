@@ -53,3 +53,10 @@ def test_bad_input(capture, tmp_path, capsys):
     assert main(["train", str(capture), "--out", str(tmp_path / "c"), "--steps", "1"]) == 2
     assert "already holds an avatar" in capsys.readouterr().err
     assert (tmp_path / "c" / "avatar.json").read_text() == "{}"
+
+
+@pytest.mark.skipif(__import__("torch").cuda.is_available(), reason="this machine has a CUDA GPU")
+def test_cuda_without_a_gpu_is_a_clear_error(capture, tmp_path, capsys):
+    assert main(["train", str(capture), "--out", str(tmp_path / "a"), "--device", "cuda", "--steps", "1"]) == 2
+    assert "torch sees no CUDA GPU" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()
