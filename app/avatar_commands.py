@@ -3,17 +3,19 @@
 from __future__ import annotations
 
 import json
+import signal
 import sys
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
+from tqdm import tqdm
 
 from app.errors import UserInputError
 from app.head_commands import save_png
-from models.avatar import Avatar
+from app.turntable import TurntableConfig, apply_preset, turntable_frames
 from models.avatar_io import load_avatar
 from models.dataset import load_split
 from models.device import device_of
@@ -26,9 +28,7 @@ from models.train_data import camera_of, load_rgb
 from render.camera import framing_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
-
-PRESETS = {"draft": (0.5, 6), "preview": (1.0, 8), "final": (1.0, 16)}
-"""Quality presets: image scale and samples per ray."""
+from render.video import write_video
 
 
 def run_train(cfg: TrainConfig) -> int:
@@ -49,7 +49,13 @@ def run_train(cfg: TrainConfig) -> int:
                              + (f"  val PSNR {r['val_psnr']:.2f}" if "val_psnr" in r else "") + "   ")
             sys.stderr.flush()
 
+    def stop(signum, frame) -> None:  # SIGTERM (the studio's Cancel): finish the step, checkpoint, exit
+        trainer.stop_requested = True
+
+    signal.signal(signal.SIGTERM, stop)
     last = trainer.run(gl, show)
+    if trainer.stop_requested:
+        print(f"stopped at step {trainer.step}; checkpoint in {cfg.out} (continue with --resume)")
     if tty:
         sys.stderr.write("\n")
     print(f"wrote {cfg.out}: {trainer.step} steps in {trainer.elapsed / 60:.1f} min, "
@@ -150,10 +156,7 @@ class RenderCommandConfig:
 def run_render(cfg: RenderCommandConfig) -> int:
     avatar, _ = load_avatar(cfg.avatar, cfg.device)
     controls = load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls()
-    scale, samples = PRESETS[cfg.preset]
-    if isinstance(avatar, Avatar):  # the NerFACE baseline always samples densely
-        avatar.render_cfg = replace(avatar.render_cfg, samples_per_ray=samples)
-    size = max(8, int(cfg.size * scale))
+    size = apply_preset(avatar, cfg.preset, cfg.size)
     cam = framing_camera(avatar.head_model.template, cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
                          height_px=size)
     gl = GLContext.headless()
@@ -176,4 +179,20 @@ def run_render(cfg: RenderCommandConfig) -> int:
     cfg.out.parent.mkdir(parents=True, exist_ok=True)
     save_png(cfg.out, (np.clip(img, 0, 1) * 255).round().astype(np.uint8))
     print(f"wrote {cfg.out} ({size}x{size}, {cfg.buffer}, {cfg.preset}: {ms:.0f} ms)")
+    return 0
+
+
+def run_turntable(cfg: TurntableConfig) -> int:
+    avatar, _ = load_avatar(cfg.avatar)
+    if cfg.frames < 1 or cfg.size < 8:
+        raise UserInputError(f"--frames {cfg.frames} --size {cfg.size}: need at least 1 frame of 8 pixels")
+    if cfg.out.suffix.lower() != ".mp4":
+        raise UserInputError(f"{cfg.out}: the turntable is written as an .mp4")
+    gl = GLContext.headless()
+    pngs = cfg.out.with_suffix("") if cfg.pngs else None
+    t0 = time.perf_counter()
+    with tqdm(total=cfg.frames, desc="turntable", unit="frame", disable=not sys.stderr.isatty()) as bar:
+        n = write_video(turntable_frames(avatar, Rasterizer(gl), cfg, on_frame=lambda k: bar.update()), cfg.out,
+                        cfg.fps, pngs)
+    print(f"wrote {cfg.out} ({n} frames{f', PNGs in {pngs}' if pngs else ''}) in {time.perf_counter() - t0:.1f} s")
     return 0

@@ -6,6 +6,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from app import avatar_commands, capture_commands, head_commands
+from app.turntable import TurntableConfig
 from models.synthetic import SynthConfig
 from models.train import TrainConfig
 
@@ -36,4 +37,6 @@ COMMANDS = (
             avatar_commands.EvalConfig, avatar_commands.run_eval, positional=("avatar", "dataset")),
     Command("render", "Render an avatar with given controls and camera to a PNG.",
             avatar_commands.RenderCommandConfig, avatar_commands.run_render, positional=("avatar",)),
+    Command("turntable", "Render an avatar from a camera circling it to an H.264 mp4 and PNG frames.",
+            TurntableConfig, avatar_commands.run_turntable, positional=("avatar",)),
 )

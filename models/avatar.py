@@ -8,6 +8,7 @@ and are composited over the background (Eq. 1).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,6 +107,10 @@ def per_sample(code: torch.Tensor, R: int, S: int) -> torch.Tensor:
 
 def mean_code(embedding: nn.Embedding) -> torch.Tensor:
     return embedding.weight.mean(0, keepdim=True)
+
+
+class RenderCancelled(Exception):
+    """A render stopped part-way because a newer request replaced it."""
 
 
 def image_rays(camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
@@ -244,9 +249,11 @@ class Avatar(nn.Module):
 
     # ---- images ----------------------------------------------------------------------------------------
     def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer,
-                     frame: int | None = None, dense_samples: int | None = None) -> dict[str, np.ndarray]:
+                     frame: int | None = None, dense_samples: int | None = None,
+                     should_stop: Callable[[], bool] | None = None) -> dict[str, np.ndarray]:
         """RGB, opacity, depth and (with normals) predicted and density-gradient normal maps, (H,W,...).
-        `frame` picks a training frame's codes; None uses the mean code (novel controls)."""
+        `frame` picks a training frame's codes; None uses the mean code (novel controls). `should_stop` is
+        asked between batches of rays; when it says yes, RenderCancelled is raised (a newer request won)."""
         geo = self.geometry(controls)
         raster = rasterizer.rasterize(geo.meshes.posed.cpu().numpy(), self.head_model.triangles, camera)
         origin, dirs = image_rays(camera)
@@ -266,6 +273,8 @@ class Avatar(nn.Module):
         grad_mode = torch.no_grad() if self.field_cfg.needs_normals else torch.inference_mode()
         with grad_mode, torch.autocast(d_all.device.type, torch.bfloat16, enabled=self.render_cfg.bf16):
             for a in range(0, len(idx), self.render_cfg.chunk_rays):
+                if should_stop is not None and should_stop():
+                    raise RenderCancelled
                 d, s = d_all[a:a + self.render_cfg.chunk_rays], s_all[a:a + self.render_cfg.chunk_rays]
                 r = self.render_rays(origin.expand(len(d), 3), d, s, geo, omega.detach(), phi.detach(),
                                      dense_samples=dense_samples, min_weight=self.render_cfg.min_weight,

@@ -15,6 +15,7 @@ unposed mesh onto the posed one, so any head model works without knowing its joi
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +23,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from models.avatar import RayOutput, image_rays, scatter_rays
+from models.avatar import RayOutput, RenderCancelled, image_rays, scatter_rays
 from models.fields.encoding import encoded_size, frequency_encoding
 from models.head.controls import Controls
 from models.head.head import Head
@@ -190,7 +191,8 @@ class NerfaceAvatar(nn.Module):
 
     @torch.inference_mode()
     def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer | None = None,
-                     frame: int | None = None, dense_samples: int | None = None) -> dict[str, np.ndarray]:
+                     frame: int | None = None, dense_samples: int | None = None,
+                     should_stop: Callable[[], bool] | None = None) -> dict[str, np.ndarray]:
         """RGB, opacity and depth (H,W,...) of every pixel whose ray crosses the head's box."""
         del rasterizer, dense_samples  # NerFACE samples every ray densely; it does not need the mesh
         geo = self.geometry(controls)
@@ -200,6 +202,8 @@ class NerfaceAvatar(nn.Module):
         latent = self.codes(torch.tensor([frame], device=device) if frame is not None else None)
         parts: dict[str, list[torch.Tensor]] = {"rgb": [], "opacity": [], "depth": []}
         for a in range(0, len(dirs), self.cfg.chunk_rays):
+            if should_stop is not None and should_stop():
+                raise RenderCancelled
             d = dirs[a:a + self.cfg.chunk_rays]
             r, _ = self.render_rays(origin.expand(len(d), 3), d, geo, latent)
             parts["rgb"].append(r.rgb)

@@ -125,6 +125,8 @@ class Trainer:
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.step = 0
         self.elapsed = 0.0
+        self.stop_requested = False
+        """Set (from a signal handler) to end the run after the current step, with a checkpoint."""
         if cfg.resume:
             self._resume()
 
@@ -261,7 +263,7 @@ class Trainer:
         last_ck = time.perf_counter()
         start_elapsed, t0 = self.elapsed, time.perf_counter()
         record: dict = {}
-        while self.step < budget_steps and self.elapsed < budget_s:
+        while self.step < budget_steps and self.elapsed < budget_s and not self.stop_requested:
             progress = max(self.step / budget_steps if budget_steps != math.inf else 0.0,
                            self.elapsed / budget_s if budget_s != math.inf else 0.0)
             terms = self.train_step(progress)

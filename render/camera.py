@@ -86,13 +86,15 @@ def orbit_camera(yaw_deg: float = 0.0, pitch_deg: float = 0.0, distance_m: float
 
 
 def framing_camera(vertices: np.ndarray, yaw_deg: float = 0.0, pitch_deg: float = 0.0, fov_y_deg: float = 30.0,
-                   width_px: int = 512, height_px: int = 512, margin: float = 1.08) -> Camera:
-    """An orbit camera around the bounding box of `vertices` (V,3) that fits them in view."""
+                   width_px: int = 512, height_px: int = 512, margin: float = 1.08, zoom: float = 1.0,
+                   target_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Camera:
+    """An orbit camera around the bounding box of `vertices` (V,3) that fits them in view; `zoom` divides
+    that distance (2: twice as close), `target_offset` (metres, world) moves the point it looks at (pan)."""
     v = np.asarray(vertices, np.float64)
-    center = 0.5 * (v.min(0) + v.max(0))
+    center = 0.5 * (v.min(0) + v.max(0)) + np.asarray(target_offset, np.float64)
     radius = float(np.linalg.norm(v - center, axis=1).max())
     half_fov = math.radians(min(fov_y_deg, fov_y_deg * width_px / height_px)) / 2
-    distance = margin * radius / math.sin(half_fov)
+    distance = margin * radius / math.sin(half_fov) / max(zoom, 1e-3)
     cam = orbit_camera(yaw_deg, pitch_deg, distance, tuple(center), fov_y_deg, width_px, height_px)
     return Camera(cam.view, fov_y_deg, width_px, height_px, near_m=max(0.01, distance - 2 * radius),
                   far_m=distance + 2 * radius)

@@ -1,0 +1,159 @@
+"""Background training jobs: each a separate `avatar-studio train` process, queued and run one at a time,
+their progress read from the avatar folder's progress.jsonl. Cancelling sends SIGTERM: the trainer writes a
+checkpoint and exits, so the job can be resumed later with --resume."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+State = Literal["queued", "running", "done", "failed", "cancelled"]
+
+
+@dataclass
+class Job:
+    """One training run and what is known of it."""
+
+    id: int
+    dataset: Path
+    out: Path
+    model: str = "codynerf"
+    effects: str = "all"
+    minutes: float | None = None
+    steps: int | None = None
+    resume: bool = False
+    state: State = "queued"
+    error: str = ""
+    progress: list[dict] = field(default_factory=list)
+    proc: subprocess.Popen | None = None
+    _read_bytes: int = 0
+
+    @property
+    def log_path(self) -> Path:
+        return self.out.with_name(self.out.name + ".log")
+
+    def command(self) -> list[str]:
+        cmd = [sys.executable, "-m", "app.cli", "train", str(self.dataset), "--out", str(self.out),
+               "--model", self.model, "--effects", self.effects]
+        if self.minutes:
+            cmd += ["--minutes", str(self.minutes)]
+        if self.steps:
+            cmd += ["--steps", str(self.steps)]
+        if self.resume:
+            cmd.append("--resume")
+        return cmd
+
+    def read_progress(self) -> None:
+        """Append the progress records written since the last call."""
+        path = self.out / "progress.jsonl"
+        try:
+            with open(path, "rb") as f:
+                f.seek(self._read_bytes)
+                data = f.read()
+        except FileNotFoundError:
+            return
+        complete = data[: data.rfind(b"\n") + 1]  # a line being written is read next time
+        self._read_bytes += len(complete)
+        for line in complete.splitlines():
+            try:
+                self.progress.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+
+    @property
+    def fraction(self) -> float:
+        """Share of the budget spent, from the last progress record."""
+        if not self.progress:
+            return 0.0
+        last = self.progress[-1]
+        if self.steps:
+            return min(1.0, last["step"] / self.steps)
+        if self.minutes:
+            return min(1.0, last["elapsed_s"] / (60 * self.minutes))
+        return 0.0
+
+
+class JobQueue:
+    """Jobs in submission order; at most `max_running` run at once (the window keeps a core)."""
+
+    def __init__(self, max_running: int = 1, threads_per_job: int = 1):
+        self.jobs: list[Job] = []
+        self.max_running = max_running
+        self.threads_per_job = threads_per_job
+
+    def submit(self, dataset: Path, out: Path, **options) -> Job:
+        job = Job(len(self.jobs) + 1, Path(dataset), Path(out), **options)
+        self.jobs.append(job)
+        self.poll()
+        return job
+
+    def _start(self, job: Job) -> None:
+        job.out.parent.mkdir(parents=True, exist_ok=True)
+        env = dict(os.environ, OMP_NUM_THREADS=str(self.threads_per_job), PYTHONUNBUFFERED="1")
+        log = open(job.log_path, "ab")
+        job.proc = subprocess.Popen(job.command(), stdout=log, stderr=subprocess.STDOUT, env=env,
+                                    cwd=Path(__file__).resolve().parents[1])
+        log.close()
+        job.state = "running"
+
+    def poll(self) -> None:
+        """Read progress, notice finished processes, start queued jobs."""
+        for job in self.jobs:
+            if job.state != "running" or job.proc is None:
+                continue
+            job.read_progress()
+            rc = job.proc.poll()
+            if rc is None:
+                continue
+            job.read_progress()
+            if job.state == "running":
+                job.state = "done" if rc == 0 else "failed"
+            if rc != 0 and job.state == "failed":
+                job.error = self.last_error(job)
+        while len(self.running()) < self.max_running:
+            queued = [j for j in self.jobs if j.state == "queued"]
+            if not queued:
+                break
+            self._start(queued[0])
+
+    @staticmethod
+    def last_error(job: Job) -> str:
+        """The last line the job's process wrote (its one-line reason on exit status 2)."""
+        try:
+            lines = [ln for ln in job.log_path.read_text(errors="replace").replace("\r", "\n").splitlines()
+                     if ln.strip()]
+        except OSError:
+            return f"exit status {job.proc.returncode if job.proc else '?'}"
+        return lines[-1] if lines else f"exit status {job.proc.returncode if job.proc else '?'}"
+
+    def running(self) -> list[Job]:
+        return [j for j in self.jobs if j.state == "running"]
+
+    def cancel(self, job: Job) -> None:
+        """Stop a job; a running one checkpoints first (SIGTERM), so it can be resumed."""
+        if job.state == "queued":
+            job.state = "cancelled"
+        elif job.state == "running" and job.proc is not None:
+            job.state = "cancelled"
+            job.proc.send_signal(signal.SIGTERM)
+
+    def resume(self, job: Job) -> Job:
+        """Queue a job that continues a cancelled or finished one from its checkpoint."""
+        return self.submit(job.dataset, job.out, model=job.model, effects=job.effects, minutes=job.minutes,
+                           steps=job.steps, resume=True)
+
+    def stop_all(self, wait_s: float = 30.0) -> None:
+        for job in self.running():
+            self.cancel(job)
+        for job in self.jobs:
+            if job.proc is not None and job.proc.poll() is None:
+                try:
+                    job.proc.wait(wait_s)
+                except subprocess.TimeoutExpired:
+                    job.proc.kill()

@@ -1,0 +1,84 @@
+"""Turntables: the avatar seen from a camera circling it, optionally talking, as an H.264 mp4 and PNG frames.
+Shared by the `turntable` command and the studio's Export panel."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from models.avatar import Avatar
+from models.head.controls import Controls
+from models.nerface import NerfaceAvatar
+from render.camera import framing_camera
+from render.gl.raster import Rasterizer
+
+PRESETS = {"draft": (0.5, 6), "preview": (1.0, 8), "final": (1.0, 16)}
+"""Quality presets: image scale and samples per ray."""
+
+
+@dataclass(frozen=True)
+class TurntableConfig:
+    avatar: Path
+    """Avatar folder."""
+    out: Path = Path("out/turntable.mp4")
+    """The mp4 to write (H.264); PNG frames go to a folder beside it unless --no-pngs."""
+    frames: int = 120
+    elevation_deg: float = 5.0
+    """Camera height above the head's centre, degrees."""
+    zoom: float = 1.0
+    """Camera distance: 1 frames the head; 2 is twice as close."""
+    size: int = 256
+    """Frame width and height, pixels (at the preview and final presets; draft halves it)."""
+    preset: Literal["draft", "preview", "final"] = "preview"
+    animate: bool = False
+    """Talk while turning: the jaw and a smile follow slow waves."""
+    fps: float = 30.0
+    pngs: bool = True
+    """Also write the frames as PNGs."""
+
+
+def apply_preset(avatar: Avatar | NerfaceAvatar, preset: str, size: int) -> int:
+    """Set the avatar's samples per ray for a preset; returns the image size it renders at."""
+    scale, samples = PRESETS[preset]
+    if isinstance(avatar, Avatar):  # the NerFACE baseline always samples densely
+        avatar.render_cfg = replace(avatar.render_cfg, samples_per_ray=samples)
+    return max(8, 2 * round(size * scale / 2))
+
+
+def talking(avatar: Avatar | NerfaceAvatar, base: Controls, phase: float) -> Controls:
+    """Controls with the jaw (or the expressions named like it) and a smile moving with `phase` (radians)."""
+    head = avatar.head_model
+    expr = np.zeros(head.num_expression, np.float32)
+    expr[: len(base.expression)] = base.expression[: head.num_expression]
+    names = [n.lower() for n in head.expr_names]
+    for i, n in enumerate(names):
+        if "jaw" in n and "open" in n:
+            expr[i] = 0.5 * (1 - math.cos(phase * 3))
+        elif "smile" in n:
+            expr[i] = 0.5 * (1 - math.cos(phase))
+    jaw = base.jaw
+    if "jaw" in head.joint_names:  # a jaw joint (FLAME, the built-in head) opens the mouth by rotation
+        jaw = np.array([0.2 * (1 - math.cos(phase * 3)), 0.0, 0.0], np.float32)
+    return replace(base, expression=expr, jaw=jaw)
+
+
+def turntable_frames(avatar: Avatar | NerfaceAvatar, rasterizer: Rasterizer, cfg: TurntableConfig,
+                     controls: Controls | None = None, on_frame: Callable[[int], None] | None = None,
+                     should_stop: Callable[[], bool] | None = None) -> Iterator[np.ndarray]:
+    """(size,size,3) uint8 frames of the turntable; on_frame(k) after each."""
+    size = apply_preset(avatar, cfg.preset, cfg.size)
+    controls = controls or Controls()
+    for k in range(cfg.frames):
+        phase = 2 * math.pi * k / cfg.frames
+        cam = framing_camera(avatar.head_model.template, math.degrees(phase), cfg.elevation_deg, fov_y_deg=18.0,
+                             width_px=size, height_px=size, zoom=cfg.zoom)
+        c = talking(avatar, controls, phase) if cfg.animate else controls
+        rgb = avatar.render_image(c, cam, rasterizer, should_stop=should_stop)["rgb"]
+        yield (np.clip(rgb, 0, 1) * 255).round().astype(np.uint8)
+        if on_frame:
+            on_frame(k)
