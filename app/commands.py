@@ -6,9 +6,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from app import avatar_commands, capture_commands, head_commands
+from app.studio.config import StudioConfig
 from app.turntable import TurntableConfig
 from models.synthetic import SynthConfig
 from models.train import TrainConfig
+
+
+def run_studio(cfg: StudioConfig) -> int:
+    """The window's code (imgui, glfw) loads only for the studio command."""
+    from app.studio.app import run_studio as run
+
+    return run(cfg)
 
 
 @dataclass(frozen=True)
@@ -21,8 +29,8 @@ class Command:
 
 
 COMMANDS = (
-    Command("studio", "Open the studio on an avatar (for now: render the built-in head to out/).",
-            head_commands.StudioConfig, head_commands.run_studio, positional=("avatar",)),
+    Command("studio", "Open the studio window on an avatar (the shipped demo avatar by default).",
+            StudioConfig, run_studio, positional=("avatar",)),
     Command("preview", "Render a head model with given controls to a PNG, headless.",
             head_commands.PreviewConfig, head_commands.run_preview),
     Command("mesh", "Write the posed guide mesh as OBJ or PLY, in the head model's vertex order.",

@@ -55,14 +55,6 @@ class MeshConfig(HeadPoseConfig):
     """Output mesh, .obj or .ply."""
 
 
-@dataclass(frozen=True)
-class StudioConfig:
-    avatar: Path | None = None
-    """Avatar folder to open (default: the shipped demo avatar)."""
-    out: Path = Path("out")
-    """Where the head renders go until the window exists."""
-
-
 def parse_expression_args(head: HeadModel, items: tuple[str, ...], controls: Controls) -> Controls:
     """Apply NAME=W / INDEX=W pairs to the controls."""
     named: dict[str, float] = {}
@@ -149,16 +141,3 @@ def run_mesh(cfg: MeshConfig) -> int:
     return 0
 
 
-def run_studio(cfg: StudioConfig) -> int:
-    """Until the studio window lands: render the built-in head from a few views and say where."""
-    cfg.out.mkdir(parents=True, exist_ok=True)
-    gl = GLContext.headless()
-    views = []
-    for yaw, expr in ((0.0, ()), (30.0, ("smile_L=1", "smile_R=1")), (-35.0, ("browRaise_L=1", "browRaise_R=1"))):
-        pc = PreviewConfig(expression=expr, yaw_deg=yaw, size=(384, 384), landmarks=False)
-        head, verts, lmks = load_posed(pc)
-        views.append(render_head(gl, head, verts, lmks, pc))
-    out = cfg.out / "studio_builtin_head.png"
-    save_png(out, np.concatenate(views, 1))
-    print(f"The studio window is not built yet; rendered the built-in head to {out.resolve()}")
-    return 0

@@ -268,13 +268,14 @@ class Trainer:
                            self.elapsed / budget_s if budget_s != math.inf else 0.0)
             terms = self.train_step(progress)
             self.elapsed = start_elapsed + time.perf_counter() - t0
-            if self.step % 50 == 0 or self.step == 1:
+            finished = (self.step >= budget_steps or self.elapsed >= budget_s or self.stop_requested)
+            if self.step % 50 == 0 or self.step == 1 or finished:  # the last step is always logged
                 rate = self.step / max(self.elapsed, 1e-9)
                 eta = min((budget_steps - self.step) / max(rate, 1e-9) if budget_steps != math.inf else math.inf,
                           budget_s - self.elapsed)
                 record = {"step": self.step, **{k: round(v, 6) for k, v in terms.items()},
                           "elapsed_s": round(self.elapsed, 1), "eta_s": round(eta, 1)}
-                if self.step % 250 == 0:
+                if self.step % 250 == 0 or finished:
                     record["val_psnr"] = round(self.validation_psnr(gl), 2)
                 with open(log, "a") as f:
                     f.write(json.dumps(record) + "\n")

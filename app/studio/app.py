@@ -1,0 +1,261 @@
+"""The studio window (DESIGN 4): glfw + Dear ImGui (imgui-bundle) + moderngl, on the CPU. The window's thread
+only draws; the neural render, exports and training run elsewhere (a thread, a thread, processes), so
+the interface keeps its frame rate.
+
+Scripted runs (tests, README pictures): --screenshot PNG --frames N saves the whole window after N frames and
+exits; --script JSON runs a list of steps (set sliders, open avatars, train, export, wait, save pictures)."""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+from imgui_bundle import hello_imgui, imgui, immapp
+from PIL import Image
+
+from app.errors import INPUT_ERRORS
+from app.jobs import JobQueue
+from app.studio import avatar_panel, controls_panel, export_panel, jobs_panel, quality_panel, viewport
+from app.studio.config import StudioConfig
+from app.studio.neural import NeuralWorker, Request
+from app.studio.script import Script
+from app.studio.session import Session, View
+from render.gl.context import GLContext
+
+REPO = Path(__file__).resolve().parents[2]
+DEMO_AVATAR = REPO / "resources" / "demo_avatar"
+
+
+class FrameClock:
+    """Interface frame rates, kept apart for idle, rendering and training."""
+
+    def __init__(self):
+        self.last = time.perf_counter()
+        self.times: dict[str, deque] = {k: deque(maxlen=240) for k in ("idle", "rendering", "training")}
+        self.recent: deque = deque(maxlen=60)
+
+    def tick(self, state: str) -> float:
+        now = time.perf_counter()
+        dt, self.last = now - self.last, now
+        self.times[state].append(dt)
+        self.recent.append(dt)
+        return dt
+
+    def fps(self, state: str | None = None) -> float:
+        t = self.recent if state is None else self.times[state]
+        return len(t) / sum(t) if t and sum(t) > 0 else 0.0
+
+
+class Studio:
+    def __init__(self, cfg: StudioConfig):
+        self.cfg = cfg
+        self.session = Session()
+        self.view = View()
+        self.worker = NeuralWorker()
+        self.jobs = JobQueue()
+        self.errors: list[str] = []
+        self.buffer = "rgb"
+        self.guide_pass = "shaded"
+        self.wireframe = False
+        self.landmarks = False
+        self.layout = "beside"
+        self.overlay_alpha = 0.5
+        self.neural_size = 160
+        self.refine_to = "final"
+        self.timeline_frame = -1  # -1: the sliders' own controls; k: capture frame k
+        self.dirty = True
+        self.last_submit_id = 0
+        self.last_submit_time = 0.0
+        self.latency_ms: float | None = None
+        self.shown_result_id = -1
+        self.clock = FrameClock()
+        self.frame_count = 0
+        self.gl: GLContext | None = None
+        self.viewport = viewport.Viewport()
+        self.export = export_panel.ExportState()
+        self.script = Script.load(cfg.script) if cfg.script else None
+        self.confirm_close = False
+        self.jobs_form = jobs_panel.JobForm()
+
+    # ---- avatars -----------------------------------------------------------------------------------------
+    def open_avatar(self, folder: str | Path) -> bool:
+        try:
+            self.session.open(folder)
+        except INPUT_ERRORS as e:
+            self.report(str(e))
+            return False
+        except Exception as e:  # a broken file is the file's problem, never the studio's end
+            self.report(f"{folder}: could not open ({type(e).__name__}: {e})")
+            return False
+        self.worker.set_avatar(self.session.avatar)
+        self.timeline_frame = -1
+        self.dirty = True
+        return True
+
+    def report(self, message: str) -> None:
+        self.errors.append(message)
+        del self.errors[:-8]
+
+    def controls(self):
+        s = self.session
+        if s.capture is not None and 0 <= self.timeline_frame < len(s.capture.frames):
+            return s.capture.frames[self.timeline_frame].controls
+        return s.sliders.controls()
+
+    # ---- per frame ---------------------------------------------------------------------------------------
+    def submit_render(self) -> None:
+        s = self.session
+        if s.avatar is None:
+            return
+        cam = self.view.camera(s.avatar.head_model.template, self.neural_size, self.neural_size)
+        passes = ("draft", "preview", "final")[: ("draft", "preview", "final").index(self.refine_to) + 1]
+        frame = self.timeline_frame if self.timeline_frame >= 0 else None
+        self.last_submit_id = self.worker.submit(Request(self.controls(), cam, passes, frame))
+        self.last_submit_time = time.perf_counter()
+        self.dirty = False
+
+    def gui(self) -> None:
+        if self.gl is None:
+            self.gl = GLContext.from_current_window()
+            self.viewport.init(self.gl)
+            if self.cfg.avatar is not None or DEMO_AVATAR.is_dir():
+                self.open_avatar(self.cfg.avatar or DEMO_AVATAR)
+        self.jobs.poll()
+        state = "training" if self.jobs.running() else "rendering" if self.worker.busy else "idle"
+        self.clock.tick(state)
+        if self.script is not None:
+            self.script.step(self)
+        result = self.worker.result
+        if result is not None and result.request_id == self.last_submit_id and self.latency_ms is None:
+            self.latency_ms = 1e3 * (time.perf_counter() - self.last_submit_time)
+
+        w, h = imgui.get_io().display_size
+        left, right = 330, 360
+        self._window("Avatar", (0, 0), (left, 260), lambda: avatar_panel.draw(self))
+        self._window("Controls", (0, 260), (left, h - 260), lambda: controls_panel.draw(self))
+        self._window("Viewport", (left, 0), (w - left - right, h), lambda: viewport.draw(self))
+        self._window("Quality", (w - right, 0), (right, 200), lambda: quality_panel.draw(self))
+        self._window("Jobs", (w - right, 200), (right, h - 440), lambda: jobs_panel.draw(self))
+        self._window("Export", (w - right, h - 240), (right, 240), lambda: export_panel.draw(self))
+        self._close_dialog()
+        if self.dirty:
+            self.latency_ms = None
+            self.submit_render()
+        self.frame_count += 1
+        if self.cfg.screenshot and self.script is None and self.frame_count >= self.cfg.frames:
+            hello_imgui.get_runner_params().app_shall_exit = True
+
+    def _window(self, title: str, pos, size, body) -> None:
+        imgui.set_next_window_pos(imgui.ImVec2(*pos), imgui.Cond_.always)
+        imgui.set_next_window_size(imgui.ImVec2(*size), imgui.Cond_.always)
+        flags = imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
+        if imgui.begin(title, None, flags)[0]:
+            try:
+                body()
+            except Exception as e:  # a panel's bug shows as a message, the window goes on
+                self.report(f"{title}: {type(e).__name__}: {e}")
+        imgui.end()
+
+    def _close_dialog(self) -> None:
+        if self.confirm_close:
+            imgui.open_popup("Training is running")
+            self.confirm_close = False
+        if imgui.begin_popup_modal("Training is running", None, imgui.WindowFlags_.always_auto_resize)[0]:
+            imgui.text(f"{len(self.jobs.running())} training job(s) running.")
+            if imgui.button("Keep training in the background"):
+                self._exit(keep_jobs=True)
+            imgui.same_line()
+            if imgui.button("Stop them (checkpointed)"):
+                self._exit(keep_jobs=False)
+            imgui.same_line()
+            if imgui.button("Cancel"):
+                imgui.close_current_popup()
+            imgui.end_popup()
+
+    def confirm_exit(self) -> bool:
+        """The window's close button: ask first when training runs."""
+        if self.jobs.running():
+            self.confirm_close = True
+            return False
+        return True
+
+    def _exit(self, keep_jobs: bool) -> None:
+        if not keep_jobs:
+            self.jobs.stop_all()
+        hello_imgui.get_runner_params().app_shall_exit = True
+
+    def read_window(self) -> np.ndarray:
+        """The window's pixels (H,W,3) uint8, top row first (the frame just drawn)."""
+        with self.gl.current():
+            fb = self.gl.ctx.detect_framebuffer(0)
+            w, h = fb.size
+            data = fb.read(components=3, alignment=1)
+        return np.frombuffer(data, np.uint8).reshape(h, w, 3)[::-1].copy()
+
+    def figures(self) -> dict:
+        """Measured figures for reports: interface fps per state, latency, the last pass's time."""
+        r = self.worker.result
+        return {"fps_idle": round(self.clock.fps("idle"), 1), "fps_rendering": round(self.clock.fps("rendering"), 1),
+                "fps_training": round(self.clock.fps("training"), 1),
+                "frames": {k: len(v) for k, v in self.clock.times.items()},
+                "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 1),
+                "last_pass": None if r is None else {"pass": r.pass_name, "ms": round(r.ms, 1)},
+                "presets": {"ms": self.worker.figures.ms, "psnr_vs_final": self.worker.figures.psnr_vs_final},
+                "errors": list(self.errors)}
+
+    def close(self) -> None:
+        self.worker.close()
+        self.export.cancel()
+
+
+def run_studio(cfg: StudioConfig) -> int:
+    studio = Studio(cfg)
+    params = hello_imgui.RunnerParams()
+    params.app_window_params.window_title = "Avatar Studio"
+    params.app_window_params.window_geometry.size = (cfg.width, cfg.height)
+    params.callbacks.show_gui = studio.gui
+    params.callbacks.confirm_exit = studio.confirm_exit
+    params.fps_idling.enable_idling = False
+    params.ini_disable = True
+    shots: list = []
+
+    def before_swap() -> None:
+        if cfg.screenshot and hello_imgui.get_runner_params().app_shall_exit and not shots:
+            shots.append(studio.read_window())
+        if studio.script is not None:
+            studio.script.after_frame(studio)
+        # The cap: no display sync here, so without it the interface would take a whole core.
+        spare = 1.0 / cfg.fps_cap - (time.perf_counter() - studio.clock.last)
+        if spare > 0:
+            time.sleep(spare)
+
+    params.callbacks.before_swap = before_swap
+
+    def post_init() -> None:
+        # A panel's mistake (an exception between a push and its pop) is recovered and logged, not fatal.
+        io = imgui.get_io()
+        io.config_error_recovery = True
+        io.config_error_recovery_enable_assert = False
+
+    params.callbacks.post_init = post_init
+    try:
+        addons = immapp.AddOnsParams()
+        addons.with_implot = True
+        immapp.run(params, addons)
+    finally:
+        studio.close()
+    if cfg.screenshot:
+        image = shots[0] if shots else hello_imgui.final_app_window_screenshot()
+        cfg.screenshot.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(np.ascontiguousarray(image[..., :3])).save(cfg.screenshot)
+        print(f"wrote {cfg.screenshot}")
+    if studio.script is not None and studio.script.report:
+        studio.script.report.write_text(json.dumps(studio.figures(), indent=1))
+    if studio.script is not None and studio.script.failed:
+        print(f"studio script failed: {studio.script.failed}")
+        return 1
+    return 0
+

@@ -1,0 +1,70 @@
+"""The Avatar panel: open an avatar folder (typed, from a file dialog, or from the recent list); what it is:
+head model, effect set, training provenance and measured metrics."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from imgui_bundle import imgui, portable_file_dialogs
+
+from app.studio.session import recent_folders
+
+if TYPE_CHECKING:
+    from app.studio.app import Studio
+
+
+class PanelState:
+    path = ""
+    dialog = None
+
+
+def draw(studio: Studio) -> None:
+    s = studio.session
+    imgui.set_next_item_width(200)
+    _, PanelState.path = imgui.input_text("##folder", PanelState.path)
+    imgui.same_line()
+    if imgui.button("Open") and PanelState.path:
+        studio.open_avatar(PanelState.path.strip())
+    imgui.same_line()
+    if imgui.button("Browse...") and PanelState.dialog is None:
+        try:
+            PanelState.dialog = portable_file_dialogs.select_folder("Open an avatar folder")
+        except Exception as e:  # no dialog program on this desktop: typing the path still works
+            studio.report(f"file dialog unavailable ({e}); type the folder instead")
+    if PanelState.dialog is not None and PanelState.dialog.ready():
+        chosen = PanelState.dialog.result()
+        PanelState.dialog = None
+        if chosen:
+            PanelState.path = chosen
+            studio.open_avatar(chosen)
+    recent = recent_folders()
+    if recent and imgui.begin_combo("recent", "open a recent avatar"):
+        for folder in recent:
+            if imgui.selectable(folder, False)[0]:
+                PanelState.path = folder
+                studio.open_avatar(folder)
+        imgui.end_combo()
+    imgui.separator()
+    if s.avatar is None:
+        imgui.text("No avatar open.")
+    else:
+        m = s.meta
+        prov = m.get("provenance", {})
+        imgui.text(f"{s.name}  ({m.get('model', 'codynerf')})")
+        imgui.text(f"head model: {s.avatar.head_model.name}")
+        imgui.text(f"effects: {', '.join(m.get('effects') or []) or 'none'}")
+        imgui.text(f"trained {prov.get('steps', '?')} steps, {prov.get('seconds', 0) / 60:.1f} min")
+        imgui.text_wrapped(f"on {prov.get('dataset', '?')}")
+        if s.metrics:
+            met = s.metrics
+            imgui.text(f"test PSNR {met.get('psnr', float('nan')):.2f} dB, SSIM {met.get('ssim', float('nan')):.3f}")
+            if "normal_deg" in met:
+                imgui.text(f"normal error {met['normal_deg']:.1f} deg")
+    for e in studio.errors[-3:]:
+        imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.35, 1.0), "")
+        imgui.same_line()
+        imgui.push_text_wrap_pos(0)
+        imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.35, 1.0), e)
+        imgui.pop_text_wrap_pos()
+    if studio.errors and imgui.small_button("clear messages"):
+        studio.errors.clear()

@@ -1,0 +1,22 @@
+"""The studio command's options (kept apart from the window code, so other commands start without it)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class StudioConfig:
+    avatar: Path | None = None
+    """Avatar folder to open (default: the shipped demo avatar)."""
+    screenshot: Path | None = None
+    """Save a screenshot of the whole window to this PNG after --frames frames, then exit."""
+    frames: int = 60
+    """Frames before the screenshot (with --screenshot)."""
+    script: Path | None = None
+    """A JSON list of scripted steps to run (tests, pictures); the window exits when they are done."""
+    width: int = 1440
+    height: int = 900
+    fps_cap: float = 60.0
+    """The interface's frame rate cap (no display sync here): what is left of the CPU goes to rendering."""

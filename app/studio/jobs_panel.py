@@ -1,0 +1,100 @@
+"""The Jobs panel: start training on a dataset (model, effect set, time budget), watch progress, loss and
+validation PSNR (implot), ETA; cancel (the checkpoint is kept), resume, open the result when done. Several
+jobs queue; each is its own process."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from imgui_bundle import imgui, implot
+
+from models.dataset import DatasetError, load_split
+
+if TYPE_CHECKING:
+    from app.studio.app import Studio
+
+MODELS = ("codynerf", "nerface")
+EFFECTS = ("all", "none", "shading", "shading,specular", "shadows")
+
+
+@dataclass
+class JobForm:
+    dataset: str = ""
+    out: str = "out/avatars/new"
+    model: int = 0
+    effects: int = 0
+    minutes: float = 30.0
+
+
+def start(studio: Studio, dataset: str, out: str, model: str = "codynerf", effects: str = "all",
+          minutes: float | None = None, steps: int | None = None) -> bool:
+    """Check the dataset here (a clear message in the window), then queue the job."""
+    try:
+        load_split(dataset, "train")
+    except DatasetError as e:
+        studio.report(str(e))
+        return False
+    out_path = Path(out)
+    if (out_path / "avatar.json").exists():
+        studio.report(f"{out_path}: already holds an avatar; choose a new folder (or resume its job)")
+        return False
+    studio.jobs.submit(Path(dataset), out_path, model=model, effects=effects, minutes=minutes, steps=steps)
+    return True
+
+
+def draw(studio: Studio) -> None:
+    f = studio.jobs_form
+    _, f.dataset = imgui.input_text("dataset", f.dataset)
+    _, f.out = imgui.input_text("avatar folder", f.out)
+    imgui.set_next_item_width(110)
+    _, f.model = imgui.combo("model", f.model, list(MODELS))
+    imgui.same_line()
+    imgui.set_next_item_width(110)
+    _, f.effects = imgui.combo("effects", f.effects, list(EFFECTS))
+    imgui.set_next_item_width(110)
+    _, f.minutes = imgui.input_float("minutes", f.minutes, 5.0, 10.0, "%.0f")
+    imgui.same_line()
+    if imgui.button("Start training"):
+        start(studio, f.dataset.strip(), f.out.strip(), MODELS[f.model], EFFECTS[f.effects], max(f.minutes, 0.1))
+    imgui.separator()
+    for job in reversed(studio.jobs.jobs):
+        imgui.push_id(job.id)
+        imgui.text(f"#{job.id} {job.out.name}: {job.model} {job.effects} - {job.state}"
+                   + (" (resumed)" if job.resume else ""))
+        last = job.progress[-1] if job.progress else {}
+        eta = last.get("eta_s")
+        imgui.progress_bar(job.fraction, imgui.ImVec2(-1, 0),
+                           f"step {last.get('step', 0)}" + (f", ETA {eta:.0f} s" if eta is not None else ""))
+        if job.error:
+            imgui.push_text_wrap_pos(0)
+            imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.35, 1.0), job.error)
+            imgui.pop_text_wrap_pos()
+        if len(job.progress) > 1 and implot.begin_plot("##curves", imgui.ImVec2(-1, 110)):
+            steps = np.array([p["step"] for p in job.progress], np.float64)
+            loss = np.array([p.get("loss", np.nan) for p in job.progress], np.float64)
+            val = np.array([(p["step"], p["val_psnr"]) for p in job.progress if "val_psnr" in p], np.float64)
+            # All setup first (implot's rule), then the lines.
+            implot.setup_axes("step", "loss", implot.AxisFlags_.auto_fit, implot.AxisFlags_.auto_fit)
+            implot.setup_axis_scale(implot.ImAxis_.y1, implot.Scale_.log10)
+            if len(val):
+                right = implot.AxisFlags_.auto_fit | implot.AxisFlags_.opposite
+                implot.setup_axis(implot.ImAxis_.y2, "val PSNR", right)
+            implot.plot_line("loss", steps, loss)
+            if len(val):
+                implot.set_axes(implot.ImAxis_.x1, implot.ImAxis_.y2)
+                implot.plot_line("val PSNR", np.ascontiguousarray(val[:, 0]), np.ascontiguousarray(val[:, 1]))
+            implot.end_plot()
+        if job.state in ("queued", "running") and imgui.small_button("Cancel"):
+            studio.jobs.cancel(job)
+        if job.state in ("cancelled", "done") and (job.out / "avatar.json").exists():
+            if imgui.small_button("Open"):
+                studio.open_avatar(job.out)
+            if job.state == "cancelled":
+                imgui.same_line()
+                if imgui.small_button("Resume"):
+                    studio.jobs.resume(job)
+        imgui.separator()
+        imgui.pop_id()

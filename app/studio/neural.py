@@ -1,0 +1,166 @@
+"""The neural render off the window's thread: progressive passes (draft at once, then finer while the
+controls rest), the latest request wins (a newer one cancels the pass in flight between ray batches), each
+pass's time measured. The worker owns a headless GL context for the rasterizer: the window's context stays
+on the window's thread."""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from app.turntable import PRESETS, apply_preset
+from models.avatar import Avatar, RenderCancelled
+from models.head.controls import Controls
+from models.metrics import psnr
+from models.nerface import NerfaceAvatar
+from render.camera import Camera
+from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
+
+
+@dataclass(frozen=True)
+class Request:
+    controls: Controls
+    camera: Camera  # at the final size; presets scale it
+    passes: tuple[str, ...] = ("draft", "preview")
+    frame: int | None = None  # a training frame's codes (timeline), or the mean code
+
+
+@dataclass
+class Result:
+    request_id: int
+    pass_name: str
+    buffers: dict[str, np.ndarray]
+    ms: float
+
+
+@dataclass
+class PresetFigures:
+    """A quality preset measured on the loaded avatar: time per frame and error against `final`."""
+
+    ms: dict[str, float] = field(default_factory=dict)
+    psnr_vs_final: dict[str, float] = field(default_factory=dict)
+
+
+def scaled(camera: Camera, scale: float) -> Camera:
+    w, h = max(8, round(camera.width_px * scale)), max(8, round(camera.height_px * scale))
+    return Camera(camera.view, camera.fov_y_deg, w, h, camera.near_m, camera.far_m)
+
+
+class NeuralWorker:
+    """One background thread that renders the latest request."""
+
+    def __init__(self):
+        self._cv = threading.Condition()
+        self._avatar: Avatar | NerfaceAvatar | None = None
+        self._request: Request | None = None
+        self._id = 0
+        self._measure = False
+        self.result: Result | None = None
+        self.busy = False
+        self.error = ""
+        self.figures = PresetFigures()
+        self._quit = False
+        self._thread = threading.Thread(target=self._run, name="neural-render", daemon=True)
+        self._thread.start()
+
+    # ---- the window's side -----------------------------------------------------------------------------
+    def set_avatar(self, avatar: Avatar | NerfaceAvatar | None, measure: bool = True) -> None:
+        with self._cv:
+            self._avatar = avatar
+            self._id += 1
+            self._request = None
+            self.result = None
+            self.figures = PresetFigures()
+            self._measure = measure and avatar is not None
+            self._cv.notify()
+
+    def submit(self, request: Request) -> int:
+        with self._cv:
+            self._id += 1
+            self._request = request
+            self._cv.notify()
+            return self._id
+
+    def close(self) -> None:
+        with self._cv:
+            self._quit = True
+            self._id += 1
+            self._cv.notify()
+        self._thread.join(timeout=10)
+
+    # ---- the worker's side -----------------------------------------------------------------------------
+    def _run(self) -> None:
+        gl = GLContext.headless()
+        raster = Rasterizer(gl)
+        while True:
+            with self._cv:
+                while not self._quit and self._request is None and not self._measure:
+                    self._cv.wait()
+                if self._quit:
+                    break
+                avatar, request_id = self._avatar, self._id
+                measure, self._measure = self._measure, False
+                request, self._request = (None, self._request) if measure else (self._request, None)
+            if avatar is None:
+                continue
+            self.busy = True
+            try:
+                if measure:
+                    self._measure_presets(avatar, raster, request_id)
+                if request is not None:
+                    self._render(avatar, raster, request, request_id)
+            except RenderCancelled:
+                pass
+            except Exception as e:  # shown in the window; the studio keeps running
+                self.error = f"render failed: {type(e).__name__}: {e}"
+            finally:
+                self.busy = False
+        raster.release()
+        gl.release()
+
+    def _stale(self, request_id: int) -> bool:
+        return self._id != request_id
+
+    def _render(self, avatar, raster: Rasterizer, request: Request, request_id: int) -> None:
+        for name in request.passes:
+            apply_preset(avatar, name, request.camera.width_px)
+            cam = scaled(request.camera, PRESETS[name][0])
+            t0 = time.perf_counter()
+            buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
+                                          should_stop=lambda: self._stale(request_id))
+            ms = 1e3 * (time.perf_counter() - t0)
+            with self._cv:
+                if self._stale(request_id):
+                    return
+                self.result = Result(request_id, name, buffers, ms)
+                self.error = ""
+
+    def _measure_presets(self, avatar, raster: Rasterizer, request_id: int, size: int = 128) -> None:
+        """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`."""
+        from render.camera import framing_camera
+
+        cam = framing_camera(avatar.head_model.template, 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
+        figures = PresetFigures()
+        images = {}
+        for name in ("final", "preview", "draft"):
+            apply_preset(avatar, name, size)
+            c = scaled(cam, PRESETS[name][0])
+            times = []
+            for _ in range(3):
+                t0 = time.perf_counter()
+                images[name] = avatar.render_image(Controls(), c, raster,
+                                                   should_stop=lambda: self._stale(request_id))["rgb"]
+                times.append(1e3 * (time.perf_counter() - t0))
+            figures.ms[name] = float(np.median(times))
+            reference = images["final"]
+            if images[name].shape != reference.shape:  # compare at the final size (nearest upsampling)
+                k = reference.shape[0] // images[name].shape[0]
+                images[name] = images[name].repeat(k, 0).repeat(k, 1)
+            figures.psnr_vs_final[name] = float("inf") if name == "final" else psnr(images[name], reference)
+        with self._cv:
+            if not self._stale(request_id):
+                self.figures = figures

@@ -1,0 +1,166 @@
+"""Scripted studio runs: a JSON file {"report": PATH, "steps": [...]} whose steps act through the same code
+the widgets call, one step per frame, with waits that keep the window drawing (tests under Xvfb, README
+pictures). Steps:
+
+  {"open": FOLDER}                        open an avatar (errors land in the window's messages)
+  {"expression": NAME|INDEX, "value": W}  move an expression slider
+  {"jaw_open_deg": D} / {"head": [YAW, PITCH, ROLL]} / {"view": {"yaw_deg": ...}} / {"buffer": NAME}
+  {"timeline": FRAME}                     show a capture frame's controls (-1: the sliders)
+  {"refine_to": PRESET}                   the pass the viewport refines to
+  {"wait_render": PRESET}                 until the latest request's pass PRESET is on screen
+  {"save_neural": PNG} / {"screenshot": PNG}   the neural image as shown / the whole window
+  {"train": {"dataset": D, "out": O, "steps": N, "effects": E, "model": M}}  queue a training job
+  {"wait_job": true}                      until no job is queued or running
+  {"open_job": true}                      open the last job's avatar
+  {"export": {"out": MP4, "frames": N, "size": PX, "preset": P, "animate": false}}
+  {"wait_export": true}
+  {"wait_frames": N}                      let N frames pass (frame-rate measurements)
+  {"expect_error": TEXT}                  fail unless a message in the window contains TEXT
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from imgui_bundle import hello_imgui
+from PIL import Image
+
+from app.turntable import PRESETS
+
+if TYPE_CHECKING:
+    from app.studio.app import Studio
+
+WAIT_S = 300.0
+
+
+@dataclass
+class Script:
+    steps: list[dict]
+    report: Path | None = None
+    index: int = 0
+    failed: str = ""
+    waited_frames: int = 0
+    wait_started: float = 0.0
+    pending_screenshot: Path | None = None
+    log: list[str] = field(default_factory=list)
+
+    @staticmethod
+    def load(path: Path) -> Script:
+        data = json.loads(Path(path).read_text())
+        return Script(list(data["steps"]), Path(data["report"]) if data.get("report") else None)
+
+    def _fail(self, message: str) -> None:
+        self.failed = f"step {self.index} {self.steps[self.index]}: {message}"
+        hello_imgui.get_runner_params().app_shall_exit = True
+
+    def _done(self) -> None:
+        self.index += 1
+        self.waited_frames = 0
+        self.wait_started = 0.0
+
+    def _waiting(self, condition: bool) -> bool:
+        """True while the step must wait; fails it after WAIT_S seconds."""
+        if condition:
+            return False
+        if not self.wait_started:
+            self.wait_started = time.perf_counter()
+        elif time.perf_counter() - self.wait_started > WAIT_S:
+            self._fail(f"still waiting after {WAIT_S:.0f} s")
+        return True
+
+    def step(self, studio: Studio) -> None:
+        if self.failed or self.pending_screenshot is not None:
+            return
+        if self.index >= len(self.steps):
+            hello_imgui.get_runner_params().app_shall_exit = True
+            return
+        s = self.steps[self.index]
+        sl = studio.session.sliders
+        if "open" in s:
+            studio.open_avatar(s["open"])
+        elif "expression" in s:
+            head = studio.session.avatar.head_model
+            key = s["expression"]
+            i = key if isinstance(key, int) else head.expression_index(key)
+            sl.expression[i] = float(s["value"])
+            studio.timeline_frame = -1
+            studio.dirty = True
+        elif "jaw_open_deg" in s:
+            sl.jaw_open_deg = float(s["jaw_open_deg"])
+            studio.dirty = True
+        elif "head" in s:
+            sl.head[:] = np.asarray(s["head"], np.float32)
+            studio.dirty = True
+        elif "view" in s:
+            for k, v in s["view"].items():
+                setattr(studio.view, k, v)
+            studio.dirty = True
+        elif "buffer" in s:
+            studio.buffer = s["buffer"]
+        elif "timeline" in s:
+            studio.timeline_frame = int(s["timeline"])
+            studio.dirty = True
+        elif "refine_to" in s:
+            studio.refine_to = s["refine_to"]
+            studio.dirty = True
+        elif "wait_render" in s:
+            r = studio.worker.result
+            target = list(PRESETS).index(s["wait_render"])
+            ok = (not studio.dirty and r is not None and r.request_id == studio.last_submit_id
+                  and list(PRESETS).index(r.pass_name) >= target and studio.viewport.neural_image is not None
+                  and studio.viewport._shown[:2] == (r.request_id, r.pass_name))
+            if self._waiting(ok or bool(studio.worker.error)):
+                return
+            if studio.worker.error:
+                return self._fail(studio.worker.error)
+        elif "save_neural" in s:
+            path = Path(s["save_neural"])
+            path.parent.mkdir(parents=True, exist_ok=True)
+            Image.fromarray(studio.viewport.neural_image).save(path)
+        elif "screenshot" in s:
+            self.pending_screenshot = Path(s["screenshot"])  # read after this frame is drawn
+        elif "train" in s:
+            from app.studio.jobs_panel import start
+
+            t = s["train"]
+            start(studio, t["dataset"], t["out"], t.get("model", "codynerf"), t.get("effects", "none"),
+                  t.get("minutes"), t.get("steps"))
+        elif "wait_job" in s:
+            if self._waiting(not any(j.state in ("queued", "running") for j in studio.jobs.jobs)):
+                return
+        elif "open_job" in s:
+            studio.open_avatar(studio.jobs.jobs[-1].out)
+        elif "export" in s:
+            from app.studio.export_panel import export_turntable
+
+            e, x = studio.export, s["export"]
+            e.out, e.frames, e.size = x["out"], int(x.get("frames", 12)), int(x.get("size", 64))
+            e.preset = list(PRESETS).index(x.get("preset", "draft"))
+            e.animate = bool(x.get("animate", False))
+            export_turntable(studio)
+        elif "wait_export" in s:
+            if self._waiting(not studio.export.running):
+                return
+        elif "wait_frames" in s:
+            self.waited_frames += 1
+            if self.waited_frames < int(s["wait_frames"]):
+                return
+        elif "expect_error" in s:
+            if not any(s["expect_error"] in e for e in studio.errors):
+                return self._fail(f"no message containing {s['expect_error']!r} (messages: {studio.errors})")
+        else:
+            return self._fail("unknown step")
+        self._done()
+
+    def after_frame(self, studio: Studio) -> None:
+        """Called with the frame complete (before it is shown): take a pending screenshot."""
+        if self.pending_screenshot is not None:
+            path, self.pending_screenshot = self.pending_screenshot, None
+            path.parent.mkdir(parents=True, exist_ok=True)
+            Image.fromarray(studio.read_window()).save(path)
+            self._done()

@@ -1,0 +1,148 @@
+"""What the studio shows, apart from widgets: the open avatar, the controls as sliders hold them, the
+orbit camera, the capture's frames for the timeline. Plain state and conversions, no GL, no imgui."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from models.avatar import Avatar
+from models.avatar_io import load_avatar
+from models.dataset import CaptureSplit, DatasetError, load_split
+from models.head.controls import Controls
+from models.nerface import NerfaceAvatar
+from render.camera import Camera, framing_camera
+
+RECENT_FILE = Path.home() / ".config" / "avatar-studio" / "recent.json"
+
+
+def euler_to_rotvec(yaw_deg: float, pitch_deg: float, roll_deg: float) -> np.ndarray:
+    """Axis-angle (3,) of a head turned by yaw (about +y), then pitch (about +x), then roll (about +z)."""
+    return Rotation.from_euler("YXZ", [yaw_deg, pitch_deg, roll_deg], degrees=True).as_rotvec().astype(np.float32)
+
+
+def rotvec_to_euler(rotvec: np.ndarray) -> np.ndarray:
+    """The inverse of euler_to_rotvec, degrees (yaw, pitch, roll)."""
+    return Rotation.from_rotvec(np.asarray(rotvec, np.float64)).as_euler("YXZ", degrees=True).astype(np.float32)
+
+
+@dataclass
+class Sliders:
+    """The controls as the Controls panel holds them (degrees where a person thinks in degrees)."""
+
+    expression: np.ndarray
+    head: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))  # yaw, pitch, roll
+    neck: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+    jaw_open_deg: float = 0.0
+    gaze_linked: bool = True
+    gaze_left: np.ndarray = field(default_factory=lambda: np.zeros(2, np.float32))  # yaw, pitch
+    gaze_right: np.ndarray = field(default_factory=lambda: np.zeros(2, np.float32))
+    shape: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))  # the capture's identity
+
+    def controls(self) -> Controls:
+        right = self.gaze_left if self.gaze_linked else self.gaze_right
+        return Controls(shape=self.shape, expression=self.expression.copy(),
+                        root=euler_to_rotvec(*self.head), neck=euler_to_rotvec(*self.neck),
+                        jaw=np.array([math.radians(self.jaw_open_deg), 0, 0], np.float32),
+                        gaze_left=euler_to_rotvec(self.gaze_left[0], self.gaze_left[1], 0),
+                        gaze_right=euler_to_rotvec(right[0], right[1], 0))
+
+    @staticmethod
+    def of(controls: Controls, n_expression: int) -> Sliders:
+        """Sliders showing given controls (a capture frame's)."""
+        expr = np.zeros(n_expression, np.float32)
+        expr[: min(n_expression, len(controls.expression))] = controls.expression[:n_expression]
+        gl, gr = rotvec_to_euler(controls.gaze_left), rotvec_to_euler(controls.gaze_right)
+        return Sliders(expr, rotvec_to_euler(controls.root), rotvec_to_euler(controls.neck),
+                       math.degrees(float(controls.jaw[0])), bool(np.allclose(gl, gr, atol=1e-3)),
+                       gl[:2].copy(), gr[:2].copy(), np.asarray(controls.shape, np.float32))
+
+
+@dataclass
+class View:
+    """The orbit camera."""
+
+    yaw_deg: float = 20.0
+    pitch_deg: float = 5.0
+    zoom: float = 1.0
+    fov_deg: float = 18.0
+    pan: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+
+    def camera(self, vertices: np.ndarray, width: int, height: int) -> Camera:
+        return framing_camera(vertices, self.yaw_deg, self.pitch_deg, self.fov_deg, width, height, zoom=self.zoom,
+                              target_offset=tuple(self.pan))
+
+    def orbit(self, dx_px: float, dy_px: float) -> None:
+        self.yaw_deg = (self.yaw_deg - 0.4 * dx_px + 180) % 360 - 180
+        self.pitch_deg = float(np.clip(self.pitch_deg + 0.4 * dy_px, -85, 85))
+
+    def pan_by(self, dx_px: float, dy_px: float, camera: Camera) -> None:
+        """Move the target with the mouse, in the camera's plane (about a pixel per pixel at the head)."""
+        c2w = np.linalg.inv(camera.view)
+        scale = 2 * math.tan(math.radians(camera.fov_y_deg) / 2) * np.linalg.norm(camera.position) / camera.height_px
+        self.pan = (self.pan - c2w[:3, 0] * dx_px * scale + c2w[:3, 1] * dy_px * scale).astype(np.float32)
+
+    def zoom_by(self, wheel: float) -> None:
+        self.zoom = float(np.clip(self.zoom * 1.1**wheel, 0.25, 8.0))
+
+
+class Session:
+    """The open avatar, if any, with its capture."""
+
+    def __init__(self):
+        self.folder: Path | None = None
+        self.avatar: Avatar | NerfaceAvatar | None = None
+        self.meta: dict = {}
+        self.metrics: dict | None = None
+        self.capture: CaptureSplit | None = None
+        self.capture_note = ""
+        self.sliders = Sliders(np.zeros(0, np.float32))
+
+    def open(self, folder: str | Path) -> None:
+        """Load an avatar folder (CheckpointError etc. propagate with the reason)."""
+        folder = Path(folder)
+        avatar, meta = load_avatar(folder)
+        self.folder, self.avatar, self.meta = folder, avatar, meta
+        self.metrics = None
+        metrics = folder / "eval" / "metrics.json"
+        if metrics.is_file():
+            try:
+                self.metrics = json.loads(metrics.read_text()).get("metrics")
+            except (OSError, json.JSONDecodeError):
+                self.metrics = None
+        self.capture, self.capture_note = None, ""
+        dataset = meta.get("provenance", {}).get("dataset")
+        if dataset:
+            try:
+                self.capture = load_split(dataset, "train")
+            except DatasetError as e:
+                self.capture_note = f"capture not available: {e}"
+        shape = self.capture.frames[0].controls.shape if self.capture and self.capture.frames else np.zeros(0)
+        self.sliders = Sliders(np.zeros(avatar.head_model.num_expression, np.float32), shape=np.asarray(shape))
+        remember_recent(folder)
+
+    @property
+    def name(self) -> str:
+        return self.folder.name if self.folder else "(none)"
+
+
+def recent_folders() -> list[str]:
+    try:
+        items = json.loads(RECENT_FILE.read_text())
+        return [s for s in items if isinstance(s, str)][:8]
+    except (OSError, json.JSONDecodeError):
+        return []
+
+
+def remember_recent(folder: Path) -> None:
+    items = [str(Path(folder).resolve())] + [s for s in recent_folders() if s != str(Path(folder).resolve())]
+    try:
+        RECENT_FILE.parent.mkdir(parents=True, exist_ok=True)
+        RECENT_FILE.write_text(json.dumps(items[:8]))
+    except OSError:
+        pass  # a read-only home: the recent list is a convenience

@@ -1,0 +1,191 @@
+"""The Viewport panel: the GL guide mesh (shaded, normals, wireframe, landmarks) beside or under the neural
+render, the neural buffer to show, mouse orbit (left drag), pan (right drag) and zoom (wheel), and each
+pass's measured time."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import moderngl
+import numpy as np
+from imgui_bundle import imgui
+
+from models.head.head import posed_mesh
+from render.gl.context import GLContext
+from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
+
+if TYPE_CHECKING:
+    from app.studio.app import Studio
+
+BUFFERS = ("rgb", "normals", "grad_normals", "depth", "opacity")
+BUFFER_LABELS = {"rgb": "RGB", "normals": "predicted normals", "grad_normals": "density-gradient normals",
+                 "depth": "depth", "opacity": "opacity"}
+
+
+def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:
+    """A buffer of the neural render as (H,W,3) uint8 for display."""
+    b = buffers[name]
+    if name in ("normals", "grad_normals"):
+        img = b * 0.5 + 0.5
+    elif name == "depth":
+        finite = np.isfinite(b)
+        lo, hi = (b[finite].min(), b[finite].max()) if finite.any() else (0.0, 1.0)
+        img = np.where(finite, 1 - (b - lo) / max(hi - lo, 1e-6), 0)[..., None].repeat(3, 2)
+    elif name == "opacity":
+        img = b[..., None].repeat(3, 2)
+    else:
+        img = b
+    return (np.clip(img, 0, 1) * 255).round().astype(np.uint8)
+
+
+class Viewport:
+    def __init__(self):
+        self.gl: GLContext | None = None
+        self.preview: PreviewRenderer | None = None
+        self.guide_tex: moderngl.Texture | None = None
+        self.neural_tex: moderngl.Texture | None = None
+        self.neural_image: np.ndarray | None = None
+        self.guide_image_size = (0, 0)
+        self._shown = (-1, "", "")
+        self._guide_key: tuple = ()
+
+    def init(self, gl: GLContext) -> None:
+        self.gl = gl
+        self.preview = PreviewRenderer(gl)
+
+    def texture(self, old: moderngl.Texture | None, size: tuple[int, int]) -> moderngl.Texture:
+        if old is not None and old.size == size:
+            return old
+        if old is not None:
+            old.release()
+        return self.gl.ctx.texture(size, 3)
+
+    def draw_guide(self, studio: Studio, size: int) -> None:
+        """Draw the guide mesh into its texture, only when something it shows changed."""
+        s = studio.session
+        sl = s.sliders
+        key = (size, studio.guide_pass, studio.wireframe, studio.landmarks, studio.timeline_frame,
+               sl.expression.tobytes(), sl.head.tobytes(), sl.neck.tobytes(), sl.jaw_open_deg, sl.gaze_linked,
+               sl.gaze_left.tobytes(), sl.gaze_right.tobytes(), studio.view.yaw_deg, studio.view.pitch_deg,
+               studio.view.zoom, studio.view.fov_deg, studio.view.pan.tobytes(), id(s.avatar))
+        if key == self._guide_key and self.guide_tex is not None:
+            return
+        self._guide_key = key
+        head = s.avatar.head_model
+        verts, lmks = posed_mesh(s.avatar.head, studio.controls())
+        cam = studio.view.camera(head.template, size, size)
+        settings = PreviewSettings(pass_name=studio.guide_pass, wireframe_overlay=studio.wireframe,
+                                   landmarks=studio.landmarks, samples=1, shadow_map_px=1024)
+        with self.gl.current():
+            fb = self.preview.draw(MeshFrame(verts, head.triangles, lmks if studio.landmarks else None), cam, settings)
+            self.guide_tex = self.texture(self.guide_tex, (size, size))
+            self.gl.ctx.copy_framebuffer(self.guide_tex, fb)
+            self.gl.ctx.detect_framebuffer(0).use()
+        self.guide_image_size = (size, size)
+
+    def update_neural(self, studio: Studio) -> None:
+        r = studio.worker.result
+        if r is None:
+            return
+        key = (r.request_id, r.pass_name, studio.buffer)
+        if key == self._shown:
+            return
+        name = studio.buffer if studio.buffer in r.buffers else "rgb"
+        img = buffer_image(r.buffers, name)
+        with self.gl.current():
+            self.neural_tex = self.texture(self.neural_tex, (img.shape[1], img.shape[0]))
+            self.neural_tex.write(np.ascontiguousarray(img).tobytes())
+        self.neural_image = img
+        self._shown = key
+
+
+def draw(studio: Studio) -> None:
+    vp = studio.viewport
+    s = studio.session
+    r = studio.worker.result
+    imgui.text(f"interface {studio.clock.fps():.0f} fps")
+    imgui.same_line()
+    if r is not None:
+        imgui.text(f"| neural {r.pass_name} pass {r.ms:.0f} ms")
+        imgui.same_line()
+    if studio.latency_ms is not None:
+        imgui.text(f"| slider to first pixels {studio.latency_ms:.0f} ms")
+        imgui.same_line()
+    imgui.text("| rendering..." if studio.worker.busy else "| at rest")
+    if studio.worker.error:
+        imgui.text_colored(imgui.ImVec4(1, 0.4, 0.3, 1), studio.worker.error)
+    if s.avatar is None:
+        imgui.text("No avatar open: open one in the Avatar panel.")
+        return
+    # What to show.
+    imgui.set_next_item_width(190)
+    available = [b for b in BUFFERS if r is None or b in r.buffers]
+    if imgui.begin_combo("buffer", BUFFER_LABELS[studio.buffer]):
+        for b in available:
+            if imgui.selectable(BUFFER_LABELS[b], b == studio.buffer)[0]:
+                studio.buffer = b
+        imgui.end_combo()
+    imgui.same_line()
+    imgui.set_next_item_width(110)
+    passes = ("shaded", "normals", "shadow")
+    changed, k = imgui.combo("guide", passes.index(studio.guide_pass), list(passes))
+    if changed:
+        studio.guide_pass = passes[k]
+    imgui.same_line()
+    _, studio.wireframe = imgui.checkbox("wireframe", studio.wireframe)
+    imgui.same_line()
+    _, studio.landmarks = imgui.checkbox("landmarks", studio.landmarks)
+    imgui.same_line()
+    if imgui.radio_button("beside", studio.layout == "beside"):
+        studio.layout = "beside"
+    imgui.same_line()
+    if imgui.radio_button("over", studio.layout == "over"):
+        studio.layout = "over"
+    if studio.layout == "over":
+        imgui.same_line()
+        imgui.set_next_item_width(100)
+        _, studio.overlay_alpha = imgui.slider_float("guide opacity", studio.overlay_alpha, 0.0, 1.0)
+
+    avail = imgui.get_content_region_avail()
+    n = 2 if studio.layout == "beside" else 1
+    size = int(max(64, min((avail.x - 8 * (n - 1)) / n, avail.y - 4)))
+    vp.draw_guide(studio, size)
+    vp.update_neural(studio)
+    origin = imgui.get_cursor_screen_pos()
+    guide_ref = imgui.ImTextureRef(vp.guide_tex.glo)
+    flip = (imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))  # GL framebuffers run bottom-up
+    if studio.layout == "beside":
+        imgui.image(guide_ref, imgui.ImVec2(size, size), *flip)
+        _mouse(studio, size)
+        imgui.same_line()
+        if vp.neural_tex is not None:
+            imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
+            _mouse(studio, size)
+    else:
+        if vp.neural_tex is not None:
+            imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
+        draw_list = imgui.get_window_draw_list()
+        alpha = int(255 * studio.overlay_alpha)
+        draw_list.add_image(guide_ref, origin, imgui.ImVec2(origin.x + size, origin.y + size), flip[0], flip[1],
+                            imgui.IM_COL32(255, 255, 255, alpha))
+        if vp.neural_tex is None:
+            imgui.dummy(imgui.ImVec2(size, size))
+        _mouse(studio, size)
+
+
+def _mouse(studio: Studio, size: int) -> None:
+    """Orbit, pan and zoom when the mouse is over the last drawn image."""
+    if not imgui.is_item_hovered():
+        return
+    io = imgui.get_io()
+    d = io.mouse_delta
+    if imgui.is_mouse_dragging(imgui.MouseButton_.left) and (d.x or d.y):
+        studio.view.orbit(d.x, d.y)
+        studio.dirty = True
+    elif imgui.is_mouse_dragging(imgui.MouseButton_.right) and (d.x or d.y):
+        cam = studio.view.camera(studio.session.avatar.head_model.template, size, size)
+        studio.view.pan_by(d.x, d.y, cam)
+        studio.dirty = True
+    if io.mouse_wheel:
+        studio.view.zoom_by(io.mouse_wheel)
+        studio.dirty = True
