@@ -136,7 +136,8 @@ class Trainer:
             "field": asdict(self.field_cfg), "render": asdict(self.avatar.render_cfg)}
         return {"model": self.cfg.model, "head_model": self.head_spec, "effects": list(self.field_cfg.effects), **sizes,
                 "frames": len(self.split.frames), "background": self.avatar.background.tolist(),
-                "provenance": {"dataset": str(Path(self.cfg.dataset).resolve()), "steps": self.step,
+                "provenance": {"dataset": str(self.cfg.dataset),
+                               "dataset_resolved": str(Path(self.cfg.dataset).resolve()), "steps": self.step,
                                "seconds": round(self.elapsed, 1), "config": {k: str(v) for k, v in
                                                                             asdict(self.cfg).items()}}}
 

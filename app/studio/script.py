@@ -12,9 +12,11 @@ pictures). Steps:
   {"train": {"dataset": D, "out": O, "steps": N, "effects": E, "model": M}}  queue a training job
   {"wait_job": true}                      until no job is queued or running
   {"open_job": true}                      open the last job's avatar
+  {"cancel_jobs": true}                   cancel every job (running ones checkpoint first)
   {"export": {"out": MP4, "frames": N, "size": PX, "preset": P, "animate": false}}
   {"wait_export": true}
   {"wait_frames": N}                      let N frames pass (frame-rate measurements)
+  {"orbit": DX}                           orbit the camera as a mouse drag of DX pixels does
   {"expect_error": TEXT}                  fail unless a message in the window contains TEXT
 """
 
@@ -133,6 +135,9 @@ class Script:
         elif "wait_job" in s:
             if self._waiting(not any(j.state in ("queued", "running") for j in studio.jobs.jobs)):
                 return
+        elif "cancel_jobs" in s:
+            for job in studio.jobs.jobs:
+                studio.jobs.cancel(job)
         elif "open_job" in s:
             studio.open_avatar(studio.jobs.jobs[-1].out)
         elif "export" in s:
@@ -146,6 +151,9 @@ class Script:
         elif "wait_export" in s:
             if self._waiting(not studio.export.running):
                 return
+        elif "orbit" in s:  # a mouse drag of dx pixels, as the viewport applies it
+            studio.view.orbit(float(s["orbit"]), 0.0)
+            studio.dirty = True
         elif "wait_frames" in s:
             self.waited_frames += 1
             if self.waited_frames < int(s["wait_frames"]):

@@ -116,10 +116,14 @@ class Session:
             except (OSError, json.JSONDecodeError):
                 self.metrics = None
         self.capture, self.capture_note = None, ""
-        dataset = meta.get("provenance", {}).get("dataset")
-        if dataset:
+        prov = meta.get("provenance", {})
+        for dataset in (prov.get("dataset"), prov.get("dataset_resolved")):  # as given, then absolute
+            if not dataset:
+                continue
             try:
                 self.capture = load_split(dataset, "train")
+                self.capture_note = ""
+                break
             except DatasetError as e:
                 self.capture_note = f"capture not available: {e}"
         shape = self.capture.frames[0].controls.shape if self.capture and self.capture.frames else np.zeros(0)

@@ -12,6 +12,7 @@ appearance. The effect set decides the inputs and which networks exist (DESIGN 3
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
@@ -109,8 +110,11 @@ class CoDyNeRFField(nn.Module):
         prior: PriorSamples,
         omega: torch.Tensor,  # (P, deform_code_dim)
         create_graph: bool = False,  # keep the graph of density gradients (training through the normals)
+        occupied: Callable[[torch.Tensor], torch.Tensor] | None = None,  # canonical points -> may hold density
     ) -> FieldOutput:
-        """Deformation, density and normals (Eq. 2, 5, 8); rgb is left empty for `appearance` to fill."""
+        """Deformation, density and normals (Eq. 2, 5, 8); rgb is left empty for `appearance` to fill. With
+        `occupied` (display), the density network runs only where the deformed, canonical point may hold
+        density; elsewhere density and features are zero."""
         c = self.cfg
         s = c.scale_m
         if c.needs_normals and not x.requires_grad:
@@ -121,7 +125,13 @@ class CoDyNeRFField(nn.Module):
             delta = self.deform(torch.cat([frequency_encoding(x, c.deform_frequencies, s),
                                            frequency_encoding(prior.offset, c.prior_frequencies, s), omega], -1))
             x_can = x_prior + delta
-            sigma, tau = self.canonical_density(x_can, prior.distance)
+            if occupied is None:
+                sigma, tau = self.canonical_density(x_can, prior.distance)
+            else:
+                idx = torch.nonzero(occupied(x_can.detach())).squeeze(1)
+                s_k, t_k = self.canonical_density(x_can[idx], prior.distance[idx])
+                sigma = s_k.new_zeros(len(x)).index_copy(0, idx, s_k)
+                tau = t_k.new_zeros(len(x), t_k.shape[1]).index_copy(0, idx, t_k)
             normal = grad_normal = None
             if c.needs_normals:
                 (grad,) = torch.autograd.grad(sigma.sum(), x, create_graph=create_graph, retain_graph=True)
