@@ -7,7 +7,7 @@ SYSTAMP := $(VENV)/.system-packages
 .PHONY: run test lint setup clean-venv
 
 run: $(STAMP)
-	$(VENV)/bin/avatar-studio studio
+	bash scripts/run_studio.sh
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check app render models tests scripts benchmarks

@@ -11,7 +11,7 @@ from PIL import Image
 
 def main() -> None:
     root, out = Path(sys.argv[1]), sys.argv[2]
-    names = [n for n in ("none", "shading+specular", "all") if (root / n / "eval").is_dir()]
+    names = [n for n in ("none", "shading+specular", "all", "nerface") if (root / n / "eval").is_dir()]
     rows = []
     for k in (0, 12, 24):
         tiles = []
