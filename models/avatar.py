@@ -14,7 +14,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 from pykdtree.kdtree import KDTree
-from scipy.ndimage import binary_dilation
+from scipy.ndimage import binary_dilation, distance_transform_edt
 from torch import nn
 
 from models.fields.codynerf import CoDyNeRFField, FieldConfig, FieldOutput
@@ -41,6 +41,9 @@ class RenderConfig:
     box_margin_m: float = 0.03
     """The head's box: the posed mesh's bounds grown by this much."""
     silhouette_px: int = 3
+    silhouette_m: float | None = None
+    """How far the capture's foreground reaches beyond the mesh's silhouette (hair, shoulders), metres,
+    measured from the capture's masks when training starts; None (no masks): the whole shell."""
     """Rays within this many pixels of the mesh's silhouette are rendered (at least as many as the shell
     spans at the head's distance); farther ones are background."""
     prior_falloff_m: float = 0.05
@@ -92,12 +95,24 @@ class RayOutput:
 
 
 def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -> int:
-    """Pixels around the mesh's silhouette to render: the shell's width at the nearest surface, at least
-    cfg.silhouette_px (density lives within shell_m of the mesh)."""
+    """Pixels around the mesh's silhouette to render: how far the capture's foreground reaches beyond the
+    mesh (cfg.silhouette_m; else the shell, as density lives within shell_m of the mesh) at the nearest
+    surface's distance, at least cfg.silhouette_px."""
     finite = depth[np.isfinite(depth)]
     if len(finite) == 0:
         return cfg.silhouette_px
-    return max(cfg.silhouette_px, int(np.ceil(cfg.shell_m * camera.focal_px() / max(finite.min(), 1e-3))))
+    reach = cfg.shell_m if cfg.silhouette_m is None else min(cfg.silhouette_m, cfg.shell_m)
+    return max(cfg.silhouette_px, int(np.ceil(reach * camera.focal_px() / max(finite.min(), 1e-3))))
+
+
+def foreground_reach_m(hit: np.ndarray, depth: np.ndarray, mask: np.ndarray, focal_px: float) -> np.ndarray:
+    """For each foreground pixel of a capture's mask outside the mesh's silhouette, how far (metres, at the
+    nearest mesh pixel's depth) it lies from the silhouette: what the avatar must render beyond the mesh."""
+    outside = (mask > 0.5) & ~hit
+    if not outside.any() or not hit.any():
+        return np.zeros(0, np.float32)
+    dist_px, (ii, jj) = distance_transform_edt(~hit, return_indices=True)
+    return (dist_px * depth[ii, jj] / focal_px)[outside].astype(np.float32)
 
 
 def active_pixels(cfg: RenderConfig, camera: Camera, raster: Raster) -> np.ndarray:

@@ -4,13 +4,13 @@ rasterized surface distance of every pixel."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
 from PIL import Image
 
-from models.avatar import Avatar, FrameGeometry, active_pixels
+from models.avatar import Avatar, FrameGeometry, active_pixels, foreground_reach_m
 from models.dataset import CaptureSplit, DatasetError
 from models.head.head import posed_mesh
 from models.nerface import NerfaceAvatar, NerfaceGeometry
@@ -77,23 +77,33 @@ def build_frames(split: CaptureSplit, avatar: Avatar | NerfaceAvatar, gl: GLCont
     images, masks, origins, dirs, surf, active, geos = [], [], [], [], [], [], []
     dirs_cam = camera_directions(split)
     raster = Rasterizer(gl)
+    rasters, cameras, reach = [], [], []
     for f in split.frames:
         images.append(load_rgb(f.image_path, bg))
-        if "mask_path" in f.extra:
-            masks.append(np.asarray(Image.open(f.extra["mask_path"]).convert("L"), np.float32) / 255.0)
         geo = avatar.geometry(f.controls)
         cam = camera_of(split, f.camera_to_world)
         r = raster.rasterize(posed_mesh(avatar.head, f.controls)[0], avatar.head_model.triangles, cam)
-        d_world = dirs_cam @ f.camera_to_world[:3, :3].T
+        if "mask_path" in f.extra:
+            masks.append(np.asarray(Image.open(f.extra["mask_path"]).convert("L"), np.float32) / 255.0)
+            reach.append(foreground_reach_m(r.hit, r.depth, masks[-1], cam.focal_px()))
         surf.append(surface_distance(r, -dirs_cam[..., 2]))  # -z: the view-axis part of each unit direction
+        origins.append(f.camera_to_world[:3, 3])
+        dirs.append(dirs_cam @ f.camera_to_world[:3, :3].T)
+        geos.append(geo)
+        rasters.append(r)
+        cameras.append(cam)
+    raster.release()
+    if isinstance(avatar, Avatar) and len(masks) == len(images) and images:
+        # Render only as far beyond the mesh as the capture's foreground goes (99.9% of its pixels, + 2 mm):
+        # none of the shell's width where the capture shows nothing there.
+        spread = np.concatenate(reach)
+        avatar.render_cfg = replace(avatar.render_cfg, silhouette_m=float(
+            (np.quantile(spread, 0.999) if len(spread) else 0.0) + 0.002))
+    for r, cam in zip(rasters, cameras, strict=True):
         if isinstance(avatar, NerfaceAvatar):
             active.append(face_box(r.hit, margin_px=max(2, split.width // 32)))
         else:
             active.append(active_pixels(avatar.render_cfg, cam, r))
-        origins.append(f.camera_to_world[:3, 3])
-        dirs.append(d_world)
-        geos.append(geo)
-    raster.release()
     t = lambda a, dt=torch.float32: torch.as_tensor(np.stack(a), dtype=dt)
     active_t = t(active, torch.bool)
     return FrameSet(split, t(images), t(masks) if len(masks) == len(images) else None, t(origins), t(dirs), t(surf),

@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MINUTES=${MINUTES:-10}
-.venv/bin/avatar-studio synth --head builtin --scene sun --frames 200 --size 128 --out out/demo_capture
+[ -d out/demo_capture ] || .venv/bin/avatar-studio synth --head builtin --scene sun --frames 200 --size 128 --out out/demo_capture
 rm -rf out/demo_avatar
 .venv/bin/avatar-studio train out/demo_capture --effects all --minutes "$MINUTES" --out out/demo_avatar
 .venv/bin/avatar-studio eval out/demo_avatar out/demo_capture --split test --out out/demo_avatar/eval

@@ -71,12 +71,6 @@ def test_mesh_keeps_vertex_order(tmp_path, builtin_model, suffix):
 
 
 @pytest.mark.gl
-def test_studio_placeholder_renders_and_says_where(tmp_path, capsys):
-    assert main(["studio", "--out", str(tmp_path)]) == 0
-    out = tmp_path / "studio_builtin_head.png"
-    assert out.is_file() and str(out.resolve()) in capsys.readouterr().out
-
-
 def test_flame_head_through_the_cli(tmp_path):
     path = write_flame_2023(tmp_path / "flame", flame_arrays())
     out = tmp_path / "f.obj"
