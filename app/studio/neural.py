@@ -102,17 +102,19 @@ class NeuralWorker:
                     self._cv.wait()
                 if self._quit:
                     break
+                # Pixels first: a pending request is rendered before the presets are measured, and a new
+                # request interrupts a measurement (which then starts again once the controls rest).
                 avatar, request_id = self._avatar, self._id
-                measure, self._measure = self._measure, False
-                request, self._request = (None, self._request) if measure else (self._request, None)
+                request, self._request = self._request, None
+                measure = request is None and self._measure
             if avatar is None:
                 continue
             self.busy = True
             try:
-                if measure:
-                    self._measure_presets(avatar, raster, request_id)
                 if request is not None:
                     self._render(avatar, raster, request, request_id)
+                elif measure:
+                    self._measure_presets(avatar, raster, request_id)
             except RenderCancelled:
                 pass
             except Exception as e:  # shown in the window; the studio keeps running
@@ -123,6 +125,7 @@ class NeuralWorker:
         gl.release()
 
     def _stale(self, request_id: int) -> bool:
+        """A newer request (or avatar) arrived since request_id."""
         return self._id != request_id
 
     def _render(self, avatar, raster: Rasterizer, request: Request, request_id: int) -> None:
@@ -164,3 +167,4 @@ class NeuralWorker:
         with self._cv:
             if not self._stale(request_id):
                 self.figures = figures
+                self._measure = False
