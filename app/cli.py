@@ -7,8 +7,14 @@ Exit status 0 on success, 2 on bad arguments or input files (one line naming the
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import traceback
+
+if sys.argv[1:2] == ["studio"]:
+    # The window shares two cores with rendering threads: idle OpenMP threads must sleep, not spin (read by
+    # the OpenMP runtime when torch loads, so before the imports below).
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from app.commands import COMMANDS
 from app.config_cli import add_config_arguments, config_from_args

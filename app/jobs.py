@@ -97,8 +97,9 @@ class JobQueue:
         job.out.parent.mkdir(parents=True, exist_ok=True)
         env = dict(os.environ, OMP_NUM_THREADS=str(self.threads_per_job), PYTHONUNBUFFERED="1")
         log = open(job.log_path, "ab")
+        # Niced: the window (and its render) come first; training takes the idle time.
         job.proc = subprocess.Popen(job.command(), stdout=log, stderr=subprocess.STDOUT, env=env,
-                                    cwd=Path(__file__).resolve().parents[1])
+                                    cwd=Path(__file__).resolve().parents[1], preexec_fn=lambda: os.nice(10))
         log.close()
         job.state = "running"
 

@@ -5,6 +5,8 @@ on the window's thread."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -94,6 +96,10 @@ class NeuralWorker:
 
     # ---- the worker's side -----------------------------------------------------------------------------
     def _run(self) -> None:
+        # Below the window's thread: the interface keeps its frame rate; rendering takes what is left. (Linux
+        # gives each thread its own nice value; the thread pools torch starts from here inherit it.)
+        with contextlib.suppress(OSError, AttributeError):
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
         gl = GLContext.headless()
         raster = Rasterizer(gl)
         while True:
