@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import shutil
+import subprocess
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -53,3 +57,17 @@ def synth_capture(tmp_path_factory, gl):
         return out
 
     return make
+
+
+@contextmanager
+def xvfb(display: str, screen: str) -> Iterator[str]:
+    """An X server for window tests (skipped where Xvfb is not installed); yields its DISPLAY."""
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed (make test installs it when run as root)")
+    proc = subprocess.Popen(["Xvfb", display, "-screen", "0", screen, "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        yield display
+    finally:
+        proc.terminate()
+        proc.wait()

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -15,20 +14,16 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from tests.conftest import xvfb
+
 REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.gl
 
 
 @pytest.fixture(scope="module")
 def display():
-    if shutil.which("Xvfb") is None:
-        pytest.skip("Xvfb is not installed (make test installs it when run as root)")
-    disp = ":88"
-    proc = subprocess.Popen(["Xvfb", disp, "-screen", "0", "1600x1000x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    yield disp
-    proc.terminate()
-    proc.wait()
+    with xvfb(":88", "1600x1000x24") as disp:
+        yield disp
 
 
 @pytest.fixture(scope="module")

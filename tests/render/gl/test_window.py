@@ -8,7 +8,6 @@ headless one the other tests use) and a GLX context current at once.
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -18,6 +17,7 @@ import pytest
 
 from render.camera import framing_camera
 from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
+from tests.conftest import xvfb
 
 SIZE = 96
 REPO = Path(__file__).resolve().parents[3]
@@ -57,14 +57,8 @@ glfw.terminate()
 
 @pytest.fixture(scope="module")
 def xvfb_display():
-    if shutil.which("Xvfb") is None:
-        pytest.skip("Xvfb is not installed (make test installs it when run as root)")
-    display = ":87"
-    proc = subprocess.Popen(["Xvfb", display, "-screen", "0", "320x240x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    yield display
-    proc.terminate()
-    proc.wait()
+    with xvfb(":87", "320x240x24") as display:
+        yield display
 
 
 @pytest.mark.gl
