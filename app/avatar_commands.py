@@ -15,7 +15,7 @@ from tqdm import tqdm
 
 from app.errors import UserInputError
 from app.head_commands import save_png
-from app.turntable import TurntableConfig, apply_preset, turntable_frames
+from app.turntable import TurntableConfig, apply_preset, buffer_image, turntable_frames
 from models.avatar_io import load_avatar
 from models.dataset import load_split
 from models.device import device_of
@@ -165,19 +165,8 @@ def run_render(cfg: RenderCommandConfig) -> int:
     ms = 1e3 * (time.perf_counter() - t0)
     if cfg.buffer not in out:
         raise UserInputError(f"--buffer {cfg.buffer}: this avatar's effect set has no normals network")
-    b = out[cfg.buffer]
-    if cfg.buffer in ("normals", "grad_normals"):
-        img = b * 0.5 + 0.5
-    elif cfg.buffer == "depth":
-        finite = np.isfinite(b)
-        lo, hi = (b[finite].min(), b[finite].max()) if finite.any() else (0, 1)
-        img = np.where(finite, 1 - (b - lo) / max(hi - lo, 1e-6), 0)[..., None].repeat(3, 2)
-    elif cfg.buffer == "opacity":
-        img = b[..., None].repeat(3, 2)
-    else:
-        img = b
     cfg.out.parent.mkdir(parents=True, exist_ok=True)
-    save_png(cfg.out, (np.clip(img, 0, 1) * 255).round().astype(np.uint8))
+    save_png(cfg.out, buffer_image(out, cfg.buffer))
     print(f"wrote {cfg.out} ({size}x{size}, {cfg.buffer}, {cfg.preset}: {ms:.0f} ms)")
     return 0
 

@@ -1,5 +1,6 @@
-"""Turntables: the avatar seen from a camera circling it, optionally talking, as an H.264 mp4 and PNG frames.
-Shared by the `turntable` command and the studio's Export panel."""
+"""Turntables: the avatar seen from a camera circling it, optionally talking, as an H.264 mp4 and PNG frames;
+with the quality presets and the display of render buffers they need. Shared by the `render` and `turntable`
+commands and the studio."""
 
 from __future__ import annotations
 
@@ -50,6 +51,22 @@ def apply_preset(avatar: Avatar | NerfaceAvatar, preset: str, size: int) -> int:
     return max(8, 2 * round(size * scale / 2))
 
 
+def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:
+    """A buffer of the neural render as (H,W,3) uint8 for display."""
+    b = buffers[name]
+    if name in ("normals", "grad_normals"):
+        img = b * 0.5 + 0.5
+    elif name == "depth":
+        finite = np.isfinite(b)
+        lo, hi = (b[finite].min(), b[finite].max()) if finite.any() else (0.0, 1.0)
+        img = np.where(finite, 1 - (b - lo) / max(hi - lo, 1e-6), 0)[..., None].repeat(3, 2)
+    elif name == "opacity":
+        img = b[..., None].repeat(3, 2)
+    else:
+        img = b
+    return (np.clip(img, 0, 1) * 255).round().astype(np.uint8)
+
+
 def talking(avatar: Avatar | NerfaceAvatar, base: Controls, phase: float) -> Controls:
     """Controls with the jaw (or the expressions named like it) and a smile moving with `phase` (radians)."""
     head = avatar.head_model
@@ -78,7 +95,6 @@ def turntable_frames(avatar: Avatar | NerfaceAvatar, rasterizer: Rasterizer, cfg
         cam = framing_camera(avatar.head_model.template, math.degrees(phase), cfg.elevation_deg, fov_y_deg=18.0,
                              width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
-        rgb = avatar.render_image(c, cam, rasterizer, should_stop=should_stop)["rgb"]
-        yield (np.clip(rgb, 0, 1) * 255).round().astype(np.uint8)
+        yield buffer_image(avatar.render_image(c, cam, rasterizer, should_stop=should_stop), "rgb")
         if on_frame:
             on_frame(k)

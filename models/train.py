@@ -244,8 +244,6 @@ class Trainer:
     # ---- validation ------------------------------------------------------------------------------------
     @torch.no_grad()
     def validation_psnr(self, gl: GLContext) -> float:
-        if not self.nerface:
-            self.avatar.occupancy.built.fill_(False)  # rebuilt at the next checkpoint; not stale meanwhile
         f = self.val_split.frames[0]
         r = Rasterizer(gl)
         img = self.avatar.render_image(f.controls, camera_of(self.val_split, f.camera_to_world), r)["rgb"]

@@ -18,7 +18,7 @@ from models.avatar import Avatar, RenderCancelled
 from models.head.controls import Controls
 from models.metrics import psnr
 from models.nerface import NerfaceAvatar
-from render.camera import Camera
+from render.camera import Camera, framing_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
@@ -150,8 +150,6 @@ class NeuralWorker:
 
     def _measure_presets(self, avatar, raster: Rasterizer, request_id: int, size: int = 128) -> None:
         """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`."""
-        from render.camera import framing_camera
-
         cam = framing_camera(avatar.head_model.template, 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
         figures = PresetFigures()
         images = {}

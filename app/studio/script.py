@@ -115,7 +115,7 @@ class Script:
             target = list(PRESETS).index(s["wait_render"])
             ok = (not studio.dirty and r is not None and r.request_id == studio.last_submit_id
                   and list(PRESETS).index(r.pass_name) >= target and studio.viewport.neural_image is not None
-                  and studio.viewport._shown[:2] == (r.request_id, r.pass_name))
+                  and studio.viewport.shown[:2] == (r.request_id, r.pass_name))
             if self._waiting(ok or bool(studio.worker.error)):
                 return
             if studio.worker.error:

@@ -10,6 +10,7 @@ import moderngl
 import numpy as np
 from imgui_bundle import imgui
 
+from app.turntable import buffer_image
 from models.head.head import posed_mesh
 from render.gl.context import GLContext
 from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
@@ -22,22 +23,6 @@ BUFFER_LABELS = {"rgb": "RGB", "normals": "predicted normals", "grad_normals": "
                  "depth": "depth", "opacity": "opacity"}
 
 
-def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:
-    """A buffer of the neural render as (H,W,3) uint8 for display."""
-    b = buffers[name]
-    if name in ("normals", "grad_normals"):
-        img = b * 0.5 + 0.5
-    elif name == "depth":
-        finite = np.isfinite(b)
-        lo, hi = (b[finite].min(), b[finite].max()) if finite.any() else (0.0, 1.0)
-        img = np.where(finite, 1 - (b - lo) / max(hi - lo, 1e-6), 0)[..., None].repeat(3, 2)
-    elif name == "opacity":
-        img = b[..., None].repeat(3, 2)
-    else:
-        img = b
-    return (np.clip(img, 0, 1) * 255).round().astype(np.uint8)
-
-
 class Viewport:
     def __init__(self):
         self.gl: GLContext | None = None
@@ -46,7 +31,7 @@ class Viewport:
         self.neural_tex: moderngl.Texture | None = None
         self.neural_image: np.ndarray | None = None
         self.guide_image_size = (0, 0)
-        self._shown = (-1, "", "")
+        self.shown = (-1, "", "")  # (request id, pass, buffer) on screen
         self._guide_key: tuple = ()
 
     def init(self, gl: GLContext) -> None:
@@ -88,7 +73,7 @@ class Viewport:
         if r is None:
             return
         key = (r.request_id, r.pass_name, studio.buffer)
-        if key == self._shown:
+        if key == self.shown:
             return
         name = studio.buffer if studio.buffer in r.buffers else "rgb"
         img = buffer_image(r.buffers, name)
@@ -96,7 +81,7 @@ class Viewport:
             self.neural_tex = self.texture(self.neural_tex, (img.shape[1], img.shape[0]))
             self.neural_tex.write(np.ascontiguousarray(img).tobytes())
         self.neural_image = img
-        self._shown = key
+        self.shown = key
 
 
 def draw(studio: Studio) -> None:
