@@ -19,7 +19,7 @@ from torch import nn
 
 from models.fields.codynerf import CoDyNeRFField, FieldConfig, FieldOutput
 from models.fields.occupancy import OccupancyGrid
-from models.fields.prior import PriorMeshes, PriorSamples, deformation_prior, nearest_vertices, vertex_tree
+from models.fields.prior import PriorMeshes, PriorSamples, nearest_vertices, prior_within, vertex_tree
 from models.head.controls import Controls
 from models.head.head import Head
 from models.head.model import HeadModel
@@ -122,9 +122,12 @@ def active_pixels(cfg: RenderConfig, camera: Camera, raster: Raster) -> np.ndarr
     return binary_dilation(raster.hit, iterations=silhouette_margin_px(cfg, camera, raster.depth))
 
 
-def per_sample(code: torch.Tensor, R: int, S: int) -> torch.Tensor:
-    """A code per ray (R,C) or one for all (1,C), repeated for each of the S samples: (R*S, C)."""
-    return code.repeat_interleave(S, 0) if code.shape[0] > 1 else code.expand(R * S, -1)
+def per_sample(code: torch.Tensor, S: int) -> Callable[[torch.Tensor], torch.Tensor]:
+    """For a code per ray (R,C), the codes of flat sample indices (each ray's S samples share its code); one
+    code for all rays (1,C) stays (1,C), which the networks fold into a bias instead of copying it."""
+    if code.shape[0] == 1:
+        return lambda idx: code
+    return lambda idx: code[torch.div(idx, S, rounding_mode="floor")]
 
 
 def mean_code(embedding: nn.Embedding) -> torch.Tensor:
@@ -248,18 +251,18 @@ class Avatar(nn.Module):
         R, S = samples.t_starts.shape
         pts = (origins[:, None] + directions[:, None] * samples.t_mid[..., None]).reshape(-1, 3)
         valid = samples.valid.repeat_interleave(S)
-        omega_s = per_sample(omega, R, S)
+        omega_s = per_sample(omega, S)
         occupied = self.occupancy.lookup if skip_empty else None
 
         def evaluate(idx: torch.Tensor) -> tuple[torch.Tensor, PriorSamples, FieldOutput, torch.Tensor]:
             """Prior and geometry at flat sample indices. Samples outside the field's support are not
             evaluated at all (exactly: their density is zero)."""
-            prior = deformation_prior(pts[idx], geo.meshes, rc.prior_falloff_m, geo.tree)
-            support = self.support(prior.distance) * valid[idx]
+            near, prior_in = prior_within(pts[idx], geo.meshes, rc.shell_m, rc.prior_falloff_m, geo.tree)
+            support = self.support(prior_in.distance) * valid[idx[near]]
             inside = torch.nonzero(support > 0).squeeze(1)
-            prior_in = prior.take(inside)
-            keep = idx[inside]
-            return keep, prior_in, self.field.geometry(pts[keep], prior_in, omega_s[keep], create_graph,
+            prior_in = prior_in.take(inside) if len(inside) < len(near) else prior_in
+            keep = idx[near[inside]]
+            return keep, prior_in, self.field.geometry(pts[keep], prior_in, omega_s(keep), create_graph,
                                                        occupied), support[inside]
 
         flat = torch.arange(R * S, device=pts.device).reshape(R, S)
@@ -282,15 +285,15 @@ class Avatar(nn.Module):
         # Colour where a sample shows (display may skip samples that add less than min_weight to a pixel).
         shown = torch.nonzero(weights.reshape(-1)[keep] > min_weight).squeeze(1) if min_weight > 0 else None
         view = (-directions[:, None]).expand(R, S, 3).reshape(-1, 3)[keep]
-        phi_k = per_sample(phi, R, S)[keep]
+        phi_at = per_sample(phi, S)
         if shown is not None:
             g_shown = FieldOutput(g.sigma[shown], g.rgb[shown], g.x_canonical[shown],
                                   None if g.normal is None else g.normal[shown])
             rgb_k = g.rgb.new_zeros(len(keep), 3).index_copy(
-                0, shown, self.field.appearance(g_shown, prior_k.take(shown), view[shown], phi_k[shown],
+                0, shown, self.field.appearance(g_shown, prior_k.take(shown), view[shown], phi_at(keep[shown]),
                                                 geo.landmarks))
         else:
-            rgb_k = self.field.appearance(g, prior_k, view, phi_k, geo.landmarks)
+            rgb_k = self.field.appearance(g, prior_k, view, phi_at(keep), geo.landmarks)
         rgb = composite(weights, scatter(rgb_k).reshape(R, S, 3), remaining, self.background)
         normal = grad_normal = pn = pg = None
         if g.normal is not None:

@@ -108,7 +108,7 @@ class CoDyNeRFField(nn.Module):
         self,
         x: torch.Tensor,  # (P,3) world points
         prior: PriorSamples,
-        omega: torch.Tensor,  # (P, deform_code_dim)
+        omega: torch.Tensor,  # (P, deform_code_dim), or (1, deform_code_dim) shared by every point
         create_graph: bool = False,  # keep the graph of density gradients (training through the normals)
         occupied: Callable[[torch.Tensor], torch.Tensor] | None = None,  # canonical points -> may hold density
     ) -> FieldOutput:
@@ -123,7 +123,7 @@ class CoDyNeRFField(nn.Module):
         with torch.enable_grad() if c.needs_normals else contextlib.nullcontext():
             x_prior = x + prior.offset  # Eq. 2: the prior's part of x_can
             delta = self.deform(torch.cat([frequency_encoding(x, c.deform_frequencies, s),
-                                           frequency_encoding(prior.offset, c.prior_frequencies, s), omega], -1))
+                                           frequency_encoding(prior.offset, c.prior_frequencies, s)], -1), omega)
             x_can = x_prior + delta
             if occupied is None:
                 sigma, tau = self.canonical_density(x_can, prior.distance)
@@ -152,12 +152,12 @@ class CoDyNeRFField(nn.Module):
         geo: FieldOutput,  # from `geometry` (rgb holds tau there)
         prior: PriorSamples,
         view_dir: torch.Tensor,  # (P,3) unit, from the point towards the camera
-        phi: torch.Tensor,  # (P, appearance_code_dim)
+        phi: torch.Tensor,  # (P, appearance_code_dim), or (1, appearance_code_dim) shared by every point
         landmarks: torch.Tensor | None = None,  # (1, 3L) head-centred
     ) -> torch.Tensor:
         """Colour (P,3) in [0,1] (Eq. 7)."""
         c = self.cfg
-        inputs = [geo.rgb, frequency_encoding(view_dir, c.view_frequencies), phi]
+        inputs = [geo.rgb, frequency_encoding(view_dir, c.view_frequencies)]
         if c.needs_normals:
             inputs.append(geo.normal)
         if "specular" in c.effects:
@@ -166,7 +166,8 @@ class CoDyNeRFField(nn.Module):
         if self.landmarks is not None:
             lm = self.landmarks(landmarks).expand(len(view_dir), -1)
             inputs += [lm, prior.expression_offset / c.scale_m, prior.pose_offset / c.scale_m]
-        return torch.sigmoid(self.appearance_net(torch.cat(inputs, -1)))
+        return torch.sigmoid(self.appearance_net(torch.cat(inputs, -1), phi, code_at=c.feature_dim + encoded_size(
+            3, c.view_frequencies)))
 
     def forward(
         self,

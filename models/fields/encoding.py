@@ -18,11 +18,16 @@ def frequency_encoding(x: torch.Tensor, n_frequencies: int, scale: float = 1.0) 
     """
     if n_frequencies == 0:
         return x
+    D = x.shape[-1]
     freqs = (2.0 ** torch.arange(n_frequencies, dtype=x.dtype, device=x.device)) * (math.pi / scale)
+    # One buffer, filled in place: x, then per frequency sin of every coordinate, then cos of every coordinate.
+    out = x.new_empty(*x.shape[:-1], D * (1 + 2 * n_frequencies))
+    out[..., :D] = x
+    tail = out[..., D:].unflatten(-1, (n_frequencies, 2, D))
     angles = x[..., None, :] * freqs[:, None]  # (..., n, D)
-    enc = torch.cat([torch.sin(angles), torch.cos(angles)], dim=-1)  # (..., n, 2D)
-    # Order per frequency: sin of every coordinate, then cos of every coordinate.
-    return torch.cat([x, enc.flatten(-2)], dim=-1)
+    tail[..., 0, :] = torch.sin(angles)
+    tail[..., 1, :] = torch.cos(angles)
+    return out
 
 
 def encoded_size(dim: int, n_frequencies: int) -> int:

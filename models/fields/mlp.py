@@ -22,5 +22,17 @@ class MLP(nn.Module):
             nn.init.zeros_(last.bias)
         self.net = nn.Sequential(*layers, last)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x)
+    def forward(self, x: torch.Tensor, code: torch.Tensor | None = None, code_at: int | None = None) -> torch.Tensor:
+        """x: (P, d_in) inputs; or, with `code`, the inputs other than the code's C columns, which sit at
+        column `code_at` of the input (default: last). A code of shape (1, C), shared by every point, is
+        folded into the first layer's bias: no (P, C) copy and no concatenation."""
+        if code is None:
+            return self.net(x)
+        at = x.shape[1] if code_at is None else code_at
+        if code.shape[0] != 1 or len(x) == 1:
+            return self.net(torch.cat([x[:, :at], code.expand(len(x), -1), x[:, at:]], -1))
+        first = self.net[0]
+        C = code.shape[1]
+        bias = first.bias + first.weight[:, at:at + C] @ code[0]
+        weight = torch.cat([first.weight[:, :at], first.weight[:, at + C:]], 1)
+        return self.net[1:](torch.nn.functional.linear(x, weight, bias))

@@ -68,7 +68,20 @@ def deformation_prior(points: torch.Tensor, meshes: PriorMeshes, falloff_m: floa
     """The prior (Eq. 3-4) at (P,3) world points; differentiable in the points and the meshes. `tree`:
     a prebuilt vertex_tree of meshes.posed."""
     assert points.ndim == 2 and points.shape[1] == 3, f"points must be (P,3), got {tuple(points.shape)}"
+    return prior_at(points, nearest_vertices(points, meshes.posed, tree), meshes, falloff_m)
+
+
+def prior_within(points: torch.Tensor, meshes: PriorMeshes, reach_m: float, falloff_m: float = 0.05,
+                 tree: KDTree | None = None) -> tuple[torch.Tensor, PriorSamples]:
+    """The prior only at those of the (P,3) points nearer the mesh than reach_m: their indices and the prior
+    there (the others are never computed)."""
     idx = nearest_vertices(points, meshes.posed, tree)
+    which = torch.nonzero((points - meshes.posed[idx]).norm(dim=-1) < reach_m).squeeze(1)
+    return which, prior_at(points[which], idx[which], meshes, falloff_m)
+
+
+def prior_at(points: torch.Tensor, idx: torch.Tensor, meshes: PriorMeshes, falloff_m: float) -> PriorSamples:
+    """The prior at (P,3) points whose nearest posed vertices are idx (P,)."""
     x_hat = meshes.posed[idx]
     diff = points - x_hat
     # |diff| with a gradient that stays finite where a point sits exactly on a vertex.
