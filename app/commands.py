@@ -6,7 +6,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from app import avatar_commands, capture_commands, head_commands
+from app.bench import BenchConfig, run_bench
 from app.studio.config import StudioConfig
+from app.track import TrackConfig, run_track
 from app.turntable import TurntableConfig
 from models.synthetic import SynthConfig
 from models.train import TrainConfig
@@ -39,6 +41,8 @@ COMMANDS = (
             SynthConfig, capture_commands.run_synth),
     Command("dataset", "Validate a capture dataset (ours, NerFACE's or IMavatar's) and summarise its splits.",
             capture_commands.DatasetConfig, capture_commands.run_dataset, positional=("dataset",)),
+    Command("track", "Turn a video of one face into a capture dataset: landmarks, head-model fit, masks, report.",
+            TrackConfig, run_track, positional=("video",)),
     Command("train", "Train an avatar on a capture (in the background of a terminal: a progress bar).",
             TrainConfig, avatar_commands.run_train, positional=("dataset",)),
     Command("eval", "Measure an avatar on a capture split: metrics.json and side-by-side images.",
@@ -47,4 +51,6 @@ COMMANDS = (
             avatar_commands.RenderCommandConfig, avatar_commands.run_render, positional=("avatar",)),
     Command("turntable", "Render an avatar from a camera circling it to an H.264 mp4 and PNG frames.",
             TurntableConfig, avatar_commands.run_turntable, positional=("avatar",)),
+    Command("bench", "Measure what accuracy costs in time: render settings, effect sets, training curves, the "
+            "dense NerFACE renderer; charts, and presets chosen from the Pareto front.", BenchConfig, run_bench),
 )

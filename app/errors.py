@@ -7,6 +7,8 @@ from models.dataset import DatasetError
 from models.device import DeviceError
 from models.head.controls import ControlsError
 from models.head.model import HeadModelError
+from models.tracking.canonical import BundleError
+from models.tracking.video import VideoError
 
 
 class UserInputError(ValueError):
@@ -14,4 +16,5 @@ class UserInputError(ValueError):
 
 
 #: Exceptions that are the user's input being wrong, not the program failing.
-INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError, CheckpointError, DeviceError)
+INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError, CheckpointError, DeviceError,
+                BundleError, VideoError)

@@ -1,6 +1,7 @@
 """Background training jobs: each a separate `avatar-studio train` process, queued and run one at a time,
 their progress read from the avatar folder's progress.jsonl. Cancelling sends SIGTERM: the trainer writes a
-checkpoint and exits, so the job can be resumed later with --resume."""
+checkpoint and exits, so the job can be resumed later with --resume. A job made from a video runs
+`avatar-studio track` first (its dataset written beside the avatar), then trains on what it tracked."""
 
 from __future__ import annotations
 
@@ -28,6 +29,13 @@ class Job:
     minutes: float | None = None
     steps: int | None = None
     resume: bool = False
+    video: Path | None = None
+    """Track this video into `dataset` first (a "new avatar from video" job)."""
+    head: str = "builtin"
+    landmarker: Path | None = None
+    stage: Literal["track", "train"] = "train"
+    opened: bool = False
+    """The studio opened the result (video jobs open theirs when done)."""
     state: State = "queued"
     error: str = ""
     progress: list[dict] = field(default_factory=list)
@@ -39,6 +47,10 @@ class Job:
         return self.out.with_name(self.out.name + ".log")
 
     def command(self) -> list[str]:
+        if self.stage == "track":
+            cmd = [sys.executable, "-m", "app.cli", "track", str(self.video), "--out", str(self.dataset),
+                   "--head", self.head]
+            return cmd + (["--landmarker", str(self.landmarker)] if self.landmarker else [])
         cmd = [sys.executable, "-m", "app.cli", "train", str(self.dataset), "--out", str(self.out),
                "--model", self.model, "--effects", self.effects]
         if self.minutes:
@@ -89,6 +101,8 @@ class JobQueue:
 
     def submit(self, dataset: Path, out: Path, **options) -> Job:
         job = Job(len(self.jobs) + 1, Path(dataset), Path(out), **options)
+        if job.video is not None and not (job.dataset / "transforms_train.json").exists():
+            job.stage = "track"
         self.jobs.append(job)
         self.poll()
         return job
@@ -113,6 +127,10 @@ class JobQueue:
             if rc is None:
                 continue
             job.read_progress()
+            if job.state == "running" and rc == 0 and job.stage == "track":
+                job.stage = "train"  # tracked: train on it, as the same job
+                self._start(job)
+                continue
             if job.state == "running":
                 job.state = "done" if rc == 0 else "failed"
             if rc != 0 and job.state == "failed":
@@ -122,6 +140,15 @@ class JobQueue:
             if not queued:
                 break
             self._start(queued[0])
+
+    @staticmethod
+    def last_line(job: Job) -> str:
+        try:
+            lines = [ln for ln in job.log_path.read_text(errors="replace").replace("\r", "\n").splitlines()
+                     if ln.strip() and not ln.startswith(("W0000", "INFO:", "WARNING: All log"))]
+        except OSError:
+            return ""
+        return lines[-1][:120] if lines else ""
 
     @staticmethod
     def last_error(job: Job) -> str:
@@ -146,8 +173,16 @@ class JobQueue:
 
     def resume(self, job: Job) -> Job:
         """Queue a job that continues a cancelled or finished one from its checkpoint."""
+        resume = (job.out / "avatar.json").exists()
         return self.submit(job.dataset, job.out, model=job.model, effects=job.effects, minutes=job.minutes,
-                           steps=job.steps, resume=True)
+                           steps=job.steps, resume=resume, video=job.video, head=job.head, landmarker=job.landmarker)
+
+    @staticmethod
+    def status(job: Job) -> str:
+        """What a job is doing, in a few words: its stage, and while tracking the tracker's last line."""
+        if job.stage == "track" and job.state == "running":
+            return "tracking: " + JobQueue.last_line(job)
+        return job.state
 
     def stop_all(self, wait_s: float = 30.0) -> None:
         for job in self.running():

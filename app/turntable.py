@@ -15,11 +15,9 @@ import numpy as np
 from models.avatar import Avatar
 from models.head.controls import Controls
 from models.nerface import NerfaceAvatar
+from models.quality import BUILTIN_PRESETS, Preset
 from render.camera import framing_camera
 from render.gl.raster import Rasterizer
-
-PRESETS = {"draft": (0.5, 6), "preview": (1.0, 8), "final": (1.0, 16)}
-"""Quality presets: image scale and samples per ray."""
 
 
 @dataclass(frozen=True)
@@ -43,12 +41,14 @@ class TurntableConfig:
     """Also write the frames as PNGs."""
 
 
+def presets_of(avatar: Avatar | NerfaceAvatar) -> dict[str, Preset]:
+    """The avatar's presets: those `bench` measured and stored with it, else the built-in ones."""
+    return getattr(avatar, "presets", None) or {k: Preset(q) for k, q in BUILTIN_PRESETS.items()}
+
+
 def apply_preset(avatar: Avatar | NerfaceAvatar, preset: str, size: int) -> int:
-    """Set the avatar's samples per ray for a preset; returns the image size it renders at."""
-    scale, samples = PRESETS[preset]
-    if isinstance(avatar, Avatar):  # the NerFACE baseline always samples densely
-        avatar.render_cfg = replace(avatar.render_cfg, samples_per_ray=samples)
-    return max(8, 2 * round(size * scale / 2))
+    """Set the avatar's render settings for a preset; returns the image size it renders at."""
+    return presets_of(avatar)[preset].quality.apply(avatar, size)
 
 
 def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:

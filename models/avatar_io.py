@@ -12,6 +12,7 @@ from models.device import device_of
 from models.fields.codynerf import FieldConfig
 from models.head.sources import load_head
 from models.nerface import NerfaceAvatar, NerfaceConfig
+from models.quality import load_presets
 
 
 def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar | NerfaceAvatar, dict]:
@@ -30,4 +31,6 @@ def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar | Nerfa
     except (KeyError, TypeError, RuntimeError) as e:
         raise CheckpointError(f"{Path(folder) / 'avatar.json'}: does not describe these weights ({e})") from None
     avatar.eval()
+    # draft/preview/final, chosen and measured by `bench` (and where: machine, image size), else built in
+    avatar.presets, avatar.presets_measured = load_presets(folder)
     return avatar.to(device_of(device)), meta

@@ -15,6 +15,9 @@ if ! "$VENV/bin/python" -c "import torch" 2>/dev/null; then
     fi
 fi
 "$PIP" install -q -e ".[test]"
+# MediaPipe's face landmarker (`avatar-studio track`), without its declared dependencies: they would put a
+# second, non-headless OpenCV beside ours; what it needs at run time is in pyproject.toml.
+"$PIP" install -q --no-deps "mediapipe==0.10.35"
 # pyrender pins PyOpenGL 3.1.0, whose EGL platform predates current Mesa's; the 3.1.7+ release works
 # with pyrender's OffscreenRenderer and keeps its API.
 "$PIP" install -q "PyOpenGL>=3.1.7"

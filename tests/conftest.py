@@ -13,6 +13,8 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
 ICT_NPZ = SHARED_DATA / "ict_facekit" / "ict_head.npz"
+LANDMARKER = SHARED_DATA / "mediapipe" / "face_landmarker_v2_with_blendshapes.task"
+FACE_VIDEO = SHARED_DATA / "video" / "expressions_d3.mp4"
 
 
 @pytest.fixture(scope="session")
@@ -20,6 +22,20 @@ def ict_npz() -> Path:
     if not ICT_NPZ.is_file():
         pytest.skip(f"ICT-FaceKit data not found at {ICT_NPZ} (../shared is absent)")
     return ICT_NPZ
+
+
+@pytest.fixture(scope="session")
+def landmarker() -> Path:
+    if not LANDMARKER.is_file():
+        pytest.skip(f"MediaPipe's face landmarker bundle not found at {LANDMARKER} (../shared is absent)")
+    return LANDMARKER
+
+
+@pytest.fixture(scope="session")
+def face_video() -> Path:
+    if not FACE_VIDEO.is_file():
+        pytest.skip(f"the face video not found at {FACE_VIDEO} (../shared is absent)")
+    return FACE_VIDEO
 
 
 @pytest.fixture(scope="session")

@@ -124,6 +124,10 @@ class Studio:
             if self.cfg.avatar is not None or DEMO_AVATAR.is_dir():
                 self.open_avatar(self.cfg.avatar or DEMO_AVATAR)
         self.jobs.poll()
+        for job in self.jobs.jobs:  # a new avatar from video opens when its job is done
+            if job.video is not None and job.state == "done" and not job.opened:
+                job.opened = True
+                self.open_avatar(job.out)
         state = "training" if self.jobs.running() else "rendering" if self.worker.busy else "idle"
         self.clock.tick(state)
         if self.script is not None:

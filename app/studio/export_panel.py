@@ -12,9 +12,10 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 from PIL import Image
 
-from app.turntable import PRESETS, TurntableConfig, turntable_frames
+from app.turntable import TurntableConfig, turntable_frames
 from models.avatar import RenderCancelled
 from models.avatar_io import load_avatar
+from models.quality import PRESET_NAMES
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 from render.video import write_video
@@ -90,7 +91,7 @@ def draw(studio: Studio) -> None:
     imgui.set_next_item_width(90)
     _, e.zoom = imgui.slider_float("zoom##export", e.zoom, 0.5, 3.0, "%.2f")
     imgui.set_next_item_width(90)
-    _, e.preset = imgui.combo("preset", e.preset, list(PRESETS))
+    _, e.preset = imgui.combo("preset", e.preset, list(PRESET_NAMES))
     imgui.same_line()
     _, e.animate = imgui.checkbox("talk while turning", e.animate)
     if e.running:
@@ -110,7 +111,7 @@ def export_turntable(studio: Studio) -> None:
     e = studio.export
     e.frames, e.size = max(1, e.frames), max(16, e.size - e.size % 2)
     cfg = TurntableConfig(studio.session.folder, Path(e.out), e.frames, e.elevation, e.zoom, e.size,
-                          list(PRESETS)[e.preset], e.animate)
+                          list(PRESET_NAMES)[e.preset], e.animate)
     if cfg.out.suffix.lower() != ".mp4":
         studio.report(f"{cfg.out}: the turntable is written as an .mp4")
         return

@@ -4,7 +4,8 @@ jobs queue; each is its own process."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,6 +28,29 @@ class JobForm:
     model: int = 0
     effects: int = 0
     minutes: float = 30.0
+    video: str = ""
+    head: str = "builtin"
+    landmarker: str = field(default_factory=lambda: os.environ.get("AVATAR_STUDIO_LANDMARKER", ""))
+
+
+def start_from_video(studio: Studio, video: str, head: str, landmarker: str, out: str, effects: str = "all",
+                     minutes: float | None = None, steps: int | None = None) -> bool:
+    """Queue a job that tracks the video into a dataset beside the avatar folder, then trains on it."""
+    video_path, out_path = Path(video), Path(out)
+    if not video_path.is_file():
+        studio.report(f"{video_path}: no such video file")
+        return False
+    if not landmarker or not Path(landmarker).is_file():
+        studio.report(f"{landmarker or '(none given)'}: MediaPipe's face landmarker bundle is needed "
+                      "(face_landmarker_v2_with_blendshapes.task)")
+        return False
+    if out_path.exists():
+        studio.report(f"{out_path}: already exists; choose a new avatar folder")
+        return False
+    dataset = out_path.with_name(out_path.name + "_dataset")
+    studio.jobs.submit(dataset, out_path, effects=effects, minutes=minutes, steps=steps, video=video_path,
+                       head=head.strip() or "builtin", landmarker=Path(landmarker))
+    return True
 
 
 def start(studio: Studio, dataset: str, out: str, model: str = "codynerf", effects: str = "all",
@@ -59,10 +83,19 @@ def draw(studio: Studio) -> None:
     imgui.same_line()
     if imgui.button("Start training"):
         start(studio, f.dataset.strip(), f.out.strip(), MODELS[f.model], EFFECTS[f.effects], max(f.minutes, 0.1))
+    if imgui.collapsing_header("New avatar from video"):
+        _, f.video = imgui.input_text("video", f.video)
+        _, f.head = imgui.input_text("head model", f.head)
+        _, f.landmarker = imgui.input_text("landmarker (.task)", f.landmarker)
+        if imgui.button("Track and train"):
+            start_from_video(studio, f.video.strip(), f.head, f.landmarker.strip(), f.out.strip(),
+                             EFFECTS[f.effects], max(f.minutes, 0.1))
+        imgui.same_line()
+        imgui.text_disabled("(avatar folder, effects and minutes from above)")
     imgui.separator()
     for job in reversed(studio.jobs.jobs):
         imgui.push_id(job.id)
-        imgui.text(f"#{job.id} {job.out.name}: {job.model} {job.effects} - {job.state}"
+        imgui.text(f"#{job.id} {job.out.name}: {job.model} {job.effects} - {studio.jobs.status(job)}"
                    + (" (resumed)" if job.resume else ""))
         last = job.progress[-1] if job.progress else {}
         eta = last.get("eta_s")

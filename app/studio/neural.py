@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.turntable import PRESETS, apply_preset
+from app.turntable import apply_preset, presets_of
 from models.avatar import Avatar, RenderCancelled
 from models.head.controls import Controls
 from models.metrics import psnr
@@ -135,9 +135,12 @@ class NeuralWorker:
         return self._id != request_id
 
     def _render(self, avatar, raster: Rasterizer, request: Request, request_id: int) -> None:
-        for name in request.passes:
+        qualities = [presets_of(avatar)[name].quality for name in request.passes]
+        for i, name in enumerate(request.passes):
+            if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:
+                continue  # the bench may choose one setting for two presets: render it once, as the finer
             apply_preset(avatar, name, request.camera.width_px)
-            cam = scaled(request.camera, PRESETS[name][0])
+            cam = scaled(request.camera, presets_of(avatar)[name].quality.scale)
             t0 = time.perf_counter()
             buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
                                           should_stop=lambda: self._stale(request_id))
@@ -155,7 +158,7 @@ class NeuralWorker:
         images = {}
         for name in ("final", "preview", "draft"):
             apply_preset(avatar, name, size)
-            c = scaled(cam, PRESETS[name][0])
+            c = scaled(cam, presets_of(avatar)[name].quality.scale)
             times = []
             for _ in range(3):
                 t0 = time.perf_counter()

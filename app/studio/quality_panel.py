@@ -1,5 +1,7 @@
-"""The Quality panel: the presets, each with its time per frame and its error against `final`, measured on
-the open avatar when it loads; which pass the viewport refines to while the controls rest."""
+"""The Quality panel: the presets (chosen by `avatar-studio bench` from the Pareto front of error against time
+and stored with the avatar, else the built-in ones), each with the figures the bench measured and its time per
+frame and error against `final` measured on the open avatar when it loads; which pass the viewport refines to
+while the controls rest."""
 
 from __future__ import annotations
 
@@ -7,7 +9,8 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from app.turntable import PRESETS
+from app.turntable import presets_of
+from models.quality import PRESET_NAMES
 
 if TYPE_CHECKING:
     from app.studio.app import Studio
@@ -18,27 +21,50 @@ def draw(studio: Studio) -> None:
     if studio.session.avatar is None:
         imgui.text("No avatar open.")
         return
+    presets = presets_of(studio.session.avatar)
     imgui.text("refine to:")
-    for name in PRESETS:
+    for name in PRESET_NAMES:
         imgui.same_line()
         if imgui.radio_button(name, studio.refine_to == name):
             studio.refine_to = name
             studio.dirty = True
+    benched = any(p.ms is not None for p in presets.values())
     flags = imgui.TableFlags_.borders | imgui.TableFlags_.row_bg
-    if imgui.begin_table("presets", 4, flags):
-        for h in ("preset", "size, samples", "ms / frame", "PSNR vs final"):
+    columns = ["preset", "setting", "ms / frame", "PSNR vs final"] + (
+        ["bench ms", "bench vs final", "test PSNR", "FaceMSE"] if benched else [])
+    if imgui.begin_table("presets", len(columns), flags):
+        for h in columns:
             imgui.table_setup_column(h)
         imgui.table_headers_row()
-        for name, (scale, samples) in PRESETS.items():
+        for name in PRESET_NAMES:
+            p = presets[name]
             imgui.table_next_row()
-            imgui.table_next_column()
-            imgui.text(name)
-            imgui.table_next_column()
-            imgui.text(f"{scale:g}x, {samples}")
-            imgui.table_next_column()
-            imgui.text(f"{fig.ms[name]:.0f}" if name in fig.ms else "measuring...")
-            imgui.table_next_column()
-            v = fig.psnr_vs_final.get(name)
-            imgui.text("reference" if name == "final" and v is not None else "" if v is None else f"{v:.1f} dB")
+            cells = [name, p.quality.describe(), f"{fig.ms[name]:.0f}" if name in fig.ms else "measuring...",
+                     _db(fig.psnr_vs_final.get(name), name)]
+            if benched:
+                cells += [_num(p.ms, "{:.0f}"), _db(p.psnr_vs_final, name), _num(p.psnr, "{:.2f} dB"),
+                          _num(p.face_mse, "{:.5f}")]
+            for c in cells:
+                imgui.table_next_column()
+                imgui.text(c)
         imgui.end_table()
-    imgui.text_wrapped("Measured on this avatar at 128 px (median of 3 renders, this machine).")
+    imgui.text_wrapped("ms / frame and PSNR vs final: measured on this avatar at 128 px when it opened (median of "
+                       "3 renders, this machine).")
+    measured = getattr(studio.session.avatar, "presets_measured", {})
+    if benched:
+        where = f"{measured.get('image_px', '?')} px, {measured.get('machine', 'machine unknown')}"
+        imgui.text_wrapped(f"bench: chosen from the Pareto front by `avatar-studio bench` ({where}); test PSNR and "
+                           "FaceMSE on the capture's held-out frames.")
+    else:
+        imgui.text_wrapped("Built-in presets: run `avatar-studio bench` to measure this avatar's trade-off and "
+                           "choose them from its Pareto front.")
+
+
+def _num(v: float | None, fmt: str) -> str:
+    return "" if v is None else fmt.format(v)
+
+
+def _db(v: float | None, name: str) -> str:
+    if v is None:
+        return ""
+    return "reference" if name == "final" or v == float("inf") else f"{v:.1f} dB"

@@ -32,7 +32,7 @@ import numpy as np
 from imgui_bundle import hello_imgui
 from PIL import Image
 
-from app.turntable import PRESETS
+from models.quality import PRESET_NAMES
 
 if TYPE_CHECKING:
     from app.studio.app import Studio
@@ -112,9 +112,9 @@ class Script:
             studio.dirty = True
         elif "wait_render" in s:
             r = studio.worker.result
-            target = list(PRESETS).index(s["wait_render"])
+            target = list(PRESET_NAMES).index(s["wait_render"])
             ok = (not studio.dirty and r is not None and r.request_id == studio.last_submit_id
-                  and list(PRESETS).index(r.pass_name) >= target and studio.viewport.neural_image is not None
+                  and list(PRESET_NAMES).index(r.pass_name) >= target and studio.viewport.neural_image is not None
                   and studio.viewport.shown[:2] == (r.request_id, r.pass_name))
             if self._waiting(ok or bool(studio.worker.error)):
                 return
@@ -145,7 +145,7 @@ class Script:
 
             e, x = studio.export, s["export"]
             e.out, e.frames, e.size = x["out"], int(x.get("frames", 12)), int(x.get("size", 64))
-            e.preset = list(PRESETS).index(x.get("preset", "draft"))
+            e.preset = list(PRESET_NAMES).index(x.get("preset", "draft"))
             e.animate = bool(x.get("animate", False))
             export_turntable(studio)
         elif "wait_export" in s:

@@ -82,8 +82,10 @@ def lbs(
     J_regressor: torch.Tensor,  # (J,V)
     parents: list[int],  # (J,)
     weights: torch.Tensor,  # (V,J)
+    rest_joints: torch.Tensor | None = None,  # (B,J,3): given, J_regressor is not used
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Posed vertices (B,V,3) and joints (B,J,3), FLAME's forward pass without translation."""
+    """Posed vertices (B,V,3) and joints (B,J,3), FLAME's forward pass without translation. With rest_joints
+    (computed from the whole mesh), the vertices may be any subset of the model's."""
     B = shape.shape[0]
     _V, J = weights.shape
     assert full_pose.shape == (B, J, 3), f"full_pose must be (B,J,3)=({B},{J},3), got {full_pose.shape}"
@@ -91,7 +93,7 @@ def lbs(
     # 1. Identity and expression blend shapes.
     v_shaped = template[None] + blend_shapes(shape, shape_basis) + blend_shapes(expression, expr_basis)
     # 2. Rest joints from the shaped mesh.
-    joints = torch.einsum("jv,bvc->bjc", J_regressor, v_shaped)
+    joints = torch.einsum("jv,bvc->bjc", J_regressor, v_shaped) if rest_joints is None else rest_joints
     # 3. Pose correctives from (R - I) of every joint but the root.
     rot_mats = rotation_matrix_from_axis_angle(full_pose)  # (B,J,3,3)
     v_posed = v_shaped

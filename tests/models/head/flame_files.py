@@ -119,3 +119,32 @@ class CommandRunningObject:
         import os
 
         return (os.system, (f"touch {self.marker}",))
+
+
+def flame_from_head(model, num_expr: int = 50) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """A FLAME-format model (arrays, static landmark embedding) with a real face's geometry: a head model
+    with FLAME's five joints (root, neck, jaw, eyes; the built-in head has them), its shape and expression
+    bases in shapedirs (padded to FLAME's 300 + num_expr), no pose correctives, and its iBUG landmarks 17-67
+    as the 51-point static embedding."""
+    V = len(model.template)
+    shapedirs = np.zeros((V, 3, 300 + num_expr))
+    shapedirs[..., : model.num_shape] = model.shape_basis
+    shapedirs[..., 300:300 + model.num_expression] = model.expr_basis
+    parents = np.asarray(model.parents, np.int64)
+    kintree = np.stack([np.where(parents < 0, 4294967295, parents), np.arange(len(parents))]).astype(np.int64)
+    arrays = {"v_template": model.template.astype(np.float64), "f": model.triangles.astype(np.uint32),
+              "shapedirs": shapedirs, "posedirs": np.zeros((V, 3, 36)), "J_regressor": model.J_regressor,
+              "weights": model.weights, "kintree_table": kintree, "bs_style": "lbs", "bs_type": "lrotmin"}
+    ids = model.landmarks.vertex_ids[17:]
+    faces = np.array([np.nonzero((model.triangles == i).any(1))[0][0] for i in ids], np.int64)
+    bary = (model.triangles[faces] == ids[:, None]).astype(np.float64)
+    return arrays, {"lmk_face_idx": faces, "lmk_b_coords": bary}
+
+
+def write_flame_from_head(folder: Path, model) -> Path:
+    arrays, embedding = flame_from_head(model)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "FLAME_NEUTRAL.pkl"
+    path.write_bytes(pickle.dumps(arrays, protocol=4))
+    (folder / "flame_static_embedding.pkl").write_bytes(pickle.dumps(embedding, protocol=4))
+    return path

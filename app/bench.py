@@ -1,0 +1,344 @@
+"""`avatar-studio bench`: what accuracy costs in time, measured on this machine.
+
+For trained avatars of a capture (one per effect set) and the capture's held-out test frames it measures,
+for each render setting (samples per ray, image size, a second "fine" pass, bf16 or fp32): the time per frame
+and the error against the ground truth (PSNR, FaceMSE) and against the most accurate setting measured; the
+NerFACE-style dense renderer (64 + 64 samples, 8x256 MLPs) at the same image size beside them; and training
+curves (test PSNR against training seconds) for each effect set. It writes `results.json`, the charts
+`error_vs_time.png` and `training_curves.png`, and stores in each avatar the presets it chose from that
+avatar's Pareto front (`presets.json`), which the studio's Quality panel shows.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from app.avatar_commands import face_mask_of
+from app.errors import UserInputError
+from models.avatar import Avatar
+from models.avatar_io import load_avatar
+from models.dataset import load_split
+from models.fields.codynerf import EFFECTS
+from models.head.sources import load_head
+from models.metrics import face_mse, psnr
+from models.nerface import NerfaceAvatar, NerfaceConfig
+from models.quality import PRESET_NAMES, Preset, Quality, save_presets
+from models.train import TrainConfig, Trainer
+from models.train_data import camera_of, load_rgb
+from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
+
+EFFECT_SETS = ("none", "shading,specular", "all")
+
+SETTINGS = (
+    # samples per ray at full size
+    *(Quality(1.0, s) for s in (4, 6, 8, 12, 16, 24, 32)),
+    # smaller images, shown scaled up
+    *(Quality(sc, s) for sc in (0.5, 0.75) for s in (6, 8, 12)),
+    # a second pass where the first pass's weights lie
+    *(Quality(1.0, s, s) for s in (6, 8, 12, 16)),
+    # bfloat16 networks
+    *(Quality(1.0, s, 0, True) for s in (8, 12, 16)),
+)
+REFERENCE = Quality(1.0, 32, 32)
+"""The most accurate setting measured: every other setting's error against it is its error against `final`."""
+
+PRESET_RULES = {"final": 45.0, "preview": 35.0, "draft": 25.0}
+"""Each preset is the fastest setting on the Pareto front whose PSNR against the reference is at least this
+(dB): 45 dB is an error under 0.6% of the range (invisible), 35 dB under 2% (a flicker at edges), 25 dB a
+blurred but faithful picture."""
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    out: Path = Path("out/bench")
+    """Folder for results.json, the charts, the capture and the avatars it trains."""
+    quick: bool = False
+    """Under 5 minutes on a 2-core CPU: a 64 px capture, 25 s of training per effect set, 3 test frames."""
+    dataset: Path | None = None
+    """A capture with a test split; by default a `sun` capture of the built-in head is synthesized into OUT."""
+    avatars: tuple[Path, ...] = ()
+    """Trained avatars of that capture whose rendering is measured (one per effect set); by default the ones
+    the training curves train."""
+    nerface: Path | None = None
+    """A trained NerFACE avatar of the capture (timed and measured); by default an untrained one of the
+    published size is timed (its weights do not change the work)."""
+    train_seconds: float | None = None
+    """Training seconds per effect set for the training curves (default 300; quick: 25)."""
+    size: int | None = None
+    """Image width and height, pixels (default 128; quick: 64)."""
+    test_frames: int | None = None
+    """Held-out test frames measured per setting (default 6; quick: 3)."""
+    store_presets: bool = True
+    """Write the chosen presets into each measured avatar (presets.json)."""
+
+
+def effects_name(effects: list[str]) -> str:
+    """none, all, or the effects joined by +."""
+    return "none" if not effects else "all" if tuple(effects) == EFFECTS else "+".join(effects)
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, torch {torch.__version__} with {torch.get_num_threads()} threads"
+
+
+def pareto(points: list[tuple[float, float]]) -> list[bool]:
+    """For (time, error) points, whether each is on the Pareto front: no other point is as fast and as
+    accurate and strictly better in one of the two.
+
+    >>> pareto([(1.0, 5.0), (2.0, 3.0), (3.0, 4.0), (2.0, 3.0), (0.5, 9.0)])
+    [True, True, False, True, True]
+    """
+    front = []
+    for i, (t, e) in enumerate(points):
+        front.append(not any(t2 <= t and e2 <= e and (t2 < t or e2 < e)
+                             for j, (t2, e2) in enumerate(points) if j != i))
+    return front
+
+
+def choose_presets(rows: list[dict]) -> dict[str, dict]:
+    """The presets from one avatar's rows (each with ms, psnr_vs_reference, on_front): for each preset the
+    fastest front setting that reaches its PSNR threshold against the reference (the reference itself if
+    none does)."""
+    front = [r for r in rows if r["on_front"]]
+    chosen = {}
+    for name in PRESET_NAMES:
+        good = [r for r in front if r["psnr_vs_reference"] >= PRESET_RULES[name]]
+        chosen[name] = min(good, key=lambda r: r["ms"]) if good else max(rows, key=lambda r: r["psnr_vs_reference"])
+    return chosen
+
+
+def upsample(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """A smaller render shown at the full size (bilinear, as the studio's texture filter does)."""
+    if img.shape[:2] == size:
+        return img
+    return cv2.resize(img, (size[1], size[0]), interpolation=cv2.INTER_LINEAR)
+
+
+class TestFrames:
+    """The held-out frames a bench measures: cameras at the bench size, ground truth and face masks."""
+
+    def __init__(self, dataset: Path, count: int, size: int, background: np.ndarray):
+        split = load_split(dataset, "test")
+        if not split.frames:
+            raise UserInputError(f"{dataset}: the capture has no test frames to measure on")
+        pick = np.unique(np.linspace(0, len(split.frames) - 1, min(count, len(split.frames))).round().astype(int))
+        self.frames = [split.frames[i] for i in pick]
+        self.cameras, self.truth, self.face = [], [], []
+        for f in self.frames:
+            cam = camera_of(split, f.camera_to_world)
+            scale = size / cam.width_px
+            self.cameras.append(replace(cam, width_px=size, height_px=round(cam.height_px * scale)))
+            truth = load_rgb(f.image_path, background)
+            hw = (self.cameras[-1].height_px, size)
+            self.truth.append(upsample(truth, hw))
+            self.face.append(cv2.resize(face_mask_of(f, truth.shape).astype(np.uint8), (hw[1], hw[0]),
+                                        interpolation=cv2.INTER_NEAREST).astype(bool))
+
+
+def measure(avatar: Avatar | NerfaceAvatar, quality: Quality, frames: TestFrames, raster: Rasterizer
+            ) -> tuple[dict, list[np.ndarray]]:
+    """Time per frame (median over the frames, after one warm-up render) and errors against the ground truth of
+    one setting; the renders at full size."""
+    images, times = [], []
+    for i, (f, cam) in enumerate(zip(frames.frames, frames.cameras, strict=True)):
+        size = quality.apply(avatar, cam.width_px)
+        c = replace(cam, width_px=size, height_px=max(8, round(cam.height_px * size / cam.width_px)))
+        if i == 0:
+            avatar.render_image(f.controls, c, raster)
+        t0 = time.perf_counter()
+        out = avatar.render_image(f.controls, c, raster)
+        times.append(time.perf_counter() - t0)
+        images.append(upsample(out["rgb"], frames.truth[i].shape[:2]))
+    finite = all(bool(np.isfinite(im).all()) for im in images)
+    row = {"ms": round(1e3 * float(np.median(times)), 1), "finite": finite,
+           "psnr": round(float(np.mean([psnr(im, t) for im, t in zip(images, frames.truth, strict=True)])), 3),
+           "face_mse": round(float(np.mean([face_mse(im, t, m) for im, t, m in
+                                            zip(images, frames.truth, frames.face, strict=True)])), 6)}
+    return row, images
+
+
+def mean_psnr(images: list[np.ndarray], reference: list[np.ndarray]) -> float:
+    return round(float(np.mean([min(psnr(a, b), 99.0) for a, b in zip(images, reference, strict=True)])), 3)
+
+
+def training_curve(dataset: Path, effects: str, out: Path, seconds: float, frames: TestFrames, gl: GLContext,
+                   points: int = 8) -> list[dict]:
+    """Train an avatar for `seconds` of training time (evaluation not counted), measuring test PSNR at
+    `points` even times; the avatar is saved in `out` (a real checkpoint, measured afterwards)."""
+    trainer = Trainer(TrainConfig(dataset=dataset, out=out, effects=effects, minutes=seconds / 60), gl)
+    raster = Rasterizer(gl)
+    curve, trained, next_eval = [], 0.0, 0.0
+    bar = tqdm(total=round(seconds), desc=f"training {effects}", unit="s", leave=False, mininterval=1.0,
+               disable=not sys.stderr.isatty(), bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt} s")
+    while True:
+        if trained >= next_eval or trained >= seconds:
+            trainer.avatar.eval()
+            with torch.no_grad():
+                row, _ = measure(trainer.avatar, Quality(), frames, raster)
+            trainer.avatar.train()
+            curve.append({"seconds": round(trained, 1), "step": trainer.step, "psnr": row["psnr"],
+                          "face_mse": row["face_mse"]})
+            next_eval += seconds / points
+        if trained >= seconds:
+            break
+        t0 = time.perf_counter()
+        trainer.train_step(trained / seconds)
+        dt = time.perf_counter() - t0
+        trained += dt
+        bar.update(min(dt, seconds - bar.n))
+    bar.close()
+    trainer.elapsed = trained
+    trainer.save()
+    raster.release()
+    return curve
+
+
+def run_bench(cfg: BenchConfig) -> int:
+    quick = cfg.quick
+    size = cfg.size or (64 if quick else 128)
+    seconds = cfg.train_seconds if cfg.train_seconds is not None else (25.0 if quick else 300.0)
+    n_test = cfg.test_frames or (3 if quick else 6)
+    out = cfg.out
+    out.mkdir(parents=True, exist_ok=True)
+    gl = GLContext.headless()
+    t_start = time.perf_counter()
+    dataset = cfg.dataset or synthesize_capture(out / "capture", quick, gl)
+    bg_split = load_split(dataset, "train")
+    background = bg_split.background if isinstance(bg_split.background, np.ndarray) else np.ones(3, np.float32)
+    frames = TestFrames(dataset, n_test, size, background)
+    print(f"bench on {dataset}: {len(frames.frames)} test frames at {size} px; {machine()}", flush=True)
+
+    curves = {}
+    trained_dirs = []
+    for effects in EFFECT_SETS:
+        name = effects.replace(",", "+")
+        folder = out / "avatars" / name
+        if (folder / "avatar.json").exists():
+            raise UserInputError(f"{folder}: already holds an avatar; choose a new --out folder")
+        curves[name] = training_curve(dataset, effects, folder, seconds, frames, gl)
+        trained_dirs.append(folder)
+        print(f"trained {name}: test PSNR {curves[name][-1]['psnr']:.2f} dB after {seconds:.0f} s", flush=True)
+
+    raster = Rasterizer(gl)
+    rows: list[dict] = []
+    chosen: dict[str, dict] = {}
+    for path in cfg.avatars or trained_dirs:
+        avatar, meta = load_avatar(path)
+        if not isinstance(avatar, Avatar):
+            raise UserInputError(f"{path}: a NerFACE avatar; pass it with --nerface")
+        effects = effects_name(meta["effects"])
+        ref_row, ref_images = measure(avatar, REFERENCE, frames, raster)
+        avatar_rows = []
+        for q in tqdm([*SETTINGS, REFERENCE], desc=f"settings {effects}", leave=False,
+                      disable=not sys.stderr.isatty()):
+            row, images = (ref_row, ref_images) if q == REFERENCE else measure(avatar, q, frames, raster)
+            avatar_rows.append({"avatar": str(path), "effects": effects, "setting": asdict(q),
+                                "label": q.describe(), "image_px": size, **row,
+                                "psnr_vs_reference": mean_psnr(images, ref_images), "_images": images})
+        front = pareto([(r["ms"], -r["psnr_vs_reference"]) for r in avatar_rows])
+        for r, f in zip(avatar_rows, front, strict=True):
+            r["on_front"] = f
+        picks = choose_presets(avatar_rows)
+        final_images = picks["final"]["_images"]
+        presets = {}
+        for name, r in picks.items():
+            r.setdefault("presets", []).append(name)
+            presets[name] = Preset(Quality(**r["setting"]), r["ms"], mean_psnr(r["_images"], final_images),
+                                   r["psnr"], r["face_mse"])
+        for r in avatar_rows:
+            r["psnr_vs_final"] = mean_psnr(r["_images"], final_images)
+            del r["_images"]
+        chosen[effects] = {k: asdict(p) for k, p in presets.items()}
+        if cfg.store_presets:
+            save_presets(path, presets, {"machine": machine(), "image_px": size, "dataset": str(dataset),
+                                         "test_frames": len(frames.frames), "command": " ".join(sys.argv)})
+        rows += avatar_rows
+        print(f"{effects}: presets " + ", ".join(f"{k} = {r['label']} ({r['ms']:.0f} ms)" for k, r in picks.items()),
+              flush=True)
+
+    nerface_row = measure_nerface(cfg.nerface, dataset, frames, raster, quick)
+    for r in rows:
+        r["nerface_over"] = round(nerface_row["ms"] / max(r["ms"], 1e-9), 1)
+    results = {"machine": machine(), "command": " ".join(["avatar-studio", *sys.argv[1:]]), "dataset": str(dataset),
+               "image_px": size, "test_frames": [f.index for f in frames.frames], "reference": asdict(REFERENCE),
+               "preset_rules_db": PRESET_RULES, "rows": rows, "nerface": nerface_row, "presets": chosen,
+               "training_curves": curves, "train_seconds": seconds,
+               "bench_seconds": round(time.perf_counter() - t_start, 1)}
+    tmp = out / "results.json.tmp"
+    tmp.write_text(json.dumps(results, indent=1) + "\n")
+    os.replace(tmp, out / "results.json")
+    from app.bench_charts import draw_charts
+
+    for p in draw_charts(results, out):
+        print(f"wrote {p}")
+    print(f"wrote {out / 'results.json'} in {results['bench_seconds']:.0f} s")
+    raster.release()
+    return 0
+
+
+def synthesize_capture(folder: Path, quick: bool, gl: GLContext) -> Path:
+    """A sun capture of the built-in head (hard light: shading, highlights and cast shadows), made once."""
+    from models.head.sources import load_builtin
+    from models.synthetic import SynthConfig, synthesize
+
+    if (folder / "dataset.json").exists():
+        return folder
+    partial = folder.with_name(folder.name + ".partial")
+    if partial.exists():
+        import shutil
+
+        shutil.rmtree(partial)
+    print(f"synthesizing a capture into {folder}", flush=True)
+    synthesize(SynthConfig(scene="sun", frames=60 if quick else 300, size=64 if quick else 128, out=partial),
+               load_builtin(), gl)
+    partial.rename(folder)
+    return folder
+
+
+def measure_nerface(path: Path | None, dataset: Path, frames: TestFrames, raster: Rasterizer, quick: bool) -> dict:
+    """The dense renderer at the bench's size: its time per frame, and its errors if it was trained."""
+    if path is not None:
+        avatar, _ = load_avatar(path)
+        if not isinstance(avatar, NerfaceAvatar):
+            raise UserInputError(f"{path}: --nerface needs a NerFACE avatar (avatar-studio train --model nerface)")
+    else:
+        head = load_head(load_split(dataset, "train").head_model)
+        avatar = NerfaceAvatar(head, NerfaceConfig(), 1, np.ones(3, np.float32)).eval()
+    few = TestFrames.__new__(TestFrames)
+    n = 1 if quick or path is None else 2
+    few.frames, few.cameras, few.truth, few.face = (x[:n] for x in (frames.frames, frames.cameras, frames.truth,
+                                                                    frames.face))
+    images, times = [], []
+    for f, cam in zip(few.frames, few.cameras, strict=True):
+        t0 = time.perf_counter()
+        with torch.inference_mode():
+            images.append(avatar.render_image(f.controls, cam, raster, frame=None)["rgb"])
+        times.append(time.perf_counter() - t0)
+    row = {"trained": path is not None, "ms": round(1e3 * float(np.median(times)), 1), "frames": n,
+           "setting": f"{avatar.cfg.coarse_samples}+{avatar.cfg.fine_samples} samples, 8x{avatar.cfg.width} MLPs"}
+    if path is not None:
+        row["psnr"] = round(float(np.mean([psnr(a, b) for a, b in zip(images, few.truth, strict=True)])), 3)
+        row["face_mse"] = round(float(np.mean([face_mse(a, b, m) for a, b, m in
+                                               zip(images, few.truth, few.face, strict=True)])), 6)
+    print(f"NerFACE dense renderer: {row['ms'] / 1e3:.1f} s per {frames.cameras[0].width_px} px frame", flush=True)
+    return row

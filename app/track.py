@@ -1,0 +1,301 @@
+"""`avatar-studio track`: a monocular video of one face -> a capture dataset that `train` accepts.
+
+Frames are decoded at a chosen rate; MediaPipe's face landmarker finds 478 landmarks, blendshape scores and
+a head pose in each; one face-centred square crop serves every frame (fixed intrinsics); the head model is
+fitted (identity once, then per frame head pose, jaw and expression, from landmark reprojection with temporal
+smoothness; gaze from the blendshape scores); GrabCut cuts a foreground mask per frame; the last part of the
+video is held out as the test split. A report says how well it went before anyone spends time training:
+landmark reprojection error per frame, frames dropped and why, and an overlay video of the fitted mesh.
+
+Everything is written to OUT.partial and renamed to OUT only when complete.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import sys
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from app.errors import UserInputError
+from models.dataset import write_split
+from models.head.controls import controls_to_dict
+from models.head.head import Head
+from models.head.sources import load_head
+from models.synthetic import write_png8
+from models.tracking.blendshapes import expression_from_scores, gaze_from_scores, jaw_from_scores
+from models.tracking.canonical import canonical_face_mesh
+from models.tracking.correspond import correspond, skin_vertices
+from models.tracking.fit import FitConfig, Intrinsics, fit, project
+from models.tracking.landmarker import Face, Landmarker
+from models.tracking.masks import foreground_mask
+from models.tracking.video import face_crop, sampled_frames, video_info
+from render.video import write_video
+
+
+@dataclass(frozen=True)
+class TrackConfig:
+    video: Path
+    """The video of one face (any format OpenCV decodes: mp4, mov, webm...)."""
+    out: Path
+    """Dataset folder to create (must not exist)."""
+    head: str = "builtin"
+    """HEAD: builtin, ict:PATH or flame:PATH."""
+    landmarker: Path | None = None
+    """MediaPipe's face landmarker bundle (face_landmarker_v2_with_blendshapes.task, from MediaPipe's model
+    page); default: $AVATAR_STUDIO_LANDMARKER."""
+    fps: float = 10.0
+    """Frames a second taken from the video."""
+    size: int = 256
+    """Width and height of the dataset's images, pixels."""
+    fov_deg: float = 40.0
+    """Horizontal field of view of the video's full frame, degrees (a guess unless you know your camera)."""
+    test_fraction: float = 0.1
+    """The last part of the video held out as the test split."""
+    iterations: int = 400
+    """Fitting iterations (all frames at once)."""
+    shape_components: int = 20
+    """Identity components fitted (0: the head model's mean shape)."""
+    smooth: float = 1.0
+    """Scale of the frame-to-frame smoothness of pose and expression (0 for frames that are not a continuous
+    motion, such as a set of photographs)."""
+    blur: float = 0.3
+    """Frames whose face is sharper than this fraction of the video's median sharpness are kept."""
+    overlay: bool = True
+    """Write tracking/overlay.mp4: the fitted mesh over the frames."""
+
+
+def landmarker_path(cfg: TrackConfig) -> Path:
+    import os
+
+    path = cfg.landmarker or (Path(os.environ["AVATAR_STUDIO_LANDMARKER"])
+                              if os.environ.get("AVATAR_STUDIO_LANDMARKER") else None)
+    if path is None:
+        raise UserInputError("no face landmarker bundle: pass --landmarker PATH to MediaPipe's "
+                             "face_landmarker_v2_with_blendshapes.task (or set AVATAR_STUDIO_LANDMARKER)")
+    return path
+
+
+def detect_faces(cfg: TrackConfig, bundle: Path, progress) -> tuple[list[dict], list[dict], int]:
+    """Landmarks of the one face in each sampled frame; frames without a face are dropped (with the reason).
+    Several faces in more than a tenth of the frames is an error: track needs a video of one person."""
+    info = video_info(cfg.video)
+    expected = max(1, round(info.frames * min(cfg.fps / info.fps, 1.0))) if info.frames > 0 else None
+    kept, dropped, several, read = [], [], 0, 0
+    with Landmarker(bundle, max_faces=2) as landmarker:
+        for index, t, rgb in sampled_frames(cfg.video, cfg.fps):
+            read += 1
+            faces = landmarker.detect(rgb, round(1000 * t))
+            if not faces:
+                dropped.append({"source_frame": index, "time_s": round(t, 3), "reason": "no face found"})
+            else:
+                if len(faces) > 1:
+                    several += 1
+                face = max(faces, key=lambda f: np.ptp(f.landmarks_px[:, 0]))
+                kept.append({"source_frame": index, "time_s": t, "rgb": rgb, "face": face})
+            progress(read, expected)
+    if read == 0:
+        raise UserInputError(f"{cfg.video}: no frames could be decoded")
+    if several > 0.1 * read:
+        raise UserInputError(f"{cfg.video}: several people (two or more faces in {several} of {read} frames); "
+                             "track needs a video of one face")
+    if len(kept) < 10:
+        raise UserInputError(f"{cfg.video}: a face was found in only {len(kept)} of {read} frames "
+                             "(at least 10 are needed)")
+    return kept, dropped, read
+
+
+def sharpness(rgb: np.ndarray, landmarks_px: np.ndarray) -> float:
+    """Variance of the Laplacian over the face's box (grey levels): low for motion blur and defocus."""
+    lo = np.clip(landmarks_px.min(0).astype(int), 0, None)
+    hi = landmarks_px.max(0).astype(int)
+    grey = cv2.cvtColor(rgb[lo[1]:hi[1], lo[0]:hi[0]], cv2.COLOR_RGB2GRAY)
+    return float(cv2.Laplacian(grey, cv2.CV_64F).var()) if grey.size else 0.0
+
+
+def split_of(k: int, n: int, n_test: int) -> str:
+    if k >= n - n_test:
+        return "test"
+    return "val" if k % 20 == 10 else "train"
+
+
+def run_track(cfg: TrackConfig) -> int:
+    t_start = time.perf_counter()
+    if cfg.out.exists():
+        raise UserInputError(f"{cfg.out}: already exists; choose a new dataset folder")
+    if not 32 <= cfg.size <= 2048:
+        raise UserInputError(f"--size {cfg.size}: must be 32..2048 pixels")
+    if not 0 < cfg.fov_deg < 170:
+        raise UserInputError(f"--fov-deg {cfg.fov_deg}: must be between 0 and 170 degrees")
+    bundle = landmarker_path(cfg)
+    model = load_head(cfg.head)
+    canonical, _ = canonical_face_mesh(bundle)
+    corr = correspond(model, canonical)
+    tty = sys.stderr.isatty()
+    bar = tqdm(desc="landmarks", unit="frame", disable=not tty)
+
+    def progress(done: int, total: int | None) -> None:
+        if tty:
+            bar.total = total
+            bar.n = done
+            bar.refresh()
+        elif done % 25 == 0:  # a log (the studio's job list shows its last line)
+            print(f"landmarks: {done}" + (f" of about {total}" if total else "") + " frames", flush=True)
+
+    info = video_info(cfg.video)
+    kept, dropped, read = detect_faces(cfg, bundle, progress)
+    bar.close()
+    t_landmarks = time.perf_counter() - t_start
+    # Blur: the face's sharpness against the video's median.
+    sharp = np.array([sharpness(f["rgb"], f["face"].landmarks_px) for f in kept])
+    limit = cfg.blur * float(np.median(sharp))
+    for f, s in zip(list(kept), sharp, strict=True):
+        if s < limit:
+            kept.remove(f)
+            dropped.append({"source_frame": f["source_frame"], "time_s": round(f["time_s"], 3),
+                            "reason": f"blurred (sharpness {s:.0f} < {limit:.0f})"})
+    if len(kept) < 10:
+        raise UserInputError(f"{cfg.video}: only {len(kept)} sharp frames with a face (at least 10 are needed)")
+    print(f"{cfg.video}: {len(kept)} of {read} frames kept ({len(dropped)} dropped) in {t_landmarks:.1f} s",
+          flush=True)
+
+    crop = face_crop([f["face"].landmarks_px for f in kept], cfg.size, (info.width, info.height))
+    f_full = 0.5 * info.width / math.tan(math.radians(cfg.fov_deg) / 2)
+    cx, cy = crop.points(np.array([info.width / 2, info.height / 2], np.float32))
+    k = Intrinsics(f_full * crop.scale, f_full * crop.scale, float(cx), float(cy))
+    faces: list[Face] = [f["face"] for f in kept]
+    targets = np.stack([crop.points(f.landmarks_px[corr.mp_ids]) for f in faces])
+    init_expr = np.stack([expression_from_scores(model, f.blendshapes) for f in faces])
+    init_jaw = np.stack([jaw_from_scores(f.blendshapes) for f in faces])
+    gaze = np.stack([gaze_from_scores(f.blendshapes) for f in faces])
+    print(f"fitting {model.name} to {len(kept)} frames...", flush=True)
+    base = FitConfig()
+    fit_cfg = replace(base, iterations=cfg.iterations, shape_components=cfg.shape_components,
+                      smooth_rotation=base.smooth_rotation * cfg.smooth,
+                      smooth_translation=base.smooth_translation * cfg.smooth,
+                      smooth_expression=base.smooth_expression * cfg.smooth)
+    result = fit(model, corr.vertex_ids, targets, k, init_expr, init_jaw, gaze, fit_cfg)
+    print(f"fitted {model.name} to {len(kept)} frames ({len(corr.mp_ids)} landmarks) in {result.seconds:.1f} s",
+          flush=True)
+
+    # The error that counts: the full head model's forward pass with the fitted controls, projected.
+    head = Head(model)
+    with torch.inference_mode():
+        verts = head.pose(result.controls)[0]
+    pixels = project(verts, k).numpy()
+    errors = np.linalg.norm(pixels[:, corr.vertex_ids] - targets, axis=-1)
+
+    partial = cfg.out.with_name(cfg.out.name + ".partial")
+    if partial.exists():
+        shutil.rmtree(partial)
+    (partial / "images").mkdir(parents=True)
+    (partial / "masks").mkdir()
+    (partial / "tracking").mkdir()
+    print("cutting masks...", flush=True)
+    t_masks = time.perf_counter()
+    crops, masks = [], []
+    for f, face in zip(kept, faces, strict=True):
+        img = crop.image(f["rgb"])
+        crops.append(img)
+        masks.append(foreground_mask(img, crop.points(face.landmarks_px[:468])))
+    t_masks = time.perf_counter() - t_masks
+    fg_pixels = np.concatenate([c[m < 0.5] for c, m in zip(crops, masks, strict=True)])
+    background = (np.median(fg_pixels, 0) / 255.0 if len(fg_pixels) else np.full(3, 0.5)).astype(np.float32)
+    n_test = max(1, math.ceil(cfg.test_fraction * len(kept)))
+    header = {"camera_angle_x": 2 * math.atan(0.5 * cfg.size / k.fx), "intrinsics": [k.fx, k.fy, k.cx, k.cy],
+              "width": cfg.size, "height": cfg.size, "head_model": head_spec(cfg.head),
+              "shape": result.shape.tolist(), "background": background.tolist(),
+              "source": {"video": str(cfg.video.resolve()), "fps": cfg.fps, "fov_deg": cfg.fov_deg,
+                         "crop": {"x0": crop.x0, "y0": crop.y0, "side": crop.side}}}
+    splits: dict[str, list[dict]] = {"train": [], "val": [], "test": []}
+    per_frame = []
+    for j, (f, img, mask, c) in enumerate(zip(kept, crops, masks, result.controls, strict=True)):
+        name = f"{j:04d}.png"
+        composite = img / 255.0 * mask[..., None] + background * (1 - mask[..., None])
+        write_png8(partial / "images" / name, composite)
+        write_png8(partial / "masks" / name, mask)
+        lm = crop.points(f["face"].landmarks_px[:468])
+        lo, hi = lm.min(0), lm.max(0)
+        pad = 0.1 * (hi - lo)
+        lo, hi = np.clip((lo - pad) / cfg.size, 0, 1), np.clip((hi + pad) / cfg.size, 0, 1)
+        split = split_of(j, len(kept), n_test)
+        splits[split].append({
+            "file_path": f"images/{name}", "mask_path": f"masks/{name}", "transform_matrix": np.eye(4).tolist(),
+            "expression": c.expression.tolist(),
+            "controls": {key: v for key, v in controls_to_dict(c).items() if key != "shape"},
+            "bbox": [float(lo[1]), float(hi[1]), float(lo[0]), float(hi[0])],
+            "source_frame": f["source_frame"]})
+        e = errors[j]
+        per_frame.append({"frame": j, "split": split, "source_frame": f["source_frame"],
+                          "time_s": round(f["time_s"], 3), "median_px": round(float(np.median(e)), 3),
+                          "p95_px": round(float(np.percentile(e, 95)), 3)})
+    for split, frames in splits.items():
+        write_split(partial, split, header, frames)
+    overlay_path = None
+    if cfg.overlay:
+        overlay_path = partial / "tracking" / "overlay.mp4"
+        write_video((overlay(img, pixels[j], model, targets[j], pixels[j][corr.vertex_ids])
+                     for j, img in enumerate(crops)), overlay_path, fps=cfg.fps)
+    total = time.perf_counter() - t_start
+    report = {
+        "video": str(cfg.video), "head_model": head_spec(cfg.head), "frames_read": read, "frames_kept": len(kept),
+        "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
+        "landmarks_used": len(corr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
+        "fov_deg": cfg.fov_deg,
+        "landmark_error_px": {"median": round(float(np.median(errors)), 3),
+                              "p95": round(float(np.percentile(errors, 95)), 3),
+                              "worst_frame_median": round(float(max(p["median_px"] for p in per_frame)), 3)},
+        "seconds": {"landmarks": round(t_landmarks, 2), "fit": round(result.seconds, 2), "masks": round(t_masks, 2),
+                    "total": round(total, 2)},
+        "seconds_per_frame": round(total / read, 4), "per_frame": per_frame,
+    }
+    (partial / "tracking" / "report.json").write_text(json.dumps(report, indent=1) + "\n")
+    partial.rename(cfg.out)
+    le = report["landmark_error_px"]
+    print(f"wrote {cfg.out}: {report['splits']['train']} train, {report['splits']['val']} val, "
+          f"{report['splits']['test']} test frames; landmark error median {le['median']:.2f} px, "
+          f"95th percentile {le['p95']:.2f} px ({cfg.size} px images); {total:.1f} s "
+          f"({report['seconds_per_frame']:.3f} s a frame)"
+          + (f"; overlay {cfg.out / 'tracking' / 'overlay.mp4'}" if overlay_path else ""))
+    return 0
+
+
+def head_spec(spec: str) -> str:
+    """ict:/flame: paths made absolute, so the dataset names its head model wherever it is opened from."""
+    kind, sep, arg = spec.partition(":")
+    return f"{kind}:{Path(arg).resolve()}" if sep and kind in ("ict", "flame") else spec
+
+
+_EDGES: dict[int, np.ndarray] = {}
+
+
+def overlay(img: np.ndarray, verts_px: np.ndarray, model, targets: np.ndarray, fitted: np.ndarray) -> np.ndarray:
+    """The frame with the fitted skin's wireframe (every other triangle, those facing the camera), the landmarks
+    (green) and where the fitted head puts them (red)."""
+    key = id(model)
+    if key not in _EDGES:
+        skin = np.zeros(len(model.template), bool)
+        skin[skin_vertices(model)] = True
+        _EDGES[key] = model.triangles[skin[model.triangles].all(1)][::2]
+    out = img.copy()
+    wire = img.copy()
+    tri = verts_px[_EDGES[key]]  # (T,3,2)
+    # Triangles facing the camera wind clockwise in image coordinates (y down): draw only those.
+    a, b = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    facing = (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) < 0
+    seg = tri[facing].round().astype(np.int32)
+    cv2.polylines(wire, list(seg), True, (255, 255, 255), 1, cv2.LINE_AA)
+    out = cv2.addWeighted(wire, 0.35, out, 0.65, 0)
+    for p in targets.round().astype(int):
+        cv2.circle(out, tuple(p), 1, (0, 255, 0), -1)
+    for p in fitted.round().astype(int):
+        cv2.circle(out, tuple(p), 1, (255, 0, 0), -1)
+    return out

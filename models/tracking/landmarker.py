@@ -1,0 +1,65 @@
+"""MediaPipe's face landmarker on video frames: 478 landmarks (468 mesh points + 10 iris points), 52
+ARKit-named blendshape scores and a head pose per face, offline from the model bundle the user supplies."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from models.tracking.canonical import BundleError
+
+
+@dataclass(frozen=True)
+class Face:
+    landmarks_px: np.ndarray  # (478,2) pixels in the frame it was found in
+    depth: np.ndarray  # (478,) MediaPipe's relative depth (image-width units)
+    blendshapes: dict[str, float]  # ARKit names -> score in [0,1]
+    pose: np.ndarray  # (4,4) MediaPipe's facial transformation matrix (canonical face -> its camera, cm)
+
+
+class Landmarker:
+    """A face landmarker in video mode (frames in time order). Use as a context manager: it closes itself."""
+
+    def __init__(self, bundle: str | Path, max_faces: int = 2):
+        try:
+            import mediapipe as mp
+            from mediapipe.tasks.python import BaseOptions, vision
+        except ImportError as e:  # the set-up installs it; a clear message where it did not
+            raise BundleError(f"mediapipe is not installed ({e}); run the set-up (make setup)") from None
+        bundle = Path(bundle)
+        if not bundle.is_file():
+            raise BundleError(f"{bundle}: no such landmarker bundle (MediaPipe's face_landmarker*.task)")
+        self._mp = mp
+        options = vision.FaceLandmarkerOptions(
+            base_options=BaseOptions(model_asset_path=str(bundle)), running_mode=vision.RunningMode.VIDEO,
+            num_faces=max_faces, output_face_blendshapes=True, output_facial_transformation_matrixes=True)
+        try:
+            self._landmarker = vision.FaceLandmarker.create_from_options(options)
+        except (RuntimeError, ValueError) as e:
+            raise BundleError(f"{bundle}: MediaPipe cannot load it as a face landmarker ({e})") from None
+
+    def detect(self, rgb: np.ndarray, time_ms: int) -> list[Face]:
+        """The faces in one (H,W,3) uint8 RGB frame; time_ms must increase from call to call."""
+        h, w = rgb.shape[:2]
+        image = self._mp.Image(image_format=self._mp.ImageFormat.SRGB, data=np.ascontiguousarray(rgb))
+        result = self._landmarker.detect_for_video(image, int(time_ms))
+        faces = []
+        for k, lms in enumerate(result.face_landmarks):
+            xyz = np.array([(p.x, p.y, p.z) for p in lms], np.float32)
+            shapes = {c.category_name: float(c.score) for c in result.face_blendshapes[k]}
+            pose = np.asarray(result.facial_transformation_matrixes[k], np.float32).reshape(4, 4)
+            faces.append(Face(xyz[:, :2] * np.array([w, h], np.float32), xyz[:, 2], shapes, pose))
+        return faces
+
+    def close(self) -> None:
+        if self._landmarker is not None:
+            self._landmarker.close()
+            self._landmarker = None
+
+    def __enter__(self) -> Landmarker:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
