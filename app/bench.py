@@ -75,7 +75,8 @@ class BenchConfig:
     """A trained NerFACE avatar of the capture (timed and measured); by default an untrained one of the
     published size is timed (its weights do not change the work)."""
     train_seconds: float | None = None
-    """Training seconds per effect set for the training curves (default 300; quick: 25)."""
+    """Training seconds per effect set for the training curves (default 300; quick: 25; 0: no curves, measure
+    the --avatars only)."""
     size: int | None = None
     """Image width and height, pixels (default 128; quick: 64)."""
     test_frames: int | None = None
@@ -230,7 +231,9 @@ def run_bench(cfg: BenchConfig) -> int:
 
     curves = {}
     trained_dirs = []
-    for effects in EFFECT_SETS:
+    if seconds <= 0 and not cfg.avatars:
+        raise UserInputError("--train-seconds 0 measures given avatars only: pass --avatars")
+    for effects in EFFECT_SETS if seconds > 0 else ():
         name = effects.replace(",", "+")
         folder = out / "avatars" / name
         if (folder / "avatar.json").exists():

@@ -33,6 +33,8 @@ class Job:
     """Track this video into `dataset` first (a "new avatar from video" job)."""
     head: str = "builtin"
     landmarker: Path | None = None
+    track_size: int = 256
+    """Image size of the tracked dataset, pixels."""
     stage: Literal["track", "train"] = "train"
     opened: bool = False
     """The studio opened the result (video jobs open theirs when done)."""
@@ -49,7 +51,7 @@ class Job:
     def command(self) -> list[str]:
         if self.stage == "track":
             cmd = [sys.executable, "-m", "app.cli", "track", str(self.video), "--out", str(self.dataset),
-                   "--head", self.head]
+                   "--head", self.head, "--size", str(self.track_size)]
             return cmd + (["--landmarker", str(self.landmarker)] if self.landmarker else [])
         cmd = [sys.executable, "-m", "app.cli", "train", str(self.dataset), "--out", str(self.out),
                "--model", self.model, "--effects", self.effects]
@@ -175,7 +177,8 @@ class JobQueue:
         """Queue a job that continues a cancelled or finished one from its checkpoint."""
         resume = (job.out / "avatar.json").exists()
         return self.submit(job.dataset, job.out, model=job.model, effects=job.effects, minutes=job.minutes,
-                           steps=job.steps, resume=resume, video=job.video, head=job.head, landmarker=job.landmarker)
+                           steps=job.steps, resume=resume, video=job.video, head=job.head, landmarker=job.landmarker,
+                           track_size=job.track_size)
 
     @staticmethod
     def status(job: Job) -> str:

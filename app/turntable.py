@@ -53,6 +53,11 @@ def apply_preset(avatar: Avatar | NerfaceAvatar, preset: str, size: int) -> int:
 
 def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:
     """A buffer of the neural render as (H,W,3) uint8 for display."""
+    if name == "shadow_change":  # what the pose's and expression's shadow inputs change: darker = shadowed
+        img = (0.5 + 2.0 * (buffers["rgb"] - buffers["rgb_no_shadows"]).mean(-1))[..., None].repeat(3, 2)
+        return (np.clip(img, 0, 1) * 255).round().astype(np.uint8)
+    if name == "shading":  # the render minus the render with every normal facing the viewer, signed about grey
+        return (np.clip(0.5 + 2.0 * (buffers["rgb"] - buffers["rgb_flat"]), 0, 1) * 255).round().astype(np.uint8)
     b = buffers[name]
     if name in ("normals", "grad_normals"):
         img = b * 0.5 + 0.5

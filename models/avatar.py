@@ -9,7 +9,7 @@ and are composited over the background (Eq. 1).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 import torch
@@ -94,6 +94,7 @@ class RayOutput:
     samples: RaySamples
     point_normal: torch.Tensor | None = None  # (R,S,3)
     point_grad_normal: torch.Tensor | None = None  # (R,S,3)
+    variants: dict[str, torch.Tensor] = field(default_factory=dict)  # name -> (R,3) colour under other inputs
 
 
 def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -> int:
@@ -170,11 +171,11 @@ def scatter_rays(parts: dict[str, list[torch.Tensor]], camera: Camera, idx: np.n
     """Images (H,W,...) from per-ray results computed in chunks for the flat pixel indices `idx`; pixels not
     rendered are background (rgb), 0 (opacity, normals) or inf (depth)."""
     H, W = camera.height_px, camera.width_px
-    fill = {"rgb": background, "depth": np.inf}
+    fill = {"rgb": background, "rgb_no_shadows": background, "rgb_flat": background, "depth": np.inf}
     out = {}
     for k, chunks in parts.items():
         values = torch.cat(chunks).float().cpu().numpy() if chunks else np.zeros((0,), np.float32)
-        channels = (3,) if k in ("rgb", "normals", "grad_normals") else ()
+        channels = () if k in ("opacity", "depth") else (3,)
         img = np.zeros((H * W, *channels), np.float32)
         img[:] = fill.get(k, 0.0)
         if len(idx):
@@ -252,6 +253,8 @@ class Avatar(nn.Module):
         stop_below: float = 0.0,
         fine: int = 0,
         samples: RaySamples | None = None,
+        variants: tuple[str, ...] = (),
+        neutral_landmarks: torch.Tensor | None = None,
     ) -> RayOutput:
         """Composited colour, opacity, depth (and normals) of R rays. dense_samples: ignore the mesh and
         spread that many samples over the head's box instead (the slow reference the shell sampler is
@@ -259,7 +262,10 @@ class Avatar(nn.Module):
         their pixel; skip_empty consults the occupancy grid; stop_below ends rays early (the front half of
         every ray first, the back half only where more than stop_below of the light gets through). fine: a
         second pass adds that many samples where the first pass's weights lie (inverse-transform sampling of
-        its weights) and renders all of them; samples: the intervals to use instead of the sampler's."""
+        its weights) and renders all of them; samples: the intervals to use instead of the sampler's.
+        variants: colours of the same samples under other appearance inputs, for inspection: "no_shadows" (the
+        shadow inputs of the neutral head, `neutral_landmarks` and no expression or pose offsets) and "flat"
+        (every normal turned to the viewer)."""
         rc = self.render_cfg
         if dense_samples:
             surface_t = torch.full_like(surface_t, float("inf"))
@@ -303,34 +309,56 @@ class Avatar(nn.Module):
         if fine > 0:
             union = fine_samples(samples, weights.detach(), fine, generator)
             return self.render_rays(origins, directions, surface_t, geo, omega, phi, generator, create_graph,
-                                    min_weight=min_weight, skip_empty=skip_empty, samples=union)
+                                    min_weight=min_weight, skip_empty=skip_empty, samples=union, variants=variants,
+                                    neutral_landmarks=neutral_landmarks)
         # Colour where a sample shows (display may skip samples that add less than min_weight to a pixel).
         shown = torch.nonzero(weights.reshape(-1)[keep] > min_weight).squeeze(1) if min_weight > 0 else None
         view = (-directions[:, None]).expand(R, S, 3).reshape(-1, 3)[keep]
         phi_at = per_sample(phi, S)
-        if shown is not None:
-            g_shown = FieldOutput(g.sigma[shown], g.rgb[shown], g.x_canonical[shown],
-                                  None if g.normal is None else g.normal[shown])
-            rgb_k = g.rgb.new_zeros(len(keep), 3).index_copy(
-                0, shown, self.field.appearance(g_shown, prior_k.take(shown), view[shown], phi_at(keep[shown]),
-                                                geo.landmarks))
-        else:
-            rgb_k = self.field.appearance(g, prior_k, view, phi_at(keep), geo.landmarks)
-        rgb = composite(weights, scatter(rgb_k).reshape(R, S, 3), remaining, self.background)
+        if shown is None:
+            shown = torch.arange(len(keep), device=keep.device)
+        g_shown = FieldOutput(g.sigma[shown], g.rgb[shown], g.x_canonical[shown],
+                              None if g.normal is None else g.normal[shown])
+        prior_shown = prior_k.take(shown)
+
+        def colour(g_in: FieldOutput, prior_in: PriorSamples, landmarks: torch.Tensor) -> torch.Tensor:
+            rgb_in = self.field.appearance(g_in, prior_in, view[shown], phi_at(keep[shown]), landmarks)
+            return scatter(g.rgb.new_zeros(len(keep), 3).index_copy(0, shown, rgb_in)).reshape(R, S, 3)
+
+        extra = {}
+        for name in variants:
+            if name == "no_shadows":  # the shadow inputs of the neutral head: no expression, no pose
+                zero = torch.zeros_like(prior_shown.offset)
+                p_neutral = replace(prior_shown, expression_offset=zero, pose_offset=zero)
+                extra[name] = composite(weights, colour(g_shown, p_neutral, neutral_landmarks), remaining,
+                                        self.background)
+            elif name == "flat":  # every surface facing the viewer: the shading's contribution is what changes
+                g_flat = replace(g_shown, normal=view[shown])
+                extra[name] = composite(weights, colour(g_flat, prior_shown, geo.landmarks), remaining,
+                                        self.background)
+        rgb = composite(weights, colour(g_shown, prior_shown, geo.landmarks), remaining, self.background)
         normal = grad_normal = pn = pg = None
         if g.normal is not None:
             pn, pg = scatter(g.normal).reshape(R, S, 3), scatter(g.grad_normal).reshape(R, S, 3)
             normal, grad_normal = composite(weights, pn), composite(weights, pg)
         return RayOutput(rgb, weights.sum(-1), expected_depth(weights, samples.t_mid), normal, grad_normal, weights,
-                         sigma, samples, pn, pg)
+                         sigma, samples, pn, pg, extra)
+
+    def inspection_variants(self) -> tuple[str, ...]:
+        """The colour variants this avatar's effects make meaningful (see render_rays)."""
+        return (("no_shadows",) if "shadows" in self.field_cfg.effects else ()) + (
+            ("flat",) if self.field_cfg.needs_normals else ())
 
     # ---- images ----------------------------------------------------------------------------------------
     def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer,
                      frame: int | None = None, dense_samples: int | None = None,
-                     should_stop: Callable[[], bool] | None = None) -> dict[str, np.ndarray]:
+                     should_stop: Callable[[], bool] | None = None, inspect: bool = False) -> dict[str, np.ndarray]:
         """RGB, opacity, depth and (with normals) predicted and density-gradient normal maps, (H,W,...).
         `frame` picks a training frame's codes; None uses the mean code (novel controls). `should_stop` is
-        asked between batches of rays; when it says yes, RenderCancelled is raised (a newer request won)."""
+        asked between batches of rays; when it says yes, RenderCancelled is raised (a newer request won).
+        `inspect` adds, for avatars with those effects, "rgb_no_shadows" (the colour with the shadow inputs of
+        the neutral head) and "rgb_flat" (with every normal turned to the viewer), from which the viewport
+        shows the cast shadows and the shading's contribution."""
         geo = self.geometry(controls)
         raster = rasterizer.rasterize(geo.meshes.posed.cpu().numpy(), self.head_model.triangles, camera)
         origin, dirs = image_rays(camera)
@@ -347,6 +375,11 @@ class Avatar(nn.Module):
         parts: dict[str, list[torch.Tensor]] = {"rgb": [], "opacity": [], "depth": []}
         if self.field_cfg.needs_normals:
             parts |= {"normals": [], "grad_normals": []}
+        variants = self.inspection_variants() if inspect and not dense_samples else ()
+        neutral_landmarks = self.geometry(Controls(shape=controls.shape)).landmarks if "no_shadows" in variants \
+            else None
+        for v in variants:
+            parts[f"rgb_{v}"] = []
         grad_mode = torch.no_grad() if self.field_cfg.needs_normals else torch.inference_mode()
         with grad_mode, torch.autocast(d_all.device.type, torch.bfloat16, enabled=self.render_cfg.bf16):
             for a in range(0, len(idx), self.render_cfg.chunk_rays):
@@ -357,8 +390,11 @@ class Avatar(nn.Module):
                                      dense_samples=dense_samples, min_weight=self.render_cfg.min_weight,
                                      skip_empty=self.render_cfg.occupancy and not dense_samples,
                                      stop_below=0.0 if dense_samples else self.render_cfg.stop_below,
-                                     fine=0 if dense_samples else self.render_cfg.fine_samples)
+                                     fine=0 if dense_samples else self.render_cfg.fine_samples,
+                                     variants=variants, neutral_landmarks=neutral_landmarks)
                 parts["rgb"].append(r.rgb)
+                for v in variants:
+                    parts[f"rgb_{v}"].append(r.variants[v])
                 parts["opacity"].append(r.opacity)
                 parts["depth"].append(torch.where(r.opacity > 0.5, r.depth, torch.full_like(r.depth, np.inf)))
                 if r.normal is not None:

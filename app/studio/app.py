@@ -57,6 +57,8 @@ class Studio:
         self.worker = NeuralWorker()
         self.jobs = JobQueue()
         self.errors: list[str] = []
+        self.gui_ms: deque = deque(maxlen=240)
+        """Time the window's own Python code takes a frame (the rest of a frame is drawing and presenting)."""
         self.buffer = "rgb"
         self.guide_pass = "shaded"
         self.wireframe = False
@@ -113,11 +115,17 @@ class Studio:
         cam = self.view.camera(s.avatar.head_model.template, self.neural_size, self.neural_size)
         passes = ("draft", "preview", "final")[: ("draft", "preview", "final").index(self.refine_to) + 1]
         frame = self.timeline_frame if self.timeline_frame >= 0 else None
-        self.last_submit_id = self.worker.submit(Request(self.controls(), cam, passes, frame))
+        self.last_submit_id = self.worker.submit(Request(self.controls(), cam, passes, frame,
+                                                         inspect=self.buffer in viewport.INSPECT))
         self.last_submit_time = time.perf_counter()
         self.dirty = False
 
     def gui(self) -> None:
+        t0 = time.perf_counter()
+        self._gui()
+        self.gui_ms.append(1e3 * (time.perf_counter() - t0))
+
+    def _gui(self) -> None:
         if self.gl is None:
             self.gl = GLContext.from_current_window()
             self.viewport.init(self.gl)
@@ -205,6 +213,7 @@ class Studio:
         return {"fps_idle": round(self.clock.fps("idle"), 1), "fps_rendering": round(self.clock.fps("rendering"), 1),
                 "fps_training": round(self.clock.fps("training"), 1),
                 "frames": {k: len(v) for k, v in self.clock.times.items()},
+                "gui_ms_median": round(float(np.median(self.gui_ms)), 2) if self.gui_ms else None,
                 "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 1),
                 "last_pass": None if r is None else {"pass": r.pass_name, "ms": round(r.ms, 1)},
                 "presets": {"ms": self.worker.figures.ms, "psnr_vs_final": self.worker.figures.psnr_vs_final},

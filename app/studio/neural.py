@@ -29,6 +29,7 @@ class Request:
     camera: Camera  # at the final size; presets scale it
     passes: tuple[str, ...] = ("draft", "preview")
     frame: int | None = None  # a training frame's codes (timeline), or the mean code
+    inspect: bool = False  # also the colour variants behind the shadow and shading buffers
 
 
 @dataclass
@@ -142,8 +143,9 @@ class NeuralWorker:
             apply_preset(avatar, name, request.camera.width_px)
             cam = scaled(request.camera, presets_of(avatar)[name].quality.scale)
             t0 = time.perf_counter()
+            extra = {"inspect": True} if request.inspect and isinstance(avatar, Avatar) else {}
             buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
-                                          should_stop=lambda: self._stale(request_id))
+                                          should_stop=lambda: self._stale(request_id), **extra)
             ms = 1e3 * (time.perf_counter() - t0)
             with self._cv:
                 if self._stale(request_id):

@@ -10,7 +10,10 @@ pictures). Steps:
   {"wait_render": PRESET}                 until the latest request's pass PRESET is on screen
   {"save_neural": PNG} / {"screenshot": PNG}   the neural image as shown / the whole window
   {"train": {"dataset": D, "out": O, "steps": N, "effects": E, "model": M}}  queue a training job
+  {"from_video": {"video": V, "head": H, "landmarker": L, "out": O, "steps": N, "size": PX}}
+                                          queue a new avatar from a video (track, then train)
   {"wait_job": true}                      until no job is queued or running
+  {"expect_open": FOLDER}                 fail unless the open avatar is FOLDER
   {"open_job": true}                      open the last job's avatar
   {"cancel_jobs": true}                   cancel every job (running ones checkpoint first)
   {"export": {"out": MP4, "frames": N, "size": PX, "preset": P, "animate": false}}
@@ -132,6 +135,16 @@ class Script:
             t = s["train"]
             start(studio, t["dataset"], t["out"], t.get("model", "codynerf"), t.get("effects", "none"),
                   t.get("minutes"), t.get("steps"))
+        elif "from_video" in s:
+            from app.studio.jobs_panel import start_from_video
+
+            v = s["from_video"]
+            start_from_video(studio, v["video"], v.get("head", "builtin"), v["landmarker"], v["out"],
+                             v.get("effects", "none"), v.get("minutes"), v.get("steps"), int(v.get("size", 256)))
+        elif "expect_open" in s:
+            folder = studio.session.folder
+            if folder is None or Path(folder).resolve() != Path(s["expect_open"]).resolve():
+                return self._fail(f"open avatar is {studio.session.folder}, not {s['expect_open']}")
         elif "wait_job" in s:
             if self._waiting(not any(j.state in ("queued", "running") for j in studio.jobs.jobs)):
                 return

@@ -18,9 +18,21 @@ from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
 if TYPE_CHECKING:
     from app.studio.app import Studio
 
-BUFFERS = ("rgb", "normals", "grad_normals", "depth", "opacity")
+BUFFERS = ("rgb", "normals", "grad_normals", "depth", "opacity", "rgb_no_shadows", "shadow_change", "shading")
 BUFFER_LABELS = {"rgb": "RGB", "normals": "predicted normals", "grad_normals": "density-gradient normals",
-                 "depth": "depth", "opacity": "opacity"}
+                 "depth": "depth", "opacity": "opacity",
+                 "rgb_no_shadows": "RGB, shadow inputs of the neutral head",
+                 "shadow_change": "cast shadows (change from the neutral head's)",
+                 "shading": "shading contribution (render - normals to viewer)"}
+INSPECT = {"rgb_no_shadows": "no_shadows", "shadow_change": "no_shadows", "shading": "flat"}
+"""Buffers made from colour variants (Avatar.render_image(inspect=True)): which variant each needs."""
+
+
+def buffer_available(name: str, avatar, buffers: dict | None) -> bool:
+    """A plain buffer the last render has; an inspection buffer the avatar's effects make meaningful."""
+    if name in INSPECT:
+        return INSPECT[name] in getattr(avatar, "inspection_variants", tuple)()
+    return buffers is None or name in buffers
 
 
 class Viewport:
@@ -75,7 +87,8 @@ class Viewport:
         key = (r.request_id, r.pass_name, studio.buffer)
         if key == self.shown:
             return
-        name = studio.buffer if studio.buffer in r.buffers else "rgb"
+        needs = {"shadow_change": "rgb_no_shadows", "shading": "rgb_flat"}.get(studio.buffer, studio.buffer)
+        name = studio.buffer if needs in r.buffers else "rgb"
         img = buffer_image(r.buffers, name)
         with self.gl.current():
             self.neural_tex = self.texture(self.neural_tex, (img.shape[1], img.shape[0]))
@@ -89,6 +102,9 @@ def draw(studio: Studio) -> None:
     s = studio.session
     r = studio.worker.result
     imgui.text(f"interface {studio.clock.fps():.0f} fps")
+    if imgui.is_item_hovered() and studio.gui_ms:
+        imgui.set_tooltip(f"the window's own code: {np.median(studio.gui_ms):.1f} ms a frame; the rest is drawing "
+                          "and presenting (software GL here)")
     imgui.same_line()
     if r is not None:
         imgui.text(f"| neural {r.pass_name} pass {r.ms:.0f} ms")
@@ -103,11 +119,13 @@ def draw(studio: Studio) -> None:
         imgui.text("No avatar open: open one in the Avatar panel.")
         return
     # What to show.
-    imgui.set_next_item_width(190)
-    available = [b for b in BUFFERS if r is None or b in r.buffers]
+    available = [b for b in BUFFERS if buffer_available(b, s.avatar, None if r is None else r.buffers)]
+    imgui.set_next_item_width(300)
     if imgui.begin_combo("buffer", BUFFER_LABELS[studio.buffer]):
         for b in available:
             if imgui.selectable(BUFFER_LABELS[b], b == studio.buffer)[0]:
+                if b in INSPECT and studio.buffer not in INSPECT:
+                    studio.dirty = True  # render again with the variants this buffer is made of
                 studio.buffer = b
         imgui.end_combo()
     imgui.same_line()

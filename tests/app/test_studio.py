@@ -109,6 +109,23 @@ def test_errors_training_job_and_turntable(display, avatar, capture, tmp_path):
     assert len(list((tmp_path / "turn").glob("frame_*.png"))) == 12
 
 
+def test_new_avatar_from_video(display, avatar, tmp_path, face_video, landmarker, ict_npz):
+    """"New avatar from video": one job tracks the real video, then trains on it; the tracker's report and the
+    avatar are written and the studio opens the avatar when the job is done."""
+    out = tmp_path / "me"
+    report = run_script(display, tmp_path, avatar, [
+        {"from_video": {"video": str(face_video), "head": f"ict:{ict_npz}", "landmarker": str(landmarker),
+                        "out": str(out), "steps": 20, "size": 96}},
+        {"wait_frames": 10},
+        {"wait_job": True},
+        {"wait_frames": 3},
+        {"expect_open": str(out)}])  # a failed step makes the studio exit non-zero: run_script asserts it
+    assert report["frames"]["training"] > 0
+    tracked = json.loads((tmp_path / "me_dataset" / "tracking" / "report.json").read_text())
+    assert tracked["frames_kept"] > 100
+    assert json.loads((out / "progress.jsonl").read_text().splitlines()[-1])["step"] == 20
+
+
 def test_screenshot_option(display, avatar, tmp_path):
     shot = tmp_path / "window.png"
     studio(display, tmp_path, str(avatar), "--screenshot", str(shot), "--frames", "20", "--width", "1024",

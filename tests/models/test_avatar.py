@@ -161,6 +161,36 @@ def test_occupancy_grid_is_off_by_default_and_its_error_is_known(trained, gl):
     assert np.isfinite(skipped).all() and err.mean() < 0.02
 
 
+def test_inspection_variants(capture, gl, tmp_path):
+    """The colour variants behind the viewport's shadow and shading buffers: none for `none`; for `all`,
+    finite, the plain colour unchanged by asking for them, the shadow-input variant equal to the render for the
+    neutral head (whose shadow inputs it borrows) and different from it with the head turned and the jaw open,
+    and the flat-normal variant different from the render."""
+    from models.head.controls import Controls
+    from models.train_data import camera_of
+
+    t = Trainer(TrainConfig(dataset=capture, out=tmp_path / "all", effects="all", steps=30, rays_per_step=512,
+                            checkpoint_seconds=1e9), gl)
+    for k in range(30):
+        t.train_step(k / 30)
+    av = t.avatar.eval()
+    assert av.inspection_variants() == ("no_shadows", "flat")
+    f = t.split.frames[3]
+    cam, r = camera_of(t.split, f.camera_to_world), Rasterizer(gl)
+    neutral = Controls()
+    out = av.render_image(neutral, cam, r, inspect=True)
+    assert np.array_equal(out["rgb"], av.render_image(neutral, cam, r)["rgb"])
+    assert all(np.isfinite(out[k]).all() for k in ("rgb", "rgb_no_shadows", "rgb_flat"))
+    np.testing.assert_allclose(out["rgb_no_shadows"], out["rgb"], atol=1e-5)
+    assert np.abs(out["rgb_flat"] - out["rgb"]).max() > 1e-3
+    head = av.head_model
+    turned = Controls(root=np.array([0.0, 0.5, 0.0], np.float32), jaw=np.array([0.3, 0, 0], np.float32)) \
+        if "jaw" in head.joint_names else Controls(root=np.array([0.0, 0.5, 0.0], np.float32))
+    moved = av.render_image(turned, cam, r, inspect=True)
+    assert np.abs(moved["rgb_no_shadows"] - moved["rgb"]).max() > 1e-3
+    r.release()
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (--device cuda); torch sees none here")
 def test_cuda_matches_cpu(capture, gl, tmp_path):
     """The same steps on the GPU and the CPU (same seed, same rays: the generator stays on the CPU) give the
