@@ -48,6 +48,22 @@ def test_d3_video_tracks(d3_dataset):
     cap.release()
 
 
+@pytest.mark.parametrize("which", ["builtin", "flame"])
+def test_builtin_and_flame_heads_track_the_video(which, face_video, landmarker, tmp_path, builtin_model):
+    """The same video with the built-in head and with FLAME-format files (made here from the built-in head's
+    geometry: FLAME itself cannot be downloaded): a dataset, landmarks within 2 px in the median (128 px)."""
+    from tests.models.head.flame_files import write_flame_from_head
+
+    head = "builtin" if which == "builtin" else f"flame:{write_flame_from_head(tmp_path / 'flame', builtin_model)}"
+    out = tmp_path / "d"
+    assert main(["track", str(face_video), "--head", head, "--out", str(out), "--landmarker", str(landmarker),
+                 "--size", "128", "--fps", "5", "--overlay" if which == "builtin" else "--no-overlay"]) == 0
+    report = json.loads((out / "tracking" / "report.json").read_text())
+    assert report["landmark_error_px"]["median"] < 2.0, report["landmark_error_px"]
+    assert (out / "tracking" / "overlay.mp4").exists() == (which == "builtin")
+    assert len(load_split(out, "train").frames) > 40
+
+
 def _weights(dataset: Path, name: str) -> tuple[np.ndarray, list]:
     frames = [f for s in ("train", "val", "test") for f in load_split(dataset, s).frames]
     frames.sort(key=lambda f: int(Path(f.image_path).stem))
