@@ -35,6 +35,8 @@ class Job:
     landmarker: Path | None = None
     track_size: int = 256
     """Image size of the tracked dataset, pixels."""
+    track_fps: float = 10.0
+    """Frames a second taken from the video."""
     stage: Literal["track", "train"] = "train"
     opened: bool = False
     """The studio opened the result (video jobs open theirs when done)."""
@@ -51,7 +53,8 @@ class Job:
     def command(self) -> list[str]:
         if self.stage == "track":
             cmd = [sys.executable, "-m", "app.cli", "track", str(self.video), "--out", str(self.dataset),
-                   "--head", self.head, "--size", str(self.track_size)]
+                   "--head", self.head, "--size", str(self.track_size),
+                   "--fps", str(self.track_fps)]
             return cmd + (["--landmarker", str(self.landmarker)] if self.landmarker else [])
         cmd = [sys.executable, "-m", "app.cli", "train", str(self.dataset), "--out", str(self.out),
                "--model", self.model, "--effects", self.effects]
@@ -178,7 +181,7 @@ class JobQueue:
         resume = (job.out / "avatar.json").exists()
         return self.submit(job.dataset, job.out, model=job.model, effects=job.effects, minutes=job.minutes,
                            steps=job.steps, resume=resume, video=job.video, head=job.head, landmarker=job.landmarker,
-                           track_size=job.track_size)
+                           track_size=job.track_size, track_fps=job.track_fps)
 
     @staticmethod
     def status(job: Job) -> str:

@@ -34,12 +34,26 @@ class FrameClock:
 
     def __init__(self):
         self.last = time.perf_counter()
-        self.times: dict[str, deque] = {k: deque(maxlen=240) for k in ("idle", "rendering", "training")}
+        self.times: dict[str, deque] = {k: deque(maxlen=240) for k in ("idle", "rendering", "training", "loading")}
+        """Frame times by what the studio was doing; "loading": time spent opening avatars (reading a checkpoint
+        blocks the window, about a second), kept out of the interface rates."""
+        self.excluded = 0.0
+        self.started = False
         self.recent: deque = deque(maxlen=60)
+
+    def exclude(self, seconds: float) -> None:
+        """Time spent loading inside the current frame: recorded as "loading", not as this frame's time."""
+        self.excluded += seconds
 
     def tick(self, state: str) -> float:
         now = time.perf_counter()
         dt, self.last = now - self.last, now
+        if not self.started:  # the first frame holds the window's creation: no interface rate
+            self.started, self.excluded = True, 0.0
+            return dt
+        if self.excluded:
+            self.times["loading"].append(self.excluded)
+            dt, self.excluded = max(dt - self.excluded, 1e-4), 0.0
         self.times[state].append(dt)
         self.recent.append(dt)
         return dt
@@ -84,6 +98,13 @@ class Studio:
 
     # ---- avatars -----------------------------------------------------------------------------------------
     def open_avatar(self, folder: str | Path) -> bool:
+        t0 = time.perf_counter()
+        try:
+            return self._open_avatar(folder)
+        finally:
+            self.clock.exclude(time.perf_counter() - t0)
+
+    def _open_avatar(self, folder: str | Path) -> bool:
         try:
             self.session.open(folder)
         except INPUT_ERRORS as e:
@@ -216,6 +237,7 @@ class Studio:
         return {"fps_idle": round(self.clock.fps("idle"), 1), "fps_rendering": round(self.clock.fps("rendering"), 1),
                 "fps_training": round(self.clock.fps("training"), 1),
                 "frames": {k: len(v) for k, v in self.clock.times.items()},
+                "loading_s": [round(x, 2) for x in self.clock.times["loading"]],
                 "gui_ms_median": round(float(np.median(self.gui_ms)), 2) if self.gui_ms else None,
                 "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 1),
                 "last_pass": None if r is None else {"pass": r.pass_name, "ms": round(r.ms, 1)},

@@ -34,7 +34,8 @@ class JobForm:
 
 
 def start_from_video(studio: Studio, video: str, head: str, landmarker: str, out: str, effects: str = "all",
-                     minutes: float | None = None, steps: int | None = None, size: int = 256) -> bool:
+                     minutes: float | None = None, steps: int | None = None, size: int = 256,
+                     fps: float = 10.0) -> bool:
     """Queue a job that tracks the video into a dataset beside the avatar folder, then trains on it."""
     video_path, out_path = Path(video), Path(out)
     if not video_path.is_file():
@@ -49,7 +50,8 @@ def start_from_video(studio: Studio, video: str, head: str, landmarker: str, out
         return False
     dataset = out_path.with_name(out_path.name + "_dataset")
     studio.jobs.submit(dataset, out_path, effects=effects, minutes=minutes, steps=steps, video=video_path,
-                       head=head.strip() or "builtin", landmarker=Path(landmarker), track_size=size)
+                       head=head.strip() or "builtin", landmarker=Path(landmarker), track_size=size,
+                       track_fps=fps)
     return True
 
 

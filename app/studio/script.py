@@ -10,7 +10,7 @@ pictures). Steps:
   {"wait_render": PRESET}                 until the latest request's pass PRESET is on screen
   {"save_neural": PNG} / {"screenshot": PNG}   the neural image as shown / the whole window
   {"train": {"dataset": D, "out": O, "steps": N, "effects": E, "model": M}}  queue a training job
-  {"from_video": {"video": V, "head": H, "landmarker": L, "out": O, "steps": N, "size": PX}}
+  {"from_video": {"video": V, "head": H, "landmarker": L, "out": O, "steps": N, "size": PX, "fps": F}}
                                           queue a new avatar from a video (track, then train)
   {"wait_job": true}                      until no job is queued or running
   {"expect_open": FOLDER}                 fail unless the open avatar is FOLDER
@@ -140,7 +140,8 @@ class Script:
 
             v = s["from_video"]
             start_from_video(studio, v["video"], v.get("head", "builtin"), v["landmarker"], v["out"],
-                             v.get("effects", "none"), v.get("minutes"), v.get("steps"), int(v.get("size", 256)))
+                             v.get("effects", "none"), v.get("minutes"), v.get("steps"), int(v.get("size", 256)),
+                             float(v.get("fps", 10.0)))
         elif "expect_open" in s:
             folder = studio.session.folder
             if folder is None or Path(folder).resolve() != Path(s["expect_open"]).resolve():

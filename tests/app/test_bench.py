@@ -114,7 +114,7 @@ def test_a_tiny_bench_run_writes_results_charts_and_presets(capture, tmp_path):
     assert all(r["finite"] and r["ms"] > 0 for r in results["rows"])
     # Each row's ratio to the dense renderer is its time against the dense renderer's, which is far slower.
     for r in results["rows"]:
-        assert r["nerface_over"] == pytest.approx(results["nerface"]["ms"] / r["ms"], rel=0.01)
+        assert r["nerface_over"] == pytest.approx(results["nerface"]["ms"] / r["ms"], abs=0.051)  # 0.1 rounding
     assert min(r["nerface_over"] for r in results["rows"]) > 1.0
     for name, curve in results["training_curves"].items():
         assert curve[0]["seconds"] == 0.0 and curve[-1]["seconds"] >= 3.0, name

@@ -115,14 +115,14 @@ def test_new_avatar_from_video(display, avatar, tmp_path, face_video, landmarker
     out = tmp_path / "me"
     report = run_script(display, tmp_path, avatar, [
         {"from_video": {"video": str(face_video), "head": f"ict:{ict_npz}", "landmarker": str(landmarker),
-                        "out": str(out), "steps": 20, "size": 96}},
+                        "out": str(out), "steps": 20, "size": 96, "fps": 3}},
         {"wait_frames": 10},
         {"wait_job": True},
         {"wait_frames": 3},
         {"expect_open": str(out)}])  # a failed step makes the studio exit non-zero: run_script asserts it
     assert report["frames"]["training"] > 0
     tracked = json.loads((tmp_path / "me_dataset" / "tracking" / "report.json").read_text())
-    assert tracked["frames_kept"] > 100
+    assert tracked["frames_kept"] > 30
     assert json.loads((out / "progress.jsonl").read_text().splitlines()[-1])["step"] == 20
 
 
