@@ -166,7 +166,7 @@ class Studio:
             self.latency_ms = 1e3 * (time.perf_counter() - self.last_submit_time)
 
         w, h = imgui.get_io().display_size
-        left, right = 330, 360
+        left, right = 330, 420
         self._window("Avatar", (0, 0), (left, 260), lambda: avatar_panel.draw(self))
         self._window("Controls", (0, 260), (left, h - 260), lambda: controls_panel.draw(self))
         self._window("Viewport", (left, 0), (w - left - right, h), lambda: viewport.draw(self))
