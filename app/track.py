@@ -30,7 +30,7 @@ from models.dataset import write_split
 from models.head.controls import controls_to_dict
 from models.head.head import Head
 from models.head.sources import load_head
-from models.synthetic import write_png8
+from models.synthetic import absolute_head_spec, write_png8
 from models.tracking.blendshapes import expression_from_scores, gaze_from_scores, jaw_from_scores
 from models.tracking.canonical import canonical_face_mesh
 from models.tracking.correspond import correspond, skin_vertices
@@ -211,7 +211,7 @@ def run_track(cfg: TrackConfig) -> int:
     background = (np.median(fg_pixels, 0) / 255.0 if len(fg_pixels) else np.full(3, 0.5)).astype(np.float32)
     n_test = max(1, math.ceil(cfg.test_fraction * len(kept)))
     header = {"camera_angle_x": 2 * math.atan(0.5 * cfg.size / k.fx), "intrinsics": [k.fx, k.fy, k.cx, k.cy],
-              "width": cfg.size, "height": cfg.size, "head_model": head_spec(cfg.head),
+              "width": cfg.size, "height": cfg.size, "head_model": absolute_head_spec(cfg.head),
               "shape": result.shape.tolist(), "background": background.tolist(),
               "source": {"video": str(cfg.video.resolve()), "fps": cfg.fps, "fov_deg": cfg.fov_deg,
                          "crop": {"x0": crop.x0, "y0": crop.y0, "side": crop.side}}}
@@ -246,7 +246,8 @@ def run_track(cfg: TrackConfig) -> int:
                      for j, img in enumerate(crops)), overlay_path, fps=cfg.fps)
     total = time.perf_counter() - t_start
     report = {
-        "video": str(cfg.video), "head_model": head_spec(cfg.head), "frames_read": read, "frames_kept": len(kept),
+        "video": str(cfg.video), "head_model": absolute_head_spec(cfg.head), "frames_read": read,
+        "frames_kept": len(kept),
         "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
         "landmarks_used": len(corr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
         "fov_deg": cfg.fov_deg,
@@ -266,12 +267,6 @@ def run_track(cfg: TrackConfig) -> int:
           f"({report['seconds_per_frame']:.3f} s a frame)"
           + (f"; overlay {cfg.out / 'tracking' / 'overlay.mp4'}" if overlay_path else ""))
     return 0
-
-
-def head_spec(spec: str) -> str:
-    """ict:/flame: paths made absolute, so the dataset names its head model wherever it is opened from."""
-    kind, sep, arg = spec.partition(":")
-    return f"{kind}:{Path(arg).resolve()}" if sep and kind in ("ict", "flame") else spec
 
 
 _EDGES: dict[int, np.ndarray] = {}

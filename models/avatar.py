@@ -315,15 +315,18 @@ class Avatar(nn.Module):
         shown = torch.nonzero(weights.reshape(-1)[keep] > min_weight).squeeze(1) if min_weight > 0 else None
         view = (-directions[:, None]).expand(R, S, 3).reshape(-1, 3)[keep]
         phi_at = per_sample(phi, S)
-        if shown is None:
-            shown = torch.arange(len(keep), device=keep.device)
-        g_shown = FieldOutput(g.sigma[shown], g.rgb[shown], g.x_canonical[shown],
-                              None if g.normal is None else g.normal[shown])
-        prior_shown = prior_k.take(shown)
+        if shown is None:  # every sample (training): no subset copies
+            g_shown, prior_shown, view_shown, keep_shown = g, prior_k, view, keep
+        else:
+            g_shown = FieldOutput(g.sigma[shown], g.rgb[shown], g.x_canonical[shown],
+                                  None if g.normal is None else g.normal[shown])
+            prior_shown, view_shown, keep_shown = prior_k.take(shown), view[shown], keep[shown]
 
         def colour(g_in: FieldOutput, prior_in: PriorSamples, landmarks: torch.Tensor) -> torch.Tensor:
-            rgb_in = self.field.appearance(g_in, prior_in, view[shown], phi_at(keep[shown]), landmarks)
-            return scatter(g.rgb.new_zeros(len(keep), 3).index_copy(0, shown, rgb_in)).reshape(R, S, 3)
+            rgb_in = self.field.appearance(g_in, prior_in, view_shown, phi_at(keep_shown), landmarks)
+            if shown is not None:
+                rgb_in = g.rgb.new_zeros(len(keep), 3).index_copy(0, shown, rgb_in)
+            return scatter(rgb_in).reshape(R, S, 3)
 
         extra = {}
         for name in variants:
@@ -333,7 +336,7 @@ class Avatar(nn.Module):
                 extra[name] = composite(weights, colour(g_shown, p_neutral, neutral_landmarks), remaining,
                                         self.background)
             elif name == "flat":  # every surface facing the viewer: the shading's contribution is what changes
-                g_flat = replace(g_shown, normal=view[shown])
+                g_flat = replace(g_shown, normal=view_shown)
                 extra[name] = composite(weights, colour(g_flat, prior_shown, geo.landmarks), remaining,
                                         self.background)
         rgb = composite(weights, colour(g_shown, prior_shown, geo.landmarks), remaining, self.background)

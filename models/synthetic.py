@@ -54,7 +54,7 @@ class SynthConfig:
     """Camera field of view, degrees (a portrait lens)."""
 
 
-def _absolute_head_spec(spec: str) -> str:
+def absolute_head_spec(spec: str) -> str:
     """ict:/flame: paths made absolute, so the dataset names its head model wherever it is opened from."""
     kind, sep, arg = spec.partition(":")
     return f"{kind}:{Path(arg).resolve()}" if sep and kind in ("ict", "flame") else spec
@@ -175,7 +175,7 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
         "camera_angle_x": math.radians(cfg.fov_y_deg),
         "intrinsics": [f_px, f_px, cfg.size / 2, cfg.size / 2],
         "width": cfg.size, "height": cfg.size,
-        "head_model": _absolute_head_spec(cfg.head), "shape": shape.tolist(), "background": bg.tolist(),
+        "head_model": absolute_head_spec(cfg.head), "shape": shape.tolist(), "background": bg.tolist(),
         "lighting": lighting_record(cfg.scene, lighting, cfg.light_deg),
         "depth_scale_m": DEPTH_SCALE_M,
         "protocol": {"frames": cfg.frames, "seed": cfg.seed, "identity": cfg.identity,
