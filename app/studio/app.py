@@ -36,7 +36,7 @@ class FrameClock:
         self.last = time.perf_counter()
         self.times: dict[str, deque] = {k: deque(maxlen=240) for k in ("idle", "rendering", "training", "loading")}
         """Frame times by what the studio was doing; "loading": time spent opening avatars (reading a checkpoint
-        blocks the window, about a second), kept out of the interface rates."""
+        blocks the window for a fraction of a second), kept out of the interface rates."""
         self.excluded = 0.0
         self.started = False
         self.recent: deque = deque(maxlen=60)
