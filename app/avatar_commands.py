@@ -15,13 +15,13 @@ from tqdm import tqdm
 
 from app.errors import UserInputError
 from app.head_commands import save_png
-from app.turntable import TurntableConfig, apply_preset, buffer_image, turntable_frames
+from app.turntable import INSPECT, TurntableConfig, apply_preset, buffer_image, turntable_frames
 from models.avatar_io import load_avatar
 from models.dataset import load_split
 from models.device import device_of
 from models.fields.codynerf import parse_effects
 from models.head.controls import Controls, load_controls
-from models.metrics import face_mse, normal_angle_deg, psnr, ssim
+from models.metrics import face_mse, luminance, normal_angle_deg, pearson, psnr, ssim
 from models.synthetic import read_png16
 from models.train import TrainConfig, Trainer
 from models.train_data import camera_of, load_rgb
@@ -95,6 +95,27 @@ def face_mask_of(frame, image_shape) -> np.ndarray:
     return mask
 
 
+SHADOW_METRICS = ("shadow_corr", "unshadowed_psnr", "unshadowed_psnr_render")
+
+
+def shadow_metrics(avatar, frame, split, raster, truth: np.ndarray, on: np.ndarray, row: dict) -> list[np.ndarray]:
+    """The avatar's cast shadows against a synthetic capture's truth, into `row`: shadow_corr, the correlation
+    over the head (`on`) of the light the shadows take away (luminance without them - with them) with the
+    share of the key light blocked; and where the capture has the frame without cast shadows, PSNR over the
+    head of the render without them against it (unshadowed_psnr) and, for scale, of the render itself
+    (unshadowed_psnr_render: what doing nothing scores). Returns the panels: without shadows, the shadows x4."""
+    out = avatar.render_image(frame.controls, camera_of(split, frame.camera_to_world), raster, inspect=True)
+    taken = luminance(out["rgb_no_shadows"]) - luminance(out["rgb"])
+    gt = load_rgb(frame.extra["shadow_path"])[..., 0]
+    if on.any():
+        row["shadow_corr"] = pearson(taken, gt, on)
+    if "unshadowed_path" in frame.extra and on.any():
+        lit = load_rgb(frame.extra["unshadowed_path"], avatar.background.numpy())
+        row["unshadowed_psnr"] = psnr(out["rgb_no_shadows"], lit, on)
+        row["unshadowed_psnr_render"] = psnr(out["rgb"], lit, on)
+    return [out["rgb_no_shadows"], np.repeat(np.clip(taken * 4, 0, 1)[..., None], 3, -1)]
+
+
 def run_eval(cfg: EvalConfig) -> int:
     avatar, meta = load_avatar(cfg.avatar, cfg.device)
     split = load_split(cfg.dataset, cfg.split)
@@ -102,6 +123,7 @@ def run_eval(cfg: EvalConfig) -> int:
     raster = Rasterizer(gl)
     cfg.out.mkdir(parents=True, exist_ok=True)
     rows, times = [], []
+    shadow_views = avatar.inspection_variants() if hasattr(avatar, "inspection_variants") else ()
     frames = split.frames[:: max(cfg.every, 1)]
     frames = frames[: cfg.max_frames] if cfg.max_frames else frames
     for f in frames:
@@ -120,11 +142,13 @@ def run_eval(cfg: EvalConfig) -> int:
                 on = face & (out["opacity"] > 0.5)
                 if on.any():
                     row["normal_deg"] = normal_angle_deg(out["normals"], gt_n, on)
+        if "no_shadows" in shadow_views and "shadow_path" in f.extra:
+            panels += shadow_metrics(avatar, f, split, raster, truth, face & (out["opacity"] > 0.5), row)
         rows.append(row)
         save_png(cfg.out / f"{cfg.split}_{f.index:04d}.png",
                  (np.concatenate(panels, 1) * 255).round().astype(np.uint8))
-    metrics = {k: float(np.mean([r[k] for r in rows if k in r])) for k in ("psnr", "ssim", "face_mse", "normal_deg")
-               if any(k in r for r in rows)}
+    metrics = {k: float(np.mean([r[k] for r in rows if k in r])) for k in ("psnr", "ssim", "face_mse", "normal_deg",
+               *SHADOW_METRICS) if any(k in r for r in rows)}
     metrics["render_ms"] = 1e3 * float(np.median(times))
     report = {"avatar": str(cfg.avatar), "dataset": str(cfg.dataset), "split": cfg.split, "frames": len(rows),
               "effects": meta.get("effects"), "training": meta.get("provenance"), "metrics": metrics, "per_frame": rows}
@@ -143,8 +167,11 @@ class RenderCommandConfig:
     yaw_deg: float = 0.0
     """Camera orbit about the vertical axis, degrees."""
     pitch_deg: float = 0.0
-    buffer: Literal["rgb", "normals", "grad_normals", "depth", "opacity"] = "rgb"
-    """Which buffer to write."""
+    buffer: Literal["rgb", "normals", "grad_normals", "depth", "opacity", "rgb_no_shadows", "rgb_light",
+                    "shadow_change", "shading"] = "rgb"
+    """Which buffer to write: rgb_no_shadows (without cast shadows), rgb_light (light reaching the surface),
+    shadow_change (what the cast shadows take away) and shading (render - normals to the viewer) need an avatar
+    with those effects."""
     preset: Literal["draft", "preview", "final"] = "preview"
     """Quality: draft (half size, 6 samples a ray), preview (8), final (16)."""
     size: int = 128
@@ -153,17 +180,27 @@ class RenderCommandConfig:
     """Where the networks run."""
 
 
+def avatar_effects(avatar) -> tuple[str, ...]:
+    cfg = getattr(avatar, "field_cfg", None)
+    return (cfg.effects or ("none",)) if cfg is not None else ("none (NerFACE)",)
+
+
 def run_render(cfg: RenderCommandConfig) -> int:
     avatar, _ = load_avatar(cfg.avatar, cfg.device)
     controls = load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls()
     size = apply_preset(avatar, cfg.preset, cfg.size)
     cam = framing_camera(avatar.head_model.template, cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
                          height_px=size)
+    variants = getattr(avatar, "inspection_variants", tuple)()
+    if cfg.buffer in INSPECT and INSPECT[cfg.buffer] not in variants:
+        raise UserInputError(f"--buffer {cfg.buffer}: {cfg.avatar} (effects: {', '.join(avatar_effects(avatar))}) "
+                             "has no such buffer" + ("; it was trained before the shadow factor existed"
+                                                     if cfg.buffer == "rgb_light" and "no_shadows" in variants else ""))
     gl = GLContext.headless()
     t0 = time.perf_counter()
-    out = avatar.render_image(controls, cam, Rasterizer(gl))
+    out = avatar.render_image(controls, cam, Rasterizer(gl), **({"inspect": True} if cfg.buffer in INSPECT else {}))
     ms = 1e3 * (time.perf_counter() - t0)
-    if cfg.buffer not in out:
+    if cfg.buffer not in out and cfg.buffer not in INSPECT:
         raise UserInputError(f"--buffer {cfg.buffer}: this avatar's effect set has no normals network")
     cfg.out.parent.mkdir(parents=True, exist_ok=True)
     save_png(cfg.out, buffer_image(out, cfg.buffer))

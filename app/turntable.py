@@ -51,6 +51,10 @@ def apply_preset(avatar: Avatar | NerfaceAvatar, preset: str, size: int) -> int:
     return presets_of(avatar)[preset].quality.apply(avatar, size)
 
 
+INSPECT = {"rgb_no_shadows": "no_shadows", "rgb_light": "light", "shadow_change": "no_shadows", "shading": "flat"}
+"""Buffers made from colour variants (Avatar.render_image(inspect=True)): which variant each needs."""
+
+
 def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:
     """A buffer of the neural render as (H,W,3) uint8 for display."""
     if name == "shadow_change":  # what the pose's and expression's shadow inputs change: darker = shadowed

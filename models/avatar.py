@@ -18,6 +18,7 @@ from scipy.ndimage import binary_dilation, distance_transform_edt
 from torch import nn
 
 from models.fields.codynerf import CoDyNeRFField, FieldConfig, FieldOutput
+from models.fields.mesh_light import MeshLight, mesh_light
 from models.fields.occupancy import OccupancyGrid
 from models.fields.prior import PriorMeshes, PriorSamples, nearest_vertices, prior_within, vertex_tree
 from models.head.controls import Controls
@@ -74,12 +75,14 @@ class FrameGeometry:
     landmarks: torch.Tensor  # (1, 3L) relative to the landmarks' centre
     box_min: torch.Tensor  # (3,)
     box_max: torch.Tensor  # (3,)
+    light: MeshLight | None = None  # the posed mesh's shadow map, for avatars whose shadow factor reads it
 
     def to(self, device: torch.device | str) -> FrameGeometry:
         """The same geometry with its tensors on `device` (the k-d tree stays on the CPU)."""
         m = self.meshes
         return FrameGeometry(PriorMeshes(*(t.to(device) for t in (m.canonical, m.expressed, m.posed, m.normals))),
-                             self.tree, self.landmarks.to(device), self.box_min.to(device), self.box_max.to(device))
+                             self.tree, self.landmarks.to(device), self.box_min.to(device), self.box_max.to(device),
+                             None if self.light is None else self.light.to(device))
 
 
 @dataclass
@@ -95,6 +98,7 @@ class RayOutput:
     point_normal: torch.Tensor | None = None  # (R,S,3)
     point_grad_normal: torch.Tensor | None = None  # (R,S,3)
     variants: dict[str, torch.Tensor] = field(default_factory=dict)  # name -> (R,3) colour under other inputs
+    point_light: torch.Tensor | None = None  # (R,S) share of the light reaching each sample (shadow factor)
 
 
 def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -> int:
@@ -171,7 +175,7 @@ def scatter_rays(parts: dict[str, list[torch.Tensor]], camera: Camera, idx: np.n
     """Images (H,W,...) from per-ray results computed in chunks for the flat pixel indices `idx`; pixels not
     rendered are background (rgb), 0 (opacity, normals) or inf (depth)."""
     H, W = camera.height_px, camera.width_px
-    fill = {"rgb": background, "rgb_no_shadows": background, "rgb_flat": background, "depth": np.inf}
+    fill = {"rgb": background, "rgb_no_shadows": background, "rgb_flat": background, "rgb_light": 1.0, "depth": np.inf}
     out = {}
     for k, chunks in parts.items():
         values = torch.cat(chunks).float().cpu().numpy() if chunks else np.zeros((0,), np.float32)
@@ -223,6 +227,14 @@ class Avatar(nn.Module):
         return self.occupancy.build(density, threshold, generator=torch.Generator().manual_seed(0))
 
     # ---- geometry --------------------------------------------------------------------------------------
+    def with_light(self, geo: FrameGeometry, rasterizer: Rasterizer) -> FrameGeometry:
+        """The geometry with its shadow map where this avatar's shadow factor reads one (else unchanged)."""
+        if not self.field_cfg.mesh_light:
+            return geo
+        light = mesh_light(geo.meshes.posed.cpu().numpy(), self.head_model.triangles, self.field_cfg.light_dir,
+                           rasterizer)
+        return replace(geo, light=light.to(geo.meshes.posed.device))
+
     @torch.no_grad()
     def geometry(self, controls: Controls) -> FrameGeometry:
         """The frame's canonical, expressed and posed meshes (DESIGN 3, step 1)."""
@@ -264,8 +276,9 @@ class Avatar(nn.Module):
         second pass adds that many samples where the first pass's weights lie (inverse-transform sampling of
         its weights) and renders all of them; samples: the intervals to use instead of the sampler's.
         variants: colours of the same samples under other appearance inputs, for inspection: "no_shadows" (the
-        shadow inputs of the neutral head, `neutral_landmarks` and no expression or pose offsets) and "flat"
-        (every normal turned to the viewer)."""
+        shadow factor at 1; an avatar without the factor: the shadow inputs of the neutral head,
+        `neutral_landmarks`, and no expression or pose offsets), "light" (the shadow factor composited, grey,
+        1 where nothing is in the way) and "flat" (every normal turned to the viewer)."""
         rc = self.render_cfg
         if dense_samples:
             surface_t = torch.full_like(surface_t, float("inf"))
@@ -322,34 +335,49 @@ class Avatar(nn.Module):
                                   None if g.normal is None else g.normal[shown])
             prior_shown, view_shown, keep_shown = prior_k.take(shown), view[shown], keep[shown]
 
-        def colour(g_in: FieldOutput, prior_in: PriorSamples, landmarks: torch.Tensor) -> torch.Tensor:
-            rgb_in = self.field.appearance(g_in, prior_in, view_shown, phi_at(keep_shown), landmarks)
+        def to_rays(values: torch.Tensor) -> torch.Tensor:
+            """Values (N,C) of the shown samples -> (R,S,C), zero at the others."""
             if shown is not None:
-                rgb_in = g.rgb.new_zeros(len(keep), 3).index_copy(0, shown, rgb_in)
-            return scatter(rgb_in).reshape(R, S, 3)
+                values = values.new_zeros(len(keep), values.shape[1]).index_copy(0, shown, values)
+            return scatter(values).reshape(R, S, -1)
 
+        mesh_vis = geo.light.visibility(pts[keep_shown]) if self.field_cfg.mesh_light else None
+
+        def colour(g_in: FieldOutput, prior_in: PriorSamples, landmarks: torch.Tensor) -> torch.Tensor:
+            return to_rays(self.field.appearance(g_in, prior_in, view_shown, phi_at(keep_shown), landmarks,
+                                                 mesh_vis))
+
+        lit, light = self.field.appearance_terms(g_shown, prior_shown, view_shown, phi_at(keep_shown), geo.landmarks,
+                                                 mesh_vis)
+        point_light = None if light is None else to_rays(light)
+        rgb = composite(weights, to_rays(lit) * (1.0 if point_light is None else point_light), remaining,
+                        self.background)
         extra = {}
         for name in variants:
-            if name == "no_shadows":  # the shadow inputs of the neutral head: no expression, no pose
+            if name == "no_shadows" and point_light is not None:  # the shadow factor at 1: lit everywhere
+                extra[name] = composite(weights, to_rays(lit), remaining, self.background)
+            elif name == "no_shadows":  # no factor: the shadow inputs of the neutral head (no expression, no pose)
                 zero = torch.zeros_like(prior_shown.offset)
                 p_neutral = replace(prior_shown, expression_offset=zero, pose_offset=zero)
                 extra[name] = composite(weights, colour(g_shown, p_neutral, neutral_landmarks), remaining,
                                         self.background)
+            elif name == "light":  # the share of the light reaching the surface (1: no cast shadow), grey
+                extra[name] = composite(weights, point_light, remaining, point_light.new_ones(1)).expand(R, 3)
             elif name == "flat":  # every surface facing the viewer: the shading's contribution is what changes
                 g_flat = replace(g_shown, normal=view_shown)
                 extra[name] = composite(weights, colour(g_flat, prior_shown, geo.landmarks), remaining,
                                         self.background)
-        rgb = composite(weights, colour(g_shown, prior_shown, geo.landmarks), remaining, self.background)
         normal = grad_normal = pn = pg = None
         if g.normal is not None:
             pn, pg = scatter(g.normal).reshape(R, S, 3), scatter(g.grad_normal).reshape(R, S, 3)
             normal, grad_normal = composite(weights, pn), composite(weights, pg)
         return RayOutput(rgb, weights.sum(-1), expected_depth(weights, samples.t_mid), normal, grad_normal, weights,
-                         sigma, samples, pn, pg, extra)
+                         sigma, samples, pn, pg, extra, None if point_light is None else point_light[..., 0])
 
     def inspection_variants(self) -> tuple[str, ...]:
         """The colour variants this avatar's effects make meaningful (see render_rays)."""
-        return (("no_shadows",) if "shadows" in self.field_cfg.effects else ()) + (
+        shadows = ("no_shadows", "light") if self.field.shadow_net is not None else ("no_shadows",)
+        return (shadows if "shadows" in self.field_cfg.effects else ()) + (
             ("flat",) if self.field_cfg.needs_normals else ())
 
     # ---- images ----------------------------------------------------------------------------------------
@@ -359,10 +387,11 @@ class Avatar(nn.Module):
         """RGB, opacity, depth and (with normals) predicted and density-gradient normal maps, (H,W,...).
         `frame` picks a training frame's codes; None uses the mean code (novel controls). `should_stop` is
         asked between batches of rays; when it says yes, RenderCancelled is raised (a newer request won).
-        `inspect` adds, for avatars with those effects, "rgb_no_shadows" (the colour with the shadow inputs of
-        the neutral head) and "rgb_flat" (with every normal turned to the viewer), from which the viewport
-        shows the cast shadows and the shading's contribution."""
-        geo = self.geometry(controls)
+        `inspect` adds, for avatars with those effects, "rgb_no_shadows" (the colour without cast shadows; for
+        an avatar without a shadow factor, with the shadow inputs of the neutral head), "rgb_light" (the share
+        of the light that reaches the surface, grey) and "rgb_flat" (with every normal turned to the viewer),
+        from which the viewport shows the cast shadows and the shading's contribution."""
+        geo = self.with_light(self.geometry(controls), rasterizer)
         raster = rasterizer.rasterize(geo.meshes.posed.cpu().numpy(), self.head_model.triangles, camera)
         origin, dirs = image_rays(camera)
         cos_view = (dirs.numpy() @ -np.linalg.inv(camera.view)[:3, 2]).reshape(raster.hit.shape)
@@ -379,7 +408,8 @@ class Avatar(nn.Module):
         if self.field_cfg.needs_normals:
             parts |= {"normals": [], "grad_normals": []}
         variants = self.inspection_variants() if inspect and not dense_samples else ()
-        neutral_landmarks = self.geometry(Controls(shape=controls.shape)).landmarks if "no_shadows" in variants \
+        counterfactual = "no_shadows" in variants and self.field.shadow_net is None
+        neutral_landmarks = self.geometry(Controls(shape=controls.shape)).landmarks if counterfactual \
             else None
         for v in variants:
             parts[f"rgb_{v}"] = []

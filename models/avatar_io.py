@@ -15,6 +15,14 @@ from models.nerface import NerfaceAvatar, NerfaceConfig
 from models.quality import load_presets
 
 
+def field_config(meta: dict) -> FieldConfig:
+    """The field's sizes from avatar.json; avatars written before the shadow factor existed have none."""
+    f = meta["field"]
+    light = f.get("light_dir")
+    return FieldConfig(**{"shadow_factor": False, **f, "effects": tuple(f["effects"]),
+                          "light_dir": None if light is None else tuple(float(v) for v in light)})
+
+
 def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar | NerfaceAvatar, dict]:
     """The avatar (CoDyNeRF or the NerFACE baseline, as avatar.json says) on `device`, in eval mode."""
     ck = load_checkpoint(folder)
@@ -25,7 +33,7 @@ def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar | Nerfa
         if meta.get("model") == "nerface":
             avatar = NerfaceAvatar(head, NerfaceConfig(**meta["nerface"]), int(meta["frames"]), background)
         else:
-            field_cfg = FieldConfig(**{**meta["field"], "effects": tuple(meta["field"]["effects"])})
+            field_cfg = field_config(meta)
             avatar = Avatar(head, field_cfg, int(meta["frames"]), background, RenderConfig(**meta["render"]))
         avatar.load_state_dict(ck.weights)
     except (KeyError, TypeError, RuntimeError) as e:

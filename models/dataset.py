@@ -19,7 +19,7 @@ from models.head.controls import Controls, ControlsError, controls_from_dict
 
 SPLITS = ("train", "val", "test")
 #: Optional per-frame paths of synthetic captures.
-EXTRA_PATHS = ("mask_path", "normal_path", "shadow_path", "depth_path", "albedo_path")
+EXTRA_PATHS = ("mask_path", "normal_path", "shadow_path", "depth_path", "albedo_path", "unshadowed_path")
 NERFACE_EXPRESSION_DIM = 76
 
 

@@ -30,6 +30,12 @@ def top_k_normal_consistency(weights: torch.Tensor, normals: torch.Tensor, grad_
     return (w * (gather(normals) - gather(grad_normals)).norm(dim=-1)).sum(-1).mean()
 
 
+def blocked_light(weights: torch.Tensor, light: torch.Tensor) -> torch.Tensor:
+    """sum_i w_i (1 - S_i) per ray, averaged over rays: the light the shadow factor S (R,S) takes away where
+    the surface is, weights (R,S) detached (where to look, as in Eq. 10)."""
+    return (weights.detach() * (1.0 - light)).sum(-1).mean()
+
+
 def mesh_normal_consistency(pred: torch.Tensor, mesh: torch.Tensor) -> torch.Tensor:
     """Eq. 9: mean over vertices of |N(v) - Mesh_n(v)|, (V,3) each."""
     return (pred - mesh).norm(dim=-1).mean()

@@ -1,4 +1,4 @@
-"""Image metrics: PSNR, SSIM, FaceMSE (over the face mask), normal angular error."""
+"""Image metrics: PSNR, SSIM, FaceMSE (over the face mask), normal angular error, correlation."""
 
 from __future__ import annotations
 
@@ -34,3 +34,16 @@ def normal_angle_deg(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> f
     p = pred[mask] / np.maximum(np.linalg.norm(pred[mask], axis=-1, keepdims=True), 1e-12)
     t = truth[mask] / np.maximum(np.linalg.norm(truth[mask], axis=-1, keepdims=True), 1e-12)
     return float(np.degrees(np.arccos(np.clip((p * t).sum(-1), -1, 1))).mean())
+
+
+def pearson(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
+    """Correlation of two (H,W) maps over the mask's pixels; 0 where either is constant there."""
+    x, y = np.asarray(a, np.float64)[mask], np.asarray(b, np.float64)[mask]
+    x, y = x - x.mean(), y - y.mean()
+    denom = np.sqrt((x * x).sum() * (y * y).sum())
+    return float((x * y).sum() / denom) if denom > 1e-12 else 0.0
+
+
+def luminance(rgb: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance of linear RGB (...,3)."""
+    return rgb @ np.array([0.2126, 0.7152, 0.0722])

@@ -1,6 +1,6 @@
 """Synthetic captures (DESIGN 2.2, 3.1): a head model performing the capture protocol under one lighting
 scene, drawn through render/gl, written as a dataset with its ground truth (masks, normals, cast-shadow
-masks, depth, albedo)."""
+masks, depth, albedo, and for scenes with cast shadows the image without them)."""
 
 from __future__ import annotations
 
@@ -150,7 +150,9 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
     """Render and write the capture; returns a summary (frames per split, seconds)."""
     t0 = time.perf_counter()
     out = cfg.out
-    for sub in ("images", "masks", "normals", "shadows", "depth", "albedo"):
+    lighting = scene_lighting(cfg.scene, cfg.light_deg)
+    subs = ("images", "masks", "normals", "shadows", "depth", "albedo") + (("unshadowed",) if lighting.shadows else ())
+    for sub in subs:
         (out / sub).mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(cfg.seed)
     n_test = max(1, round(0.1 * cfg.frames))
@@ -163,7 +165,6 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
     canonical = model.pose(Controls(shape=shape))[0][0].numpy()
     look = head_appearance(head, canonical, cfg.identity)
     eyes = eye_attribute(head, canonical)
-    lighting = scene_lighting(cfg.scene, cfg.light_deg)
     portrait = portrait_vertices(head, canonical)
     center = 0.5 * (portrait.min(0) + portrait.max(0))
     radius = float(np.linalg.norm(portrait - center, axis=1).max())
@@ -190,10 +191,16 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
             verts, _, lmks = model.pose(controls)
             verts, lmks = verts[0].numpy(), lmks[0].numpy()
             camera = frame_camera(center, distance, spec, cfg.size, cfg.fov_y_deg)
-            buf = renderer.render(CaptureMesh(verts, head.triangles, canonical, eyes), camera, lighting, look)
+            mesh = CaptureMesh(verts, head.triangles, canonical, eyes)
+            buf = renderer.render(mesh, camera, lighting, look)
             name = f"{k:04d}.png"
             image = buf.color + bg * (1 - buf.coverage[..., None])
             write_png8(out / "images" / name, image)
+            extra = {}
+            if lighting.shadows:  # the same frame with nothing in the key light's way: what "without" should show
+                lit = renderer.render(mesh, camera, replace(lighting, shadows=False), look)
+                write_png8(out / "unshadowed" / name, lit.color + bg * (1 - lit.coverage[..., None]))
+                extra["unshadowed_path"] = f"unshadowed/{name}"
             write_png8(out / "masks" / name, buf.coverage)
             write_png16(out / "normals" / name, buf.normal * 0.5 + 0.5)
             write_png8(out / "shadows" / name, cast_shadow(buf))
@@ -203,6 +210,7 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
             splits[split].append({
                 "file_path": f"images/{name}", "mask_path": f"masks/{name}", "normal_path": f"normals/{name}",
                 "shadow_path": f"shadows/{name}", "depth_path": f"depth/{name}", "albedo_path": f"albedo/{name}",
+                **extra,
                 "transform_matrix": np.linalg.inv(camera.view).tolist(),
                 "expression": controls.expression.tolist(),
                 "controls": {k: v for k, v in controls_to_dict(replace(controls, shape=np.zeros(0))).items()

@@ -81,6 +81,8 @@ def build_frames(split: CaptureSplit, avatar: Avatar | NerfaceAvatar, gl: GLCont
     for f in split.frames:
         images.append(load_rgb(f.image_path, bg))
         geo = avatar.geometry(f.controls)
+        if isinstance(avatar, Avatar):
+            geo = avatar.with_light(geo, raster)
         cam = camera_of(split, f.camera_to_world)
         r = raster.rasterize(posed_mesh(avatar.head, f.controls)[0], avatar.head_model.triangles, cam)
         if "mask_path" in f.extra:

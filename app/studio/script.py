@@ -106,6 +106,10 @@ class Script:
                 setattr(studio.view, k, v)
             studio.dirty = True
         elif "buffer" in s:
+            from app.studio.viewport import INSPECT
+
+            if s["buffer"] in INSPECT and studio.buffer not in INSPECT:
+                studio.dirty = True  # as the combo does: render again with the variants the buffer is made of
             studio.buffer = s["buffer"]
         elif "timeline" in s:
             studio.timeline_frame = int(s["timeline"])
@@ -118,7 +122,7 @@ class Script:
             target = list(PRESET_NAMES).index(s["wait_render"])
             ok = (not studio.dirty and r is not None and r.request_id == studio.last_submit_id
                   and list(PRESET_NAMES).index(r.pass_name) >= target and studio.viewport.neural_image is not None
-                  and studio.viewport.shown[:2] == (r.request_id, r.pass_name))
+                  and studio.viewport.shown == (r.request_id, r.pass_name, studio.buffer))
             if self._waiting(ok or bool(studio.worker.error)):
                 return
             if studio.worker.error:

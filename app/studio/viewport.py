@@ -10,7 +10,7 @@ import moderngl
 import numpy as np
 from imgui_bundle import imgui
 
-from app.turntable import buffer_image
+from app.turntable import INSPECT, buffer_image
 from models.head.head import posed_mesh
 from render.gl.context import GLContext
 from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
@@ -18,14 +18,24 @@ from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
 if TYPE_CHECKING:
     from app.studio.app import Studio
 
-BUFFERS = ("rgb", "normals", "grad_normals", "depth", "opacity", "rgb_no_shadows", "shadow_change", "shading")
+BUFFERS = ("rgb", "normals", "grad_normals", "depth", "opacity", "rgb_no_shadows", "rgb_light", "shadow_change",
+           "shading")
 BUFFER_LABELS = {"rgb": "RGB", "normals": "predicted normals", "grad_normals": "density-gradient normals",
                  "depth": "depth", "opacity": "opacity",
-                 "rgb_no_shadows": "RGB, shadow inputs of the neutral head",
-                 "shadow_change": "cast shadows (change from the neutral head's)",
+                 "rgb_no_shadows": "RGB without cast shadows",
+                 "rgb_light": "light reaching the surface (cast shadows dark)",
+                 "shadow_change": "cast shadows (render - render without them)",
                  "shading": "shading contribution (render - normals to viewer)"}
-INSPECT = {"rgb_no_shadows": "no_shadows", "shadow_change": "no_shadows", "shading": "flat"}
-"""Buffers made from colour variants (Avatar.render_image(inspect=True)): which variant each needs."""
+LEGACY_LABELS = {"rgb_no_shadows": "RGB, shadow inputs of the neutral head",
+                 "shadow_change": "cast shadows (change from the neutral head's)"}
+"""An avatar trained before the shadow factor has no render without cast shadows: its buffers are the
+counterfactual of the neutral head's shadow inputs, and say so."""
+
+
+def buffer_label(name: str, avatar) -> str:
+    field = getattr(avatar, "field", None)
+    legacy = field is not None and getattr(field, "landmarks", None) is not None and field.shadow_net is None
+    return LEGACY_LABELS.get(name, BUFFER_LABELS[name]) if legacy else BUFFER_LABELS[name]
 
 
 def buffer_available(name: str, avatar, buffers: dict | None) -> bool:
@@ -121,9 +131,9 @@ def draw(studio: Studio) -> None:
     # What to show.
     available = [b for b in BUFFERS if buffer_available(b, s.avatar, None if r is None else r.buffers)]
     imgui.set_next_item_width(300)
-    if imgui.begin_combo("buffer", BUFFER_LABELS[studio.buffer]):
+    if imgui.begin_combo("buffer", buffer_label(studio.buffer, s.avatar)):
         for b in available:
-            if imgui.selectable(BUFFER_LABELS[b], b == studio.buffer)[0]:
+            if imgui.selectable(buffer_label(b, s.avatar), b == studio.buffer)[0]:
                 if b in INSPECT and studio.buffer not in INSPECT:
                     studio.dirty = True  # render again with the variants this buffer is made of
                 studio.buffer = b

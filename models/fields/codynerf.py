@@ -7,6 +7,12 @@ appearance. The effect set decides the inputs and which networks exist (DESIGN 3
 | shading   | + n                                        | built                              |
 | specular  | + n, R                                     | built                              |
 | shadows   | + landmarks, expression/pose prior offsets | only with shading or specular      |
+
+Cast shadows as a factor (`FieldConfig.shadow_factor`, every avatar trained since it exists): the shadow
+inputs do not go into T with the rest; a small network S reads them with tau and gives the share of the light
+that reaches the point, and the colour is T(tau, n, R, phi) * S. An artist can then see the render without
+cast shadows (S = 1) and the shadows alone, by construction rather than by a counterfactual. The paper's single
+network (Eq. 7 as written) stays for avatars trained before (`shadow_factor` False).
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from models.fields.mlp import MLP
 from models.fields.prior import PriorSamples
 
 EFFECTS = ("shading", "specular", "shadows")
+SHADOW_BIAS = 4.0  # the shadow factor's logit at initialisation: 98% of the light reaches every point
 
 
 def parse_effects(text: str) -> tuple[str, ...]:
@@ -61,6 +68,16 @@ class FieldConfig:
     landmark_features: int = 16
     scale_m: float = 0.25
     """Half the extent that position encodings cover without aliasing."""
+    shadow_factor: bool = True
+    """With shadows: colour = T(...) * S(tau, landmarks, expression/pose offsets) instead of one T reading all
+    of them (Eq. 7 as written; avatars trained before the factor existed load with False)."""
+    light_dir: tuple[float, float, float] | None = None
+    """The capture's key light (world, towards the light) where its lighting record has one: S also reads
+    whether the guide mesh blocks that light at the point (models/fields/mesh_light.py)."""
+
+    @property
+    def mesh_light(self) -> bool:
+        return self.light_dir is not None and self.shadow_factor and "shadows" in self.effects
 
     @property
     def needs_normals(self) -> bool:
@@ -98,10 +115,14 @@ class CoDyNeRFField(nn.Module):
             d_app += 3
         if "specular" in c.effects:
             d_app += encoded_size(3, c.view_frequencies)
-        self.landmarks = None
+        self.landmarks = self.shadow_net = None
         if "shadows" in c.effects:
             self.landmarks = nn.Linear(3 * n_landmarks, c.landmark_features)
-            d_app += c.landmark_features + 6
+            if c.shadow_factor:  # starts fully lit (see SHADOW_BIAS): shadows are learnt where the images call for them
+                self.shadow_net = MLP(c.feature_dim + 6 + int(c.mesh_light) + c.landmark_features, 1, 32, 2,
+                                      zero_last=True)
+            else:
+                d_app += c.landmark_features + 6
         self.appearance_net = MLP(d_app, 3, c.width, 2)
 
     def geometry(
@@ -154,31 +175,44 @@ class CoDyNeRFField(nn.Module):
         view_dir: torch.Tensor,  # (P,3) unit, from the point towards the camera
         phi: torch.Tensor,  # (P, appearance_code_dim), or (1, appearance_code_dim) shared by every point
         landmarks: torch.Tensor | None = None,  # (1, 3L) head-centred
+        mesh_light: torch.Tensor | None = None,  # (P,) the guide mesh's visibility of the key light (cfg.mesh_light)
     ) -> torch.Tensor:
         """Colour (P,3) in [0,1] (Eq. 7)."""
+        lit, light = self.appearance_terms(geo, prior, view_dir, phi, landmarks, mesh_light)
+        return lit if light is None else lit * light
+
+    def appearance_terms(
+        self,
+        geo: FieldOutput,
+        prior: PriorSamples,
+        view_dir: torch.Tensor,
+        phi: torch.Tensor,
+        landmarks: torch.Tensor | None = None,
+        mesh_light: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The colour without cast shadows (P,3) and the share of the light that reaches each point (P,1) in
+        (0,1), whose product is the colour; the share is None without a shadow factor (the colour is then
+        the first term)."""
         c = self.cfg
+        light = None
+        if self.shadow_net is not None:
+            lm = self.landmarks(landmarks)
+            inputs = [geo.rgb, prior.expression_offset / c.scale_m, prior.pose_offset / c.scale_m]
+            if c.mesh_light:
+                if mesh_light is None:
+                    raise ValueError("this avatar's shadow factor reads the guide mesh's shadow map: pass mesh_light")
+                inputs.append(mesh_light[:, None])
+            light = torch.sigmoid(SHADOW_BIAS + self.shadow_net(torch.cat(inputs, -1), lm))
         inputs = [geo.rgb, frequency_encoding(view_dir, c.view_frequencies)]
         if c.needs_normals:
             inputs.append(geo.normal)
         if "specular" in c.effects:
             reflect = 2 * (view_dir * geo.normal).sum(-1, keepdim=True) * geo.normal - view_dir
             inputs.append(frequency_encoding(reflect, c.view_frequencies))
-        if self.landmarks is not None:
+        if self.landmarks is not None and self.shadow_net is None:
             lm = self.landmarks(landmarks).expand(len(view_dir), -1)
             inputs += [lm, prior.expression_offset / c.scale_m, prior.pose_offset / c.scale_m]
-        return torch.sigmoid(self.appearance_net(torch.cat(inputs, -1), phi, code_at=c.feature_dim + encoded_size(
+        lit = torch.sigmoid(self.appearance_net(torch.cat(inputs, -1), phi, code_at=c.feature_dim + encoded_size(
             3, c.view_frequencies)))
+        return lit, light
 
-    def forward(
-        self,
-        x: torch.Tensor,  # (P,3) world points
-        prior: PriorSamples,
-        view_dir: torch.Tensor,  # (P,3) unit, from the point towards the camera
-        omega: torch.Tensor,  # (P, deform_code_dim)
-        phi: torch.Tensor,  # (P, appearance_code_dim)
-        landmarks: torch.Tensor | None = None,  # (1, 3L), head-centred
-        create_graph: bool = False,
-    ) -> FieldOutput:
-        out = self.geometry(x, prior, omega, create_graph)
-        out.rgb = self.appearance(out, prior, view_dir, phi, landmarks)
-        return out

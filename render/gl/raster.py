@@ -65,21 +65,39 @@ class Rasterizer:
         self._size = (0, 0)
 
     def rasterize(self, vertices: np.ndarray, triangles: np.ndarray, camera: Camera) -> Raster:
+        tri, depth = self._draw(vertices, triangles, camera.view, camera.projection, camera.width_px,
+                                camera.height_px)
+        hit = tri >= 0
+        bary = np.zeros((*tri.shape, 3), np.float32)
+        if hit.any():
+            origin, dirs = pixel_rays(camera)
+            corners = np.asarray(vertices, np.float64)[np.asarray(triangles)[tri[hit]]]
+            bary[hit] = ray_triangle_barycentric(origin, dirs[hit], corners)
+        return Raster(tri, np.where(hit, depth, np.inf), bary)
+
+    def depth_map(self, vertices: np.ndarray, triangles: np.ndarray, view: np.ndarray, projection: np.ndarray,
+                  px: int) -> np.ndarray:
+        """(px,px) distance along the view axis to the nearest surface, inf where there is none, rows top
+        first, for any view and projection (an orthographic one from a light gives a shadow map)."""
+        tri, depth = self._draw(vertices, triangles, view, projection, px, px)
+        return np.where(tri >= 0, depth, np.inf).astype(np.float32)
+
+    def _draw(self, vertices: np.ndarray, triangles: np.ndarray, view: np.ndarray, projection: np.ndarray, w: int,
+              h: int) -> tuple[np.ndarray, np.ndarray]:
+        """Triangle ids (-1 where none) and view depth, (h,w) each, rows top first."""
         with self.gl.current():
             ctx = self.gl.ctx
-            w, h = camera.width_px, camera.height_px
             if self._size != (w, h):
                 self.release()
                 self._depth = ctx.texture((w, h), 1, dtype="f4")
                 self._tri = ctx.texture((w, h), 1, dtype="i4")
                 self._fbo = ctx.framebuffer([self._depth, self._tri], ctx.depth_renderbuffer((w, h)))
                 self._size = (w, h)
-            v = np.asarray(vertices, "f4")
-            vbo = ctx.buffer(v.tobytes())
+            vbo = ctx.buffer(np.asarray(vertices, "f4").tobytes())
             ibo = ctx.buffer(np.asarray(triangles, "i4").tobytes())
             prog = self.gl.program("raster")
-            prog["u_view_projection"].write((camera.projection @ camera.view).astype("f4").T.tobytes())
-            prog["u_view"].write(camera.view.astype("f4").T.tobytes())
+            prog["u_view_projection"].write((projection @ view).astype("f4").T.tobytes())
+            prog["u_view"].write(np.asarray(view).astype("f4").T.tobytes())
             vao = ctx.vertex_array(prog, [(vbo, "3f", "in_position")], index_buffer=ibo)
             self._fbo.use()
             self._fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -91,13 +109,7 @@ class Rasterizer:
             ibo.release()
             tri = np.frombuffer(self._tri.read(), np.int32).reshape(h, w)[::-1] - 1
             depth = np.frombuffer(self._depth.read(), np.float32).reshape(h, w)[::-1]
-            hit = tri >= 0
-            bary = np.zeros((h, w, 3), np.float32)
-            if hit.any():
-                origin, dirs = pixel_rays(camera)
-                corners = np.asarray(vertices, np.float64)[np.asarray(triangles)[tri[hit]]]
-                bary[hit] = ray_triangle_barycentric(origin, dirs[hit], corners)
-            return Raster(tri.copy(), np.where(hit, depth, np.inf), bary)
+            return tri.copy(), depth.copy()
 
     def release(self) -> None:
         with self.gl.current():

@@ -60,3 +60,35 @@ def test_cuda_without_a_gpu_is_a_clear_error(capture, tmp_path, capsys):
     assert main(["train", str(capture), "--out", str(tmp_path / "a"), "--device", "cuda", "--steps", "1"]) == 2
     assert "torch sees no CUDA GPU" in capsys.readouterr().err
     assert not (tmp_path / "a").exists()
+
+
+def test_shadow_buffers_and_metrics(synth_capture, tmp_path, capsys):
+    """An `all` avatar on a sun capture (which has the cast-shadow masks and the frames without cast shadows):
+    eval reports the shadow figures and adds the without-shadows and shadows panels; render writes the shadow
+    buffers; an avatar without shadows refuses them with exit 2 naming the avatar."""
+    capture = synth_capture("sun", 12, 24)
+    avatar = tmp_path / "all"
+    assert main(["train", str(capture), "--out", str(avatar), "--effects", "all", "--steps", "6",
+                 "--rays-per-step", "128"]) == 0
+    assert main(["eval", str(avatar), str(capture), "--out", str(tmp_path / "ev")]) == 0
+    report = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    m = report["metrics"]
+    assert {"shadow_corr", "unshadowed_psnr", "unshadowed_psnr_render"} <= set(m)
+    assert -1 <= m["shadow_corr"] <= 1 and all(np.isfinite(m[k]) for k in m)
+    side = np.asarray(Image.open(tmp_path / "ev" / "test_0000.png"))
+    assert side.shape == (24, 24 * 6, 3)  # ground truth, render, error, normals, without shadows, shadows x4
+    for buffer in ("rgb_no_shadows", "rgb_light", "shadow_change", "shading"):
+        out = tmp_path / f"{buffer}.png"
+        assert main(["render", str(avatar), "--buffer", buffer, "--size", "32", "--out", str(out)]) == 0
+        img = np.asarray(Image.open(out))
+        assert img.shape == (32, 32, 3)
+        if buffer == "rgb_light":  # off the head all the light arrives: white corners
+            assert (img[0, 0] == 255).all() and (img[-1, -1] == 255).all()
+    shading = tmp_path / "shading_only"
+    assert main(["train", str(capture), "--out", str(shading), "--effects", "shading", "--steps", "1",
+                 "--rays-per-step", "64"]) == 0
+    capsys.readouterr()
+    assert main(["render", str(shading), "--buffer", "rgb_light", "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert "rgb_light" in err and str(shading) in err and "shading" in err
+    assert not (tmp_path / "x.png").exists()

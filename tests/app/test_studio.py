@@ -77,6 +77,21 @@ def test_expression_slider_changes_the_face(display, avatar, tmp_path):
     assert report["latency_ms"] is not None
 
 
+def test_shadow_buffers_in_the_viewport(display, avatar, tmp_path):
+    """With the head turned and the jaw open: the render without cast shadows is nowhere darker than the
+    render, the light reaching the surface is white off the head and darker somewhere on it, as shown."""
+    shots = {b: tmp_path / f"{b}.png" for b in ("rgb", "rgb_no_shadows", "rgb_light")}
+    steps = [{"head": [35, -10, 0]}, {"jaw_open_deg": 20}]
+    for b, path in shots.items():
+        steps += [{"buffer": b}, {"refine_to": "preview"}, {"wait_render": "preview"}, {"save_neural": str(path)}]
+    report = run_script(display, tmp_path, avatar, steps)
+    assert report["errors"] == []
+    rgb, without, light = (np.asarray(Image.open(shots[b]), np.int16) for b in shots)
+    assert rgb.shape == without.shape == light.shape == (160, 160, 3)
+    assert (without >= rgb - 1).all()  # uint8 rounding
+    assert (light[0, 0] == 255).all() and light.min() < 250
+
+
 def test_errors_training_job_and_turntable(display, avatar, capture, tmp_path):
     mp4 = tmp_path / "turn.mp4"
     job_out = tmp_path / "job"

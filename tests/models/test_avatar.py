@@ -162,11 +162,13 @@ def test_occupancy_grid_is_off_by_default_and_its_error_is_known(trained, gl):
 
 
 def test_inspection_variants(capture, gl, tmp_path):
-    """The colour variants behind the viewport's shadow and shading buffers: none for `none`; for `all`,
-    finite, the plain colour unchanged by asking for them, the shadow-input variant equal to the render for the
-    neutral head (whose shadow inputs it borrows) and different from it with the head turned and the jaw open,
-    and the flat-normal variant different from the render."""
-    from models.head.controls import Controls
+    """The buffers behind the viewport's shadow and shading views, for `all`: finite; the plain colour unchanged
+    by asking for them; the shadow factor's share of the light in [0, 1] and 1 off the head; the render without
+    cast shadows never darker than the render (the factor only takes light away) and brighter somewhere; the
+    flat-normal variant different from the render. An avatar written before the factor existed (no
+    `shadow_factor` in avatar.json) still loads, and shows the counterfactual of the neutral head's shadow
+    inputs: equal to the render for the neutral head, different with the head turned and the jaw open."""
+    from models.checkpoint import save_checkpoint
     from models.train_data import camera_of
 
     t = Trainer(TrainConfig(dataset=capture, out=tmp_path / "all", effects="all", steps=30, rays_per_step=512,
@@ -174,20 +176,36 @@ def test_inspection_variants(capture, gl, tmp_path):
     for k in range(30):
         t.train_step(k / 30)
     av = t.avatar.eval()
-    assert av.inspection_variants() == ("no_shadows", "flat")
+    assert av.inspection_variants() == ("no_shadows", "light", "flat")
     f = t.split.frames[3]
     cam, r = camera_of(t.split, f.camera_to_world), Rasterizer(gl)
-    neutral = Controls()
-    out = av.render_image(neutral, cam, r, inspect=True)
-    assert np.array_equal(out["rgb"], av.render_image(neutral, cam, r)["rgb"])
-    assert all(np.isfinite(out[k]).all() for k in ("rgb", "rgb_no_shadows", "rgb_flat"))
-    np.testing.assert_allclose(out["rgb_no_shadows"], out["rgb"], atol=1e-5)
+    out = av.render_image(f.controls, cam, r, frame=3, inspect=True)
+    assert np.array_equal(out["rgb"], av.render_image(f.controls, cam, r, frame=3)["rgb"])
+    assert all(np.isfinite(out[k]).all() for k in ("rgb", "rgb_no_shadows", "rgb_light", "rgb_flat"))
+    light = out["rgb_light"]
+    assert light.min() >= 0 and light.max() <= 1 + 1e-6 and np.allclose(light[out["opacity"] == 0], 1.0)
+    assert (out["rgb"] <= out["rgb_no_shadows"] + 1e-6).all()
+    assert (out["rgb_no_shadows"] - out["rgb"]).max() > 1e-3
     assert np.abs(out["rgb_flat"] - out["rgb"]).max() > 1e-3
-    head = av.head_model
+
+    meta = t.meta()
+    meta["field"].pop("shadow_factor")
+    legacy_cfg = replace(t.field_cfg, shadow_factor=False)
+    torch.manual_seed(0)
+    legacy = type(av)(av.head_model, legacy_cfg, len(t.split.frames), av.background.numpy(), av.render_cfg)
+    legacy.load_state_dict({k: v for k, v in av.state_dict().items()  # the trained geometry, a new appearance
+                            if not k.startswith(("field.appearance_net", "field.shadow_net"))}, strict=False)
+    save_checkpoint(tmp_path / "legacy", meta, legacy.state_dict(), 0)
+    old, _ = load_avatar(tmp_path / "legacy")
+    assert old.field.shadow_net is None and old.inspection_variants() == ("no_shadows", "flat")
+    neutral = Controls()
+    out = old.render_image(neutral, cam, r, inspect=True)
+    np.testing.assert_allclose(out["rgb_no_shadows"], out["rgb"], atol=1e-5)
+    head = old.head_model
     turned = Controls(root=np.array([0.0, 0.5, 0.0], np.float32), jaw=np.array([0.3, 0, 0], np.float32)) \
         if "jaw" in head.joint_names else Controls(root=np.array([0.0, 0.5, 0.0], np.float32))
-    moved = av.render_image(turned, cam, r, inspect=True)
-    assert np.abs(moved["rgb_no_shadows"] - moved["rgb"]).max() > 1e-3
+    moved = old.render_image(turned, cam, r, inspect=True)
+    assert np.abs(moved["rgb_no_shadows"] - moved["rgb"]).max() > 1e-4  # untrained colour: small, but 10x the above
     r.release()
 
 
