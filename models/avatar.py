@@ -98,7 +98,7 @@ class RayOutput:
     point_normal: torch.Tensor | None = None  # (R,S,3)
     point_grad_normal: torch.Tensor | None = None  # (R,S,3)
     variants: dict[str, torch.Tensor] = field(default_factory=dict)  # name -> (R,3) colour under other inputs
-    point_light: torch.Tensor | None = None  # (R,S) share of the light reaching each sample (shadow factor)
+    point_factor: torch.Tensor | None = None  # (R,S) share of each sample's lit colour the cast shadows leave (F)
 
 
 def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -> int:
@@ -229,7 +229,7 @@ class Avatar(nn.Module):
     # ---- geometry --------------------------------------------------------------------------------------
     def with_light(self, geo: FrameGeometry, rasterizer: Rasterizer) -> FrameGeometry:
         """The geometry with its shadow map where this avatar's shadow factor reads one (else unchanged)."""
-        if not self.field_cfg.mesh_light:
+        if not self.field_cfg.shadow_factor:
             return geo
         light = mesh_light(geo.meshes.posed.cpu().numpy(), self.head_model.triangles, self.field_cfg.light_dir,
                            rasterizer)
@@ -277,8 +277,8 @@ class Avatar(nn.Module):
         its weights) and renders all of them; samples: the intervals to use instead of the sampler's.
         variants: colours of the same samples under other appearance inputs, for inspection: "no_shadows" (the
         shadow factor at 1; an avatar without the factor: the shadow inputs of the neutral head,
-        `neutral_landmarks`, and no expression or pose offsets), "light" (the shadow factor composited, grey,
-        1 where nothing is in the way) and "flat" (every normal turned to the viewer)."""
+        `neutral_landmarks`, and no expression or pose offsets), "light" (the key light's visibility S
+        composited, grey, 1 where nothing is in the way) and "flat" (every normal turned to the viewer)."""
         rc = self.render_cfg
         if dense_samples:
             surface_t = torch.full_like(surface_t, float("inf"))
@@ -341,28 +341,28 @@ class Avatar(nn.Module):
                 values = values.new_zeros(len(keep), values.shape[1]).index_copy(0, shown, values)
             return scatter(values).reshape(R, S, -1)
 
-        mesh_vis = geo.light.visibility(pts[keep_shown]) if self.field_cfg.mesh_light else None
+        mesh_vis = geo.light.visibility(pts[keep_shown]) if self.field_cfg.shadow_factor else None
 
         def colour(g_in: FieldOutput, prior_in: PriorSamples, landmarks: torch.Tensor) -> torch.Tensor:
             return to_rays(self.field.appearance(g_in, prior_in, view_shown, phi_at(keep_shown), landmarks,
                                                  mesh_vis))
 
-        lit, light = self.field.appearance_terms(g_shown, prior_shown, view_shown, phi_at(keep_shown), geo.landmarks,
-                                                 mesh_vis)
-        point_light = None if light is None else to_rays(light)
-        rgb = composite(weights, to_rays(lit) * (1.0 if point_light is None else point_light), remaining,
+        lit, factor, visibility = self.field.appearance_terms(g_shown, prior_shown, view_shown, phi_at(keep_shown),
+                                                              geo.landmarks, mesh_vis)
+        point_factor = None if factor is None else to_rays(factor)
+        rgb = composite(weights, to_rays(lit) * (1.0 if point_factor is None else point_factor), remaining,
                         self.background)
         extra = {}
         for name in variants:
-            if name == "no_shadows" and point_light is not None:  # the shadow factor at 1: lit everywhere
+            if name == "no_shadows" and point_factor is not None:  # the shadow factor at 1: lit everywhere
                 extra[name] = composite(weights, to_rays(lit), remaining, self.background)
             elif name == "no_shadows":  # no factor: the shadow inputs of the neutral head (no expression, no pose)
                 zero = torch.zeros_like(prior_shown.offset)
                 p_neutral = replace(prior_shown, expression_offset=zero, pose_offset=zero)
                 extra[name] = composite(weights, colour(g_shown, p_neutral, neutral_landmarks), remaining,
                                         self.background)
-            elif name == "light":  # the share of the light reaching the surface (1: no cast shadow), grey
-                extra[name] = composite(weights, point_light, remaining, point_light.new_ones(1)).expand(R, 3)
+            elif name == "light":  # the key light's visibility (1: no cast shadow), grey
+                extra[name] = composite(weights, to_rays(visibility), remaining, visibility.new_ones(1)).expand(R, 3)
             elif name == "flat":  # every surface facing the viewer: the shading's contribution is what changes
                 g_flat = replace(g_shown, normal=view_shown)
                 extra[name] = composite(weights, colour(g_flat, prior_shown, geo.landmarks), remaining,
@@ -372,7 +372,7 @@ class Avatar(nn.Module):
             pn, pg = scatter(g.normal).reshape(R, S, 3), scatter(g.grad_normal).reshape(R, S, 3)
             normal, grad_normal = composite(weights, pn), composite(weights, pg)
         return RayOutput(rgb, weights.sum(-1), expected_depth(weights, samples.t_mid), normal, grad_normal, weights,
-                         sigma, samples, pn, pg, extra, None if point_light is None else point_light[..., 0])
+                         sigma, samples, pn, pg, extra, None if point_factor is None else point_factor[..., 0])
 
     def inspection_variants(self) -> tuple[str, ...]:
         """The colour variants this avatar's effects make meaningful (see render_rays)."""
@@ -388,8 +388,8 @@ class Avatar(nn.Module):
         `frame` picks a training frame's codes; None uses the mean code (novel controls). `should_stop` is
         asked between batches of rays; when it says yes, RenderCancelled is raised (a newer request won).
         `inspect` adds, for avatars with those effects, "rgb_no_shadows" (the colour without cast shadows; for
-        an avatar without a shadow factor, with the shadow inputs of the neutral head), "rgb_light" (the share
-        of the light that reaches the surface, grey) and "rgb_flat" (with every normal turned to the viewer),
+        an avatar without a shadow factor, with the shadow inputs of the neutral head), "rgb_light" (the key
+        light's visibility, grey) and "rgb_flat" (with every normal turned to the viewer),
         from which the viewport shows the cast shadows and the shading's contribution."""
         geo = self.with_light(self.geometry(controls), rasterizer)
         raster = rasterizer.rasterize(geo.meshes.posed.cpu().numpy(), self.head_model.triangles, camera)

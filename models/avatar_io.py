@@ -16,10 +16,10 @@ from models.quality import load_presets
 
 
 def field_config(meta: dict) -> FieldConfig:
-    """The field's sizes from avatar.json; avatars written before the shadow factor existed have none."""
+    """The field's sizes from avatar.json (avatars written before the shadow factor existed have no light_dir)."""
     f = meta["field"]
     light = f.get("light_dir")
-    return FieldConfig(**{"shadow_factor": False, **f, "effects": tuple(f["effects"]),
+    return FieldConfig(**{**f, "effects": tuple(f["effects"]),
                           "light_dir": None if light is None else tuple(float(v) for v in light)})
 
 

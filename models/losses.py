@@ -31,8 +31,8 @@ def top_k_normal_consistency(weights: torch.Tensor, normals: torch.Tensor, grad_
 
 
 def blocked_light(weights: torch.Tensor, light: torch.Tensor) -> torch.Tensor:
-    """sum_i w_i (1 - S_i) per ray, averaged over rays: the light the shadow factor S (R,S) takes away where
-    the surface is, weights (R,S) detached (where to look, as in Eq. 10)."""
+    """sum_i w_i (1 - F_i) per ray, averaged over rays: the share of the colour the shadow factor F (R,S)
+    takes away where the surface is, weights (R,S) detached (where to look, as in Eq. 10)."""
     return (weights.detach() * (1.0 - light)).sum(-1).mean()
 
 

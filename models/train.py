@@ -237,9 +237,9 @@ class Trainer:
         parts = {"photometric": losses.photometric(out.rgb, target),
                  "cauchy": self.w.cauchy * losses.cauchy_sparsity(out.sigma, self.w.cauchy_c),
                  "codes": self.w.codes * losses.code_l2(self.avatar.omega(code), self.avatar.phi(code))}
-        if out.point_light is not None:
+        if out.point_factor is not None:
             parts["shadow"] = ramp(progress, self.w.shadow_start, self.w.shadow_ramp) * self.w.shadow * \
-                losses.blocked_light(out.weights, out.point_light)
+                losses.blocked_light(out.weights, out.point_factor)
         if out.point_normal is not None:
             parts["normals_facing"] = self.w.normals_facing * losses.normals_facing_camera(
                 out.weights, out.point_normal, dirs)

@@ -8,8 +8,10 @@ exits; --script JSON runs a list of steps (set sliders, open avatars, train, exp
 from __future__ import annotations
 
 import json
+import threading
 import time
 from collections import deque
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +24,7 @@ from app.studio import avatar_panel, controls_panel, export_panel, jobs_panel, q
 from app.studio.config import StudioConfig
 from app.studio.neural import NeuralWorker, Request
 from app.studio.script import Script
-from app.studio.session import Session, View
+from app.studio.session import Session, View, remember_recent
 from render.gl.context import GLContext
 
 REPO = Path(__file__).resolve().parents[2]
@@ -35,25 +37,16 @@ class FrameClock:
     def __init__(self):
         self.last = time.perf_counter()
         self.times: dict[str, deque] = {k: deque(maxlen=240) for k in ("idle", "rendering", "training", "loading")}
-        """Frame times by what the studio was doing; "loading": time spent opening avatars (reading a checkpoint
-        blocks the window for a fraction of a second), kept out of the interface rates."""
-        self.excluded = 0.0
+        """Frame times by what the studio was doing ("loading": while an avatar is read in the background)."""
         self.started = False
         self.recent: deque = deque(maxlen=60)
-
-    def exclude(self, seconds: float) -> None:
-        """Time spent loading inside the current frame: recorded as "loading", not as this frame's time."""
-        self.excluded += seconds
 
     def tick(self, state: str) -> float:
         now = time.perf_counter()
         dt, self.last = now - self.last, now
         if not self.started:  # the first frame holds the window's creation: no interface rate
-            self.started, self.excluded = True, 0.0
+            self.started = True
             return dt
-        if self.excluded:
-            self.times["loading"].append(self.excluded)
-            dt, self.excluded = max(dt - self.excluded, 1e-4), 0.0
         self.times[state].append(dt)
         self.recent.append(dt)
         return dt
@@ -63,10 +56,24 @@ class FrameClock:
         return len(t) / sum(t) if t and sum(t) > 0 else 0.0
 
 
+@dataclass
+class Opening:
+    """An avatar folder being read in the background."""
+
+    folder: Path
+    thread: threading.Thread | None = None
+    session: Session | None = None
+    error: str | None = None
+    seconds: float = 0.0
+
+
 class Studio:
     def __init__(self, cfg: StudioConfig):
         self.cfg = cfg
         self.session = Session()
+        self.opening: Opening | None = None
+        self.loading_s: list[float] = []
+        """Seconds each avatar took to read (off the window's thread)."""
         self.view = View()
         self.worker = NeuralWorker()
         self.jobs = JobQueue()
@@ -97,26 +104,39 @@ class Studio:
         self.jobs_form = jobs_panel.JobForm()
 
     # ---- avatars -----------------------------------------------------------------------------------------
-    def open_avatar(self, folder: str | Path) -> bool:
-        t0 = time.perf_counter()
-        try:
-            return self._open_avatar(folder)
-        finally:
-            self.clock.exclude(time.perf_counter() - t0)
+    def open_avatar(self, folder: str | Path) -> None:
+        """Start reading an avatar folder on a thread of its own; the window goes on drawing (with the open
+        avatar, if any) and the new one takes its place when read (poll_opening). A later request wins."""
+        opening = Opening(Path(folder))
 
-    def _open_avatar(self, folder: str | Path) -> bool:
-        try:
-            self.session.open(folder)
-        except INPUT_ERRORS as e:
-            self.report(str(e))
-            return False
-        except Exception as e:  # a broken file is the file's problem, never the studio's end
-            self.report(f"{folder}: could not open ({type(e).__name__}: {e})")
-            return False
+        def read() -> None:
+            t0 = time.perf_counter()
+            try:
+                opening.session = Session.load(opening.folder)
+            except INPUT_ERRORS as e:
+                opening.error = str(e)
+            except Exception as e:  # a broken file is the file's problem, never the studio's end
+                opening.error = f"{folder}: could not open ({type(e).__name__}: {e})"
+            opening.seconds = time.perf_counter() - t0
+
+        opening.thread = threading.Thread(target=read, name="open-avatar", daemon=True)
+        opening.thread.start()
+        self.opening = opening
+
+    def poll_opening(self) -> None:
+        o = self.opening
+        if o is None or o.thread.is_alive():
+            return
+        self.opening = None
+        self.loading_s.append(o.seconds)
+        if o.error is not None:
+            self.report(o.error)
+            return
+        self.session = o.session
+        remember_recent(o.folder)
         self.worker.set_avatar(self.session.avatar)
         self.timeline_frame = -1
         self.dirty = True
-        return True
 
     def report(self, message: str) -> None:
         self.errors.append(message)
@@ -152,12 +172,14 @@ class Studio:
             self.viewport.init(self.gl)
             if self.cfg.avatar is not None or DEMO_AVATAR.is_dir():
                 self.open_avatar(self.cfg.avatar or DEMO_AVATAR)
+        self.poll_opening()
         self.jobs.poll()
         for job in self.jobs.jobs:  # a new avatar from video opens when its job is done
             if job.video is not None and job.state == "done" and not job.opened:
                 job.opened = True
                 self.open_avatar(job.out)
-        state = "training" if self.jobs.running() else "rendering" if self.worker.busy else "idle"
+        state = "training" if self.jobs.running() else "loading" if self.opening else \
+            "rendering" if self.worker.busy else "idle"
         self.clock.tick(state)
         if self.script is not None:
             self.script.step(self)
@@ -237,7 +259,8 @@ class Studio:
         return {"fps_idle": round(self.clock.fps("idle"), 1), "fps_rendering": round(self.clock.fps("rendering"), 1),
                 "fps_training": round(self.clock.fps("training"), 1),
                 "frames": {k: len(v) for k, v in self.clock.times.items()},
-                "loading_s": [round(x, 2) for x in self.clock.times["loading"]],
+                "loading_s": [round(x, 2) for x in self.loading_s],
+                "fps_loading": round(self.clock.fps("loading"), 1),
                 "gui_ms_median": round(float(np.median(self.gui_ms)), 2) if self.gui_ms else None,
                 "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 1),
                 "last_pass": None if r is None else {"pass": r.pass_name, "ms": round(r.ms, 1)},

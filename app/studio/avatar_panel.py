@@ -45,6 +45,8 @@ def draw(studio: Studio) -> None:
                 studio.open_avatar(folder)
         imgui.end_combo()
     imgui.separator()
+    if studio.opening is not None:
+        imgui.text(f"opening {studio.opening.folder.name}...")
     if s.avatar is None:
         imgui.text("No avatar open.")
     else:

@@ -81,6 +81,8 @@ class Script:
     def step(self, studio: Studio) -> None:
         if self.failed or self.pending_screenshot is not None:
             return
+        if self._waiting(studio.opening is None):  # every step acts on the avatar being opened, once it is open
+            return
         if self.index >= len(self.steps):
             hello_imgui.get_runner_params().app_shall_exit = True
             return

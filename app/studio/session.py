@@ -103,19 +103,20 @@ class Session:
         self.capture_note = ""
         self.sliders = Sliders(np.zeros(0, np.float32))
 
-    def open(self, folder: str | Path) -> None:
-        """Load an avatar folder (CheckpointError etc. propagate with the reason)."""
+    @classmethod
+    def load(cls, folder: str | Path) -> Session:
+        """A session with the avatar folder read (CheckpointError etc. propagate with the reason). It only reads,
+        so the studio runs it off the window's thread."""
+        self = cls()
         folder = Path(folder)
         avatar, meta = load_avatar(folder)
         self.folder, self.avatar, self.meta = folder, avatar, meta
-        self.metrics = None
         metrics = folder / "eval" / "metrics.json"
         if metrics.is_file():
             try:
                 self.metrics = json.loads(metrics.read_text()).get("metrics")
             except (OSError, json.JSONDecodeError):
                 self.metrics = None
-        self.capture, self.capture_note = None, ""
         prov = meta.get("provenance", {})
         for dataset in (prov.get("dataset"), prov.get("dataset_resolved")):  # as given, then absolute
             if not dataset:
@@ -128,7 +129,7 @@ class Session:
                 self.capture_note = f"capture not available: {e}"
         shape = self.capture.frames[0].controls.shape if self.capture and self.capture.frames else np.zeros(0)
         self.sliders = Sliders(np.zeros(avatar.head_model.num_expression, np.float32), shape=np.asarray(shape))
-        remember_recent(folder)
+        return self
 
     @property
     def name(self) -> str:

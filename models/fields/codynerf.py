@@ -8,11 +8,13 @@ appearance. The effect set decides the inputs and which networks exist (DESIGN 3
 | specular  | + n, R                                     | built                              |
 | shadows   | + landmarks, expression/pose prior offsets | only with shading or specular      |
 
-Cast shadows as a factor (`FieldConfig.shadow_factor`, every avatar trained since it exists): the shadow
-inputs do not go into T with the rest; a small network S reads them with tau and gives the share of the light
-that reaches the point, and the colour is T(tau, n, R, phi) * S. An artist can then see the render without
-cast shadows (S = 1) and the shadows alone, by construction rather than by a counterfactual. The paper's single
-network (Eq. 7 as written) stays for avatars trained before (`shadow_factor` False).
+Cast shadows as a factor, where the capture records its key light (`FieldConfig.light_dir`): T also gives k,
+the key light's share of its colour L, and a small network S gives the key light's visibility at the point from
+tau and whether the guide mesh blocks the light there (its shadow map); the colour is L (1 - k (1 - S)). The
+render without cast shadows (S = 1) and the shadows alone are then the model's own, not a counterfactual.
+Measured on the ICT sun capture's test frames (README, "Cast shadows"): S reading the landmarks and offsets
+instead of the mesh, or T without them, lost 4-6 dB; T keeps them (what they carry beyond cast shadows).
+Without a recorded light, Eq. 7 as written.
 """
 
 from __future__ import annotations
@@ -68,16 +70,15 @@ class FieldConfig:
     landmark_features: int = 16
     scale_m: float = 0.25
     """Half the extent that position encodings cover without aliasing."""
-    shadow_factor: bool = True
-    """With shadows: colour = T(...) * S(tau, landmarks, expression/pose offsets) instead of one T reading all
-    of them (Eq. 7 as written; avatars trained before the factor existed load with False)."""
     light_dir: tuple[float, float, float] | None = None
-    """The capture's key light (world, towards the light) where its lighting record has one: S also reads
-    whether the guide mesh blocks that light at the point (models/fields/mesh_light.py)."""
+    """The capture's key light (world, towards the light), where its lighting record has one. With shadows,
+    the colour is then T's L (1 - k (1 - S)): S, the key light's visibility, read from the guide mesh's shadow
+    map (models/fields/mesh_light.py) and tau, so the render without cast shadows (S = 1) is the model's own.
+    Without a light (a tracked video, avatars trained before), Eq. 7 as written: one T reads everything."""
 
     @property
-    def mesh_light(self) -> bool:
-        return self.light_dir is not None and self.shadow_factor and "shadows" in self.effects
+    def shadow_factor(self) -> bool:
+        return self.light_dir is not None and "shadows" in self.effects
 
     @property
     def needs_normals(self) -> bool:
@@ -118,12 +119,11 @@ class CoDyNeRFField(nn.Module):
         self.landmarks = self.shadow_net = None
         if "shadows" in c.effects:
             self.landmarks = nn.Linear(3 * n_landmarks, c.landmark_features)
-            if c.shadow_factor:  # starts fully lit (see SHADOW_BIAS): shadows are learnt where the images call for them
-                self.shadow_net = MLP(c.feature_dim + 6 + int(c.mesh_light) + c.landmark_features, 1, 32, 2,
-                                      zero_last=True)
-            else:
-                d_app += c.landmark_features + 6
-        self.appearance_net = MLP(d_app, 3, c.width, 2)
+            d_app += c.landmark_features + 6
+        if c.shadow_factor:  # starts fully lit (see SHADOW_BIAS): shadows are learnt where the images call for them
+            self.shadow_net = MLP(c.feature_dim + 1, 1, 32, 2, zero_last=True)
+        # With a shadow factor, a fourth output: the share of the lit colour that the key light gives (k below).
+        self.appearance_net = MLP(d_app, 4 if self.shadow_net is not None else 3, c.width, 2)
 
     def geometry(
         self,
@@ -175,11 +175,11 @@ class CoDyNeRFField(nn.Module):
         view_dir: torch.Tensor,  # (P,3) unit, from the point towards the camera
         phi: torch.Tensor,  # (P, appearance_code_dim), or (1, appearance_code_dim) shared by every point
         landmarks: torch.Tensor | None = None,  # (1, 3L) head-centred
-        mesh_light: torch.Tensor | None = None,  # (P,) the guide mesh's visibility of the key light (cfg.mesh_light)
+        mesh_light: torch.Tensor | None = None,  # (P,) the guide mesh's visibility of the key light (shadow factor)
     ) -> torch.Tensor:
         """Colour (P,3) in [0,1] (Eq. 7)."""
-        lit, light = self.appearance_terms(geo, prior, view_dir, phi, landmarks, mesh_light)
-        return lit if light is None else lit * light
+        lit, factor, _ = self.appearance_terms(geo, prior, view_dir, phi, landmarks, mesh_light)
+        return lit if factor is None else lit * factor
 
     def appearance_terms(
         self,
@@ -189,30 +189,33 @@ class CoDyNeRFField(nn.Module):
         phi: torch.Tensor,
         landmarks: torch.Tensor | None = None,
         mesh_light: torch.Tensor | None = None,
-    ) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """The colour without cast shadows (P,3) and the share of the light that reaches each point (P,1) in
-        (0,1), whose product is the colour; the share is None without a shadow factor (the colour is then
-        the first term)."""
+    ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+        """The colour without cast shadows L (P,3), the factor F (P,1) in (0,1) that cast shadows leave of it,
+        whose product is the colour, and the key light's visibility S (P,1); F and S are None without a shadow
+        factor (the colour is then L).
+
+        F = 1 - k (1 - S): S, from the shadow network, is how much of the key light reaches the point (a
+        visibility: 1 lit, 0 blocked), and k, from the appearance network beside L, is the share of L that
+        the key light gives there (it depends on the normal, the light and the albedo, which the appearance
+        network sees and S does not). So a fully shadowed point keeps its ambient part L (1 - k), as in the
+        capture's light, and S only has to say where the light is blocked."""
         c = self.cfg
-        light = None
-        if self.shadow_net is not None:
-            lm = self.landmarks(landmarks)
-            inputs = [geo.rgb, prior.expression_offset / c.scale_m, prior.pose_offset / c.scale_m]
-            if c.mesh_light:
-                if mesh_light is None:
-                    raise ValueError("this avatar's shadow factor reads the guide mesh's shadow map: pass mesh_light")
-                inputs.append(mesh_light[:, None])
-            light = torch.sigmoid(SHADOW_BIAS + self.shadow_net(torch.cat(inputs, -1), lm))
+        if c.shadow_factor:
+            if mesh_light is None:
+                raise ValueError("this avatar's shadow factor reads the guide mesh's shadow map: pass mesh_light")
+            visibility = torch.sigmoid(SHADOW_BIAS + self.shadow_net(torch.cat([geo.rgb, mesh_light[:, None]], -1)))
         inputs = [geo.rgb, frequency_encoding(view_dir, c.view_frequencies)]
         if c.needs_normals:
             inputs.append(geo.normal)
         if "specular" in c.effects:
             reflect = 2 * (view_dir * geo.normal).sum(-1, keepdim=True) * geo.normal - view_dir
             inputs.append(frequency_encoding(reflect, c.view_frequencies))
-        if self.landmarks is not None and self.shadow_net is None:
+        if self.landmarks is not None:
             lm = self.landmarks(landmarks).expand(len(view_dir), -1)
             inputs += [lm, prior.expression_offset / c.scale_m, prior.pose_offset / c.scale_m]
-        lit = torch.sigmoid(self.appearance_net(torch.cat(inputs, -1), phi, code_at=c.feature_dim + encoded_size(
+        out = torch.sigmoid(self.appearance_net(torch.cat(inputs, -1), phi, code_at=c.feature_dim + encoded_size(
             3, c.view_frequencies)))
-        return lit, light
+        if self.shadow_net is None:
+            return out, None, None
+        return out[:, :3], 1.0 - out[:, 3:] * (1.0 - visibility), visibility
 

@@ -163,11 +163,12 @@ def test_occupancy_grid_is_off_by_default_and_its_error_is_known(trained, gl):
 
 def test_inspection_variants(capture, gl, tmp_path):
     """The buffers behind the viewport's shadow and shading views, for `all`: finite; the plain colour unchanged
-    by asking for them; the shadow factor's share of the light in [0, 1] and 1 off the head; the render without
-    cast shadows never darker than the render (the factor only takes light away) and brighter somewhere; the
-    flat-normal variant different from the render. An avatar written before the factor existed (no
-    `shadow_factor` in avatar.json) still loads, and shows the counterfactual of the neutral head's shadow
-    inputs: equal to the render for the neutral head, different with the head turned and the jaw open."""
+    by asking for them; the key light's visibility in [0, 1] and 1 off the head; the render without cast
+    shadows never darker than the render (the factor only takes light away) and brighter somewhere; the
+    flat-normal variant different from the render. An avatar without a shadow factor (no `light_dir` in
+    avatar.json: trained before it existed, or on a capture that records no light) loads, and shows the
+    counterfactual of the neutral head's shadow inputs: equal to the render for the neutral head, different
+    with the head turned and the jaw open."""
     from models.checkpoint import save_checkpoint
     from models.train_data import camera_of
 
@@ -189,12 +190,13 @@ def test_inspection_variants(capture, gl, tmp_path):
     assert np.abs(out["rgb_flat"] - out["rgb"]).max() > 1e-3
 
     meta = t.meta()
-    meta["field"].pop("shadow_factor")
-    legacy_cfg = replace(t.field_cfg, shadow_factor=False)
+    meta["field"].pop("light_dir")  # as avatar.json was before the factor existed
+    legacy_cfg = replace(t.field_cfg, light_dir=None)
     torch.manual_seed(0)
     legacy = type(av)(av.head_model, legacy_cfg, len(t.split.frames), av.background.numpy(), av.render_cfg)
     legacy.load_state_dict({k: v for k, v in av.state_dict().items()  # the trained geometry, a new appearance
                             if not k.startswith(("field.appearance_net", "field.shadow_net"))}, strict=False)
+    assert legacy.field.shadow_net is None
     save_checkpoint(tmp_path / "legacy", meta, legacy.state_dict(), 0)
     old, _ = load_avatar(tmp_path / "legacy")
     assert old.field.shadow_net is None and old.inspection_variants() == ("no_shadows", "flat")
