@@ -17,8 +17,6 @@ from models.dataset import load_split
 from models.metrics import luminance
 from models.train_data import load_rgb
 
-FRAMES = (0, 12, 24)
-
 
 def main() -> None:
     dataset, out = Path(sys.argv[1]), Path(sys.argv[2])
@@ -27,7 +25,8 @@ def main() -> None:
     labels = ["image", "truth without", "truth shadows"]
     labels += [f"{n}: {w}" for n, _ in evals for w in ("without", "shadows")]
     rows = []
-    for k in FRAMES:
+    frames = [round(i * (len(split.frames) - 1) * 0.4) for i in range(3)]  # 0, 40% and 80% of the test split
+    for k in frames:
         f = split.frames[k]
         image = load_rgb(f.image_path)
         lit = load_rgb(f.extra["unshadowed_path"])
@@ -39,7 +38,7 @@ def main() -> None:
             tiles += [side[:, 4 * w:5 * w], side[:, 5 * w:6 * w]]  # eval's panels 5 and 6
         rows.append(np.concatenate(tiles, 1))
     grid = (np.concatenate(rows, 0) * 255).round().astype(np.uint8)
-    w = grid.shape[0] // len(FRAMES)
+    w = grid.shape[0] // len(frames)
     header = Image.new("RGB", (grid.shape[1], 16), (255, 255, 255))
     draw = ImageDraw.Draw(header)
     for i, text in enumerate(labels):
