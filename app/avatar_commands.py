@@ -193,9 +193,10 @@ def run_render(cfg: RenderCommandConfig) -> int:
                          height_px=size)
     variants = getattr(avatar, "inspection_variants", tuple)()
     if cfg.buffer in INSPECT and INSPECT[cfg.buffer] not in variants:
+        why = "; it has no shadow factor (its capture recorded no key light, or it was trained before the factor " \
+              "existed)" if cfg.buffer == "rgb_light" and "no_shadows" in variants else ""
         raise UserInputError(f"--buffer {cfg.buffer}: {cfg.avatar} (effects: {', '.join(avatar_effects(avatar))}) "
-                             "has no such buffer" + ("; it was trained before the shadow factor existed"
-                                                     if cfg.buffer == "rgb_light" and "no_shadows" in variants else ""))
+                             f"has no such buffer{why}")
     gl = GLContext.headless()
     t0 = time.perf_counter()
     out = avatar.render_image(controls, cam, Rasterizer(gl), **({"inspect": True} if cfg.buffer in INSPECT else {}))

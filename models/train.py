@@ -141,8 +141,9 @@ class Trainer:
         effects = () if self.nerface else parse_effects(cfg.effects)
         self.field_cfg = FieldConfig(effects=effects,
                                      light_dir=key_light_dir(self.split.lighting) if "shadows" in effects else None)
-        if cfg.resume and not self.nerface:  # the checkpoint's own sizes (an older one may have no shadow factor)
-            self.field_cfg = field_config(load_checkpoint(cfg.out).meta)
+        resumed = load_checkpoint(cfg.out, with_train_state=True) if cfg.resume else None
+        if resumed is not None and not self.nerface:  # the checkpoint's own sizes (an older one: no shadow factor)
+            self.field_cfg = field_config(resumed.meta)
         self.rays_per_step = cfg.rays_per_step or (256 if self.nerface else 1024)
         self.avatar: Avatar | NerfaceAvatar = (
             NerfaceAvatar(head, nerface or NerfaceConfig(), len(self.split.frames), bg) if self.nerface
@@ -160,7 +161,7 @@ class Trainer:
         self.stop_requested = False
         """Set (from a signal handler) to end the run after the current step, with a checkpoint."""
         if cfg.resume:
-            self._resume()
+            self._resume(resumed)
 
     # ---- state -----------------------------------------------------------------------------------------
     def meta(self) -> dict:
@@ -181,8 +182,7 @@ class Trainer:
         state["elapsed"] = torch.tensor(self.elapsed, dtype=torch.float64)
         save_checkpoint(self.cfg.out, self.meta(), self.avatar.state_dict(), self.step, state)
 
-    def _resume(self) -> None:
-        ck = load_checkpoint(self.cfg.out, with_train_state=True)
+    def _resume(self, ck) -> None:
         self.avatar.load_state_dict(ck.weights)
         _load_adam_state(self.opt, ck.train_state)
         self.generator.set_state(ck.train_state["generator"])

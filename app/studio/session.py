@@ -107,29 +107,29 @@ class Session:
     def load(cls, folder: str | Path) -> Session:
         """A session with the avatar folder read (CheckpointError etc. propagate with the reason). It only reads,
         so the studio runs it off the window's thread."""
-        self = cls()
+        s = cls()
         folder = Path(folder)
         avatar, meta = load_avatar(folder)
-        self.folder, self.avatar, self.meta = folder, avatar, meta
+        s.folder, s.avatar, s.meta = folder, avatar, meta
         metrics = folder / "eval" / "metrics.json"
         if metrics.is_file():
             try:
-                self.metrics = json.loads(metrics.read_text()).get("metrics")
+                s.metrics = json.loads(metrics.read_text()).get("metrics")
             except (OSError, json.JSONDecodeError):
-                self.metrics = None
+                s.metrics = None
         prov = meta.get("provenance", {})
         for dataset in (prov.get("dataset"), prov.get("dataset_resolved")):  # as given, then absolute
             if not dataset:
                 continue
             try:
-                self.capture = load_split(dataset, "train")
-                self.capture_note = ""
+                s.capture = load_split(dataset, "train")
+                s.capture_note = ""
                 break
             except DatasetError as e:
-                self.capture_note = f"capture not available: {e}"
-        shape = self.capture.frames[0].controls.shape if self.capture and self.capture.frames else np.zeros(0)
-        self.sliders = Sliders(np.zeros(avatar.head_model.num_expression, np.float32), shape=np.asarray(shape))
-        return self
+                s.capture_note = f"capture not available: {e}"
+        shape = s.capture.frames[0].controls.shape if s.capture and s.capture.frames else np.zeros(0)
+        s.sliders = Sliders(np.zeros(avatar.head_model.num_expression, np.float32), shape=np.asarray(shape))
+        return s
 
     @property
     def name(self) -> str:

@@ -28,13 +28,14 @@ BUFFER_LABELS = {"rgb": "RGB", "normals": "predicted normals", "grad_normals": "
                  "shading": "shading contribution (render - normals to viewer)"}
 LEGACY_LABELS = {"rgb_no_shadows": "RGB, shadow inputs of the neutral head",
                  "shadow_change": "cast shadows (change from the neutral head's)"}
-"""An avatar trained before the shadow factor has no render without cast shadows: its buffers are the
-counterfactual of the neutral head's shadow inputs, and say so."""
+"""An avatar with shadows but no shadow factor (its capture recorded no key light, or it was trained before
+the factor existed) has no render without cast shadows: its buffers are the counterfactual of the neutral
+head's shadow inputs, and say so."""
 
 
 def buffer_label(name: str, avatar) -> str:
-    field = getattr(avatar, "field", None)
-    legacy = field is not None and getattr(field, "landmarks", None) is not None and field.shadow_net is None
+    cfg = getattr(avatar, "field_cfg", None)
+    legacy = cfg is not None and "shadows" in cfg.effects and not cfg.shadow_factor
     return LEGACY_LABELS.get(name, BUFFER_LABELS[name]) if legacy else BUFFER_LABELS[name]
 
 
