@@ -81,8 +81,9 @@ class LossWeights:
     where the factor dims what the lit colour could show."""
     shadow_start: float = 0.5
     """The shadow term is off for this fraction of the run, then ramps up over `shadow_ramp`: on from the start
-    it held the factor at 1 before anything called for shadows (measured: all light > 0.9999 after 3 minutes
-    on the ICT sun capture; without the term, down to 0.44 in the shadows)."""
+    (weight 0.01) it held the factor at 1 before anything called for shadows (measured with the factor's first
+    form, colour = L S with S on the shadow inputs: S > 0.9999 everywhere after 3 minutes on the ICT sun capture;
+    without the term, down to 0.44 in the shadows)."""
     shadow_ramp: float = 0.2
     mesh_normal_vertices: int = 256
 

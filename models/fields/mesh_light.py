@@ -10,9 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from render.camera import look_at, orthographic
 from render.gl.raster import Rasterizer
-from render.gl.shadow import bounding_sphere
+from render.gl.shadow import bounding_sphere, light_camera
 
 LIGHT_MAP_PX = 256
 """Shadow-map size: 1.2 mm a texel over a 30 cm head."""
@@ -60,11 +59,7 @@ class MeshLight:
 def mesh_light(vertices: np.ndarray, triangles: np.ndarray, light_dir: np.ndarray | tuple, rasterizer: Rasterizer,
                px: int = LIGHT_MAP_PX) -> MeshLight:
     """The shadow map of a posed mesh (V,3) for a directional light (towards the light, world)."""
-    d = np.asarray(light_dir, np.float64)
-    d = d / np.linalg.norm(d)
-    center, radius = bounding_sphere(vertices)
-    view = look_at(center + d * (3 * radius), center)
-    projection = orthographic(radius, radius, radius, 5 * radius)
+    view, projection = light_camera(light_dir, *bounding_sphere(vertices))
     depth = rasterizer.depth_map(vertices, triangles, view, projection, px)
     t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)
     return MeshLight(t(view), t(projection), t(depth))

@@ -9,11 +9,18 @@ from render.camera import look_at, orthographic
 from render.gl.context import GLContext
 
 
-def light_view_projection(light_dir: np.ndarray, center: np.ndarray, radius_m: float) -> np.ndarray:
-    """Orthographic light camera that sees a sphere of `radius_m` about `center` from `light_dir`."""
+def light_camera(light_dir: np.ndarray, center: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """View and orthographic projection of a light camera that sees a sphere of `radius_m` about `center` from
+    `light_dir`."""
     d = np.asarray(light_dir, np.float64) / np.linalg.norm(light_dir)
     eye = center + d * (3 * radius_m)
-    return orthographic(radius_m, radius_m, radius_m, 5 * radius_m) @ look_at(eye, center)
+    return look_at(eye, center), orthographic(radius_m, radius_m, radius_m, 5 * radius_m)
+
+
+def light_view_projection(light_dir: np.ndarray, center: np.ndarray, radius_m: float) -> np.ndarray:
+    """Orthographic light camera that sees a sphere of `radius_m` about `center` from `light_dir`."""
+    view, projection = light_camera(light_dir, center, radius_m)
+    return projection @ view
 
 
 def bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
