@@ -15,16 +15,16 @@ from tqdm import tqdm
 
 from app.errors import UserInputError
 from app.head_commands import save_png
-from app.turntable import INSPECT, TurntableConfig, apply_preset, buffer_image, turntable_frames
-from models.avatar_io import load_avatar
-from models.dataset import load_split
+from app.turntable import INSPECT, TurntableConfig, buffer_image, turntable_frames
+from models.avatars.effects import parse_effects
+from models.avatars.registry import load_avatar
+from models.capture.dataset import load_split
+from models.capture.frames import camera_of, load_rgb
+from models.capture.synthetic import read_png16
 from models.device import device_of
-from models.fields.codynerf import parse_effects
 from models.head.controls import Controls, load_controls
-from models.metrics import face_mse, luminance, normal_angle_deg, pearson, psnr, ssim
-from models.synthetic import read_png16
-from models.train import TrainConfig, Trainer
-from models.train_data import camera_of, load_rgb
+from models.training.metrics import face_mse, luminance, normal_angle_deg, pearson, psnr, ssim
+from models.training.trainer import TrainConfig, prepare_training
 from render.camera import framing_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
@@ -40,7 +40,7 @@ def run_train(cfg: TrainConfig) -> int:
     if not cfg.resume and (cfg.out / "avatar.json").exists():
         raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
     gl = GLContext.headless()
-    trainer = Trainer(cfg, gl)
+    trainer = prepare_training(cfg, gl)
     tty = sys.stderr.isatty()
 
     def show(r: dict) -> None:
@@ -123,7 +123,7 @@ def run_eval(cfg: EvalConfig) -> int:
     raster = Rasterizer(gl)
     cfg.out.mkdir(parents=True, exist_ok=True)
     rows, times = [], []
-    shadow_views = avatar.inspection_variants() if hasattr(avatar, "inspection_variants") else ()
+    shadow_views = avatar.inspection_buffers()
     frames = split.frames[:: max(cfg.every, 1)]
     frames = frames[: cfg.max_frames] if cfg.max_frames else frames
     for f in frames:
@@ -142,7 +142,7 @@ def run_eval(cfg: EvalConfig) -> int:
                 on = face & (out["opacity"] > 0.5)
                 if on.any():
                     row["normal_deg"] = normal_angle_deg(out["normals"], gt_n, on)
-        if "no_shadows" in shadow_views and "shadow_path" in f.extra:
+        if "rgb_no_shadows" in shadow_views and "shadow_path" in f.extra:
             panels += shadow_metrics(avatar, f, split, raster, truth, face & (out["opacity"] > 0.5), row)
         rows.append(row)
         save_png(cfg.out / f"{cfg.split}_{f.index:04d}.png",
@@ -180,26 +180,21 @@ class RenderCommandConfig:
     """Where the networks run."""
 
 
-def avatar_effects(avatar) -> tuple[str, ...]:
-    cfg = getattr(avatar, "field_cfg", None)
-    return (cfg.effects or ("none",)) if cfg is not None else ("none (NerFACE)",)
-
-
 def run_render(cfg: RenderCommandConfig) -> int:
     avatar, _ = load_avatar(cfg.avatar, cfg.device)
     controls = load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls()
-    size = apply_preset(avatar, cfg.preset, cfg.size)
+    size = avatar.apply_preset(cfg.preset, cfg.size)
     cam = framing_camera(avatar.head_model.template, cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
                          height_px=size)
-    variants = getattr(avatar, "inspection_variants", tuple)()
-    if cfg.buffer in INSPECT and INSPECT[cfg.buffer] not in variants:
+    offered = avatar.inspection_buffers()
+    if cfg.buffer in INSPECT and INSPECT[cfg.buffer] not in offered:
         why = "; it has no shadow factor (its capture recorded no key light, or it was trained before the factor " \
-              "existed)" if cfg.buffer == "rgb_light" and "no_shadows" in variants else ""
-        raise UserInputError(f"--buffer {cfg.buffer}: {cfg.avatar} (effects: {', '.join(avatar_effects(avatar))}) "
-                             f"has no such buffer{why}")
+              "existed)" if cfg.buffer == "rgb_light" and "rgb_no_shadows" in offered else ""
+        raise UserInputError(f"--buffer {cfg.buffer}: {cfg.avatar} ({avatar.name}, effects: "
+                             f"{avatar.describe_effects()}) has no such buffer{why}")
     gl = GLContext.headless()
     t0 = time.perf_counter()
-    out = avatar.render_image(controls, cam, Rasterizer(gl), **({"inspect": True} if cfg.buffer in INSPECT else {}))
+    out = avatar.render_image(controls, cam, Rasterizer(gl), inspect=cfg.buffer in INSPECT)
     ms = 1e3 * (time.perf_counter() - t0)
     if cfg.buffer not in out and cfg.buffer not in INSPECT:
         raise UserInputError(f"--buffer {cfg.buffer}: this avatar's effect set has no normals network")

@@ -25,17 +25,17 @@ import torch
 from tqdm import tqdm
 
 from app.avatar_commands import face_mask_of
+from app.bench_charts import draw_charts
 from app.errors import UserInputError
-from models.avatar import Avatar
-from models.avatar_io import load_avatar
-from models.dataset import load_split
-from models.fields.codynerf import EFFECTS
+from models.avatars.base import Avatar
+from models.avatars.effects import effects_name
+from models.avatars.quality import PRESET_NAMES, Preset, Quality, pareto, save_presets
+from models.avatars.registry import BASELINE_MODEL, load_avatar, untrained_avatar
+from models.capture.dataset import load_split
+from models.capture.frames import camera_of, load_rgb
 from models.head.sources import load_head
-from models.metrics import face_mse, psnr
-from models.nerface import NerfaceAvatar, NerfaceConfig
-from models.quality import PRESET_NAMES, Preset, Quality, save_presets
-from models.train import TrainConfig, Trainer
-from models.train_data import camera_of, load_rgb
+from models.training.metrics import face_mse, psnr
+from models.training.trainer import TrainConfig, prepare_training
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
@@ -85,11 +85,6 @@ class BenchConfig:
     """Write the chosen presets into each measured avatar (presets.json)."""
 
 
-def effects_name(effects: list[str]) -> str:
-    """none, all, or the effects joined by +."""
-    return "none" if not effects else "all" if tuple(effects) == EFFECTS else "+".join(effects)
-
-
 def machine() -> str:
     cpu = platform.processor() or platform.machine()
     try:
@@ -100,20 +95,6 @@ def machine() -> str:
     except OSError:
         pass
     return f"{cpu}, {os.cpu_count()} cores, torch {torch.__version__} with {torch.get_num_threads()} threads"
-
-
-def pareto(points: list[tuple[float, float]]) -> list[bool]:
-    """For (time, error) points, whether each is on the Pareto front: no other point is as fast and as
-    accurate and strictly better in one of the two.
-
-    >>> pareto([(1.0, 5.0), (2.0, 3.0), (3.0, 4.0), (2.0, 3.0), (0.5, 9.0)])
-    [True, True, False, True, True]
-    """
-    front = []
-    for i, (t, e) in enumerate(points):
-        front.append(not any(t2 <= t and e2 <= e and (t2 < t or e2 < e)
-                             for j, (t2, e2) in enumerate(points) if j != i))
-    return front
 
 
 def choose_presets(rows: list[dict]) -> dict[str, dict]:
@@ -156,13 +137,14 @@ class TestFrames:
                                         interpolation=cv2.INTER_NEAREST).astype(bool))
 
 
-def measure(avatar: Avatar | NerfaceAvatar, quality: Quality, frames: TestFrames, raster: Rasterizer
+def measure(avatar: Avatar, quality: Quality, frames: TestFrames, raster: Rasterizer
             ) -> tuple[dict, list[np.ndarray]]:
     """Time per frame (median over the frames, after one warm-up render) and errors against the ground truth of
     one setting; the renders at full size."""
     images, times = [], []
     for i, (f, cam) in enumerate(zip(frames.frames, frames.cameras, strict=True)):
-        size = quality.apply(avatar, cam.width_px)
+        avatar.set_quality(quality)
+        size = quality.size(cam.width_px)
         c = replace(cam, width_px=size, height_px=max(8, round(cam.height_px * size / cam.width_px)))
         if i == 0:
             avatar.render_image(f.controls, c, raster)
@@ -186,7 +168,7 @@ def training_curve(dataset: Path, effects: str, out: Path, seconds: float, frame
                    points: int = 8) -> list[dict]:
     """Train an avatar for `seconds` of training time (evaluation not counted), measuring test PSNR at
     `points` even times; the avatar is saved in `out` (a real checkpoint, measured afterwards)."""
-    trainer = Trainer(TrainConfig(dataset=dataset, out=out, effects=effects, minutes=seconds / 60), gl)
+    trainer = prepare_training(TrainConfig(dataset=dataset, out=out, effects=effects, minutes=seconds / 60), gl)
     raster = Rasterizer(gl)
     curve, trained, next_eval = [], 0.0, 0.0
     bar = tqdm(total=round(seconds), desc=f"training {effects}", unit="s", leave=False, mininterval=1.0,
@@ -247,8 +229,9 @@ def run_bench(cfg: BenchConfig) -> int:
     chosen: dict[str, dict] = {}
     for path in cfg.avatars or trained_dirs:
         avatar, meta = load_avatar(path)
-        if not isinstance(avatar, Avatar):
-            raise UserInputError(f"{path}: a NerFACE avatar; pass it with --nerface")
+        if not avatar.quality_knobs:
+            raise UserInputError(f"{path}: a {avatar.name} avatar renders the same at every setting (a dense "
+                                 "baseline); pass it with --nerface")
         effects = effects_name(meta["effects"])
         ref_row, ref_images = measure(avatar, REFERENCE, frames, raster)
         avatar_rows = []
@@ -290,8 +273,6 @@ def run_bench(cfg: BenchConfig) -> int:
     tmp = out / "results.json.tmp"
     tmp.write_text(json.dumps(results, indent=1) + "\n")
     os.replace(tmp, out / "results.json")
-    from app.bench_charts import draw_charts
-
     for p in draw_charts(results, out):
         print(f"wrote {p}")
     print(f"wrote {out / 'results.json'} in {results['bench_seconds']:.0f} s")
@@ -301,8 +282,8 @@ def run_bench(cfg: BenchConfig) -> int:
 
 def synthesize_capture(folder: Path, quick: bool, gl: GLContext) -> Path:
     """A sun capture of the built-in head (hard light: shading, highlights and cast shadows), made once."""
+    from models.capture.synthetic import SynthConfig, synthesize
     from models.head.sources import load_builtin
-    from models.synthetic import SynthConfig, synthesize
 
     if (folder / "dataset.json").exists():
         return folder
@@ -322,11 +303,11 @@ def measure_nerface(path: Path | None, dataset: Path, frames: TestFrames, raster
     """The dense renderer at the bench's size: its time per frame, and its errors if it was trained."""
     if path is not None:
         avatar, _ = load_avatar(path)
-        if not isinstance(avatar, NerfaceAvatar):
-            raise UserInputError(f"{path}: --nerface needs a NerFACE avatar (avatar-studio train --model nerface)")
+        if avatar.quality_knobs:
+            raise UserInputError(f"{path}: --nerface needs a dense baseline avatar, not a {avatar.name} one "
+                                 f"(avatar-studio train --model {BASELINE_MODEL})")
     else:
-        head = load_head(load_split(dataset, "train").head_model)
-        avatar = NerfaceAvatar(head, NerfaceConfig(), 1, np.ones(3, np.float32)).eval()
+        avatar = untrained_avatar(BASELINE_MODEL, load_head(load_split(dataset, "train").head_model))
     n = 1 if quick or path is None else 2  # seconds a frame: the first test frames only
     images, times = [], []
     for f, cam in zip(frames.frames[:n], frames.cameras[:n], strict=True):
@@ -335,7 +316,7 @@ def measure_nerface(path: Path | None, dataset: Path, frames: TestFrames, raster
             images.append(avatar.render_image(f.controls, cam, raster, frame=None)["rgb"])
         times.append(time.perf_counter() - t0)
     row = {"trained": path is not None, "ms": round(1e3 * float(np.median(times)), 1), "frames": n,
-           "setting": f"{avatar.cfg.coarse_samples}+{avatar.cfg.fine_samples} samples, 8x{avatar.cfg.width} MLPs"}
+           "setting": avatar.describe_rendering()}
     if path is not None:
         row["psnr"] = round(float(np.mean([psnr(a, b) for a, b in zip(images, frames.truth[:n], strict=True)])), 3)
         row["face_mse"] = round(float(np.mean([face_mse(a, b, m) for a, b, m in

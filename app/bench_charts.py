@@ -10,7 +10,7 @@ import matplotlib
 matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt
 
-from app.bench import pareto
+from models.avatars.quality import pareto
 
 COLOURS = {"none": "tab:gray", "shading+specular": "tab:blue", "all": "tab:red"}
 

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from app.errors import UserInputError
-from models.dataset import SPLITS, load_split
+from models.capture.dataset import SPLITS, load_split
+from models.capture.synthetic import SynthConfig, synthesize
 from models.head.sources import load_head
-from models.synthetic import SynthConfig, synthesize
 from render.gl.context import GLContext
 
 

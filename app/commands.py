@@ -10,8 +10,8 @@ from app.bench import BenchConfig, run_bench
 from app.studio.config import StudioConfig
 from app.track import TrackConfig, run_track
 from app.turntable import TurntableConfig
-from models.synthetic import SynthConfig
-from models.train import TrainConfig
+from models.capture.synthetic import SynthConfig
+from models.training.trainer import TrainConfig
 
 
 def run_studio(cfg: StudioConfig) -> int:

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from models.checkpoint import CheckpointError
-from models.dataset import DatasetError
+from models.avatars.checkpoint import CheckpointError
+from models.capture.dataset import DatasetError
 from models.device import DeviceError
 from models.head.controls import ControlsError
 from models.head.model import HeadModelError

@@ -26,11 +26,11 @@ import torch
 from tqdm import tqdm
 
 from app.errors import UserInputError
-from models.dataset import write_split
+from models.capture.dataset import write_split
+from models.capture.synthetic import absolute_head_spec, write_png8
 from models.head.controls import controls_to_dict
 from models.head.head import Head
 from models.head.sources import load_head
-from models.synthetic import absolute_head_spec, write_png8
 from models.tracking.blendshapes import expression_from_scores, gaze_from_scores, jaw_from_scores
 from models.tracking.canonical import canonical_face_mesh
 from models.tracking.correspond import correspond, skin_vertices

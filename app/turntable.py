@@ -12,10 +12,8 @@ from typing import Literal
 
 import numpy as np
 
-from models.avatar import Avatar
+from models.avatars.base import Avatar
 from models.head.controls import Controls
-from models.nerface import NerfaceAvatar
-from models.quality import BUILTIN_PRESETS, Preset
 from render.camera import framing_camera
 from render.gl.raster import Rasterizer
 
@@ -41,18 +39,9 @@ class TurntableConfig:
     """Also write the frames as PNGs."""
 
 
-def presets_of(avatar: Avatar | NerfaceAvatar) -> dict[str, Preset]:
-    """The avatar's presets: those `bench` measured and stored with it, else the built-in ones."""
-    return getattr(avatar, "presets", None) or {k: Preset(q) for k, q in BUILTIN_PRESETS.items()}
-
-
-def apply_preset(avatar: Avatar | NerfaceAvatar, preset: str, size: int) -> int:
-    """Set the avatar's render settings for a preset; returns the image size it renders at."""
-    return presets_of(avatar)[preset].quality.apply(avatar, size)
-
-
-INSPECT = {"rgb_no_shadows": "no_shadows", "rgb_light": "light", "shadow_change": "no_shadows", "shading": "flat"}
-"""Buffers made from colour variants (Avatar.render_image(inspect=True)): which variant each needs."""
+INSPECT = {"rgb_no_shadows": "rgb_no_shadows", "rgb_light": "rgb_light", "shadow_change": "rgb_no_shadows",
+           "shading": "rgb_flat"}
+"""Buffers shown from an avatar's inspection buffers (render_image(inspect=True)): which one each needs."""
 
 
 def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:
@@ -76,7 +65,7 @@ def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:
     return (np.clip(img, 0, 1) * 255).round().astype(np.uint8)
 
 
-def talking(avatar: Avatar | NerfaceAvatar, base: Controls, phase: float) -> Controls:
+def talking(avatar: Avatar, base: Controls, phase: float) -> Controls:
     """Controls with the jaw (or the expressions named like it) and a smile moving with `phase` (radians)."""
     head = avatar.head_model
     expr = np.zeros(head.num_expression, np.float32)
@@ -93,11 +82,11 @@ def talking(avatar: Avatar | NerfaceAvatar, base: Controls, phase: float) -> Con
     return replace(base, expression=expr, jaw=jaw)
 
 
-def turntable_frames(avatar: Avatar | NerfaceAvatar, rasterizer: Rasterizer, cfg: TurntableConfig,
+def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfig,
                      controls: Controls | None = None, on_frame: Callable[[int], None] | None = None,
                      should_stop: Callable[[], bool] | None = None) -> Iterator[np.ndarray]:
     """(size,size,3) uint8 frames of the turntable; on_frame(k) after each."""
-    size = apply_preset(avatar, cfg.preset, cfg.size)
+    size = avatar.apply_preset(cfg.preset, cfg.size)
     controls = controls or Controls()
     for k in range(cfg.frames):
         phase = 2 * math.pi * k / cfg.frames

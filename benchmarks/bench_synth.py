@@ -11,8 +11,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from models.capture.synthetic import SynthConfig, synthesize
 from models.head.sources import load_head
-from models.synthetic import SynthConfig, synthesize
 from render.gl.context import GLContext
 
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import torch
 
-from render.volume import ray_aabb_intersect
+from render.volume import ray_aabb_intersect, sample_pdf
 
 
 @dataclass(frozen=True)
@@ -63,3 +63,14 @@ def shell_or_box_samples(
     far = torch.where(valid, far, torch.zeros_like(far))
     t0, t1 = stratified(near, far, n_samples, generator)
     return RaySamples(t0, t1, valid)
+
+
+def fine_samples(samples: RaySamples, weights: torch.Tensor, n: int, generator: torch.Generator | None = None
+                 ) -> RaySamples:
+    """The first pass's samples plus n drawn where its weights (R,S) lie (inverse-transform sampling), as
+    intervals about the sorted sample points, within the first pass's span."""
+    edges = torch.cat([samples.t_starts, samples.t_ends[:, -1:]], 1)
+    t_all = torch.sort(torch.cat([samples.t_mid, sample_pdf(edges, weights, n, generator)], 1), 1).values
+    mids = 0.5 * (t_all[:, 1:] + t_all[:, :-1])
+    return RaySamples(torch.cat([samples.t_starts[:, :1], mids], 1), torch.cat([mids, samples.t_ends[:, -1:]], 1),
+                      samples.valid)

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from models.dataset import load_split
-from models.synthetic import read_png16
+from models.capture.dataset import load_split
+from models.capture.synthetic import read_png16
 
 
 def main() -> None:

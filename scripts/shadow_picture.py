@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from models.dataset import load_split
-from models.metrics import luminance
-from models.train_data import load_rgb
+from models.capture.dataset import load_split
+from models.capture.frames import load_rgb
+from models.training.metrics import luminance
 
 
 def main() -> None:

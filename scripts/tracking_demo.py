@@ -20,9 +20,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from app.cli import main as cli
-from models.dataset import load_split
+from models.capture.dataset import load_split
+from models.capture.synthetic import SynthConfig, synthesize
 from models.head.sources import load_head
-from models.synthetic import SynthConfig, synthesize
 from render.gl.context import GLContext
 from render.video import write_video
 

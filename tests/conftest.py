@@ -64,8 +64,8 @@ def gl():
 @pytest.fixture(scope="module")
 def synth_capture(tmp_path_factory, gl):
     """make(scene, frames, size): a small synthetic capture of the built-in head, made once per module."""
+    from models.capture.synthetic import SynthConfig, synthesize
     from models.head.sources import load_builtin
-    from models.synthetic import SynthConfig, synthesize
 
     def make(scene: str, frames: int, size: int) -> Path:
         out = tmp_path_factory.mktemp("capture") / f"{scene}_{frames}_{size}"

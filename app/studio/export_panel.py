@@ -13,9 +13,9 @@ from imgui_bundle import imgui
 from PIL import Image
 
 from app.turntable import TurntableConfig, turntable_frames
-from models.avatar import RenderCancelled
-from models.avatar_io import load_avatar
-from models.quality import PRESET_NAMES
+from models.avatars.base import RenderCancelled
+from models.avatars.quality import PRESET_NAMES
+from models.avatars.registry import load_avatar
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 from render.video import write_video

@@ -12,12 +12,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from imgui_bundle import imgui, implot
 
-from models.dataset import DatasetError, load_split
+from models.avatars.registry import AVATARS
+from models.capture.dataset import DatasetError, load_split
 
 if TYPE_CHECKING:
     from app.studio.app import Studio
 
-MODELS = ("codynerf", "nerface")
+MODELS = tuple(AVATARS)
 EFFECTS = ("all", "none", "shading", "shading,specular", "shadows")
 
 

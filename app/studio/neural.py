@@ -13,11 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.turntable import apply_preset, presets_of
-from models.avatar import Avatar, RenderCancelled
+from models.avatars.base import Avatar, RenderCancelled
 from models.head.controls import Controls
-from models.metrics import psnr
-from models.nerface import NerfaceAvatar
+from models.training.metrics import psnr
 from render.camera import Camera, framing_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
@@ -58,7 +56,7 @@ class NeuralWorker:
 
     def __init__(self):
         self._cv = threading.Condition()
-        self._avatar: Avatar | NerfaceAvatar | None = None
+        self._avatar: Avatar | None = None
         self._request: Request | None = None
         self._id = 0
         self._measure = False
@@ -71,7 +69,7 @@ class NeuralWorker:
         self._thread.start()
 
     # ---- the window's side -----------------------------------------------------------------------------
-    def set_avatar(self, avatar: Avatar | NerfaceAvatar | None, measure: bool = True) -> None:
+    def set_avatar(self, avatar: Avatar | None, measure: bool = True) -> None:
         with self._cv:
             self._avatar = avatar
             self._id += 1
@@ -136,16 +134,15 @@ class NeuralWorker:
         return self._id != request_id
 
     def _render(self, avatar, raster: Rasterizer, request: Request, request_id: int) -> None:
-        qualities = [presets_of(avatar)[name].quality for name in request.passes]
+        qualities = [avatar.presets[name].quality for name in request.passes]
         for i, name in enumerate(request.passes):
             if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:
                 continue  # the bench may choose one setting for two presets: render it once, as the finer
-            apply_preset(avatar, name, request.camera.width_px)
-            cam = scaled(request.camera, presets_of(avatar)[name].quality.scale)
+            avatar.apply_preset(name, request.camera.width_px)
+            cam = scaled(request.camera, avatar.presets[name].quality.scale)
             t0 = time.perf_counter()
-            extra = {"inspect": True} if request.inspect and isinstance(avatar, Avatar) else {}
             buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
-                                          should_stop=lambda: self._stale(request_id), **extra)
+                                          should_stop=lambda: self._stale(request_id), inspect=request.inspect)
             ms = 1e3 * (time.perf_counter() - t0)
             with self._cv:
                 if self._stale(request_id):
@@ -159,8 +156,8 @@ class NeuralWorker:
         figures = PresetFigures()
         images = {}
         for name in ("final", "preview", "draft"):
-            apply_preset(avatar, name, size)
-            c = scaled(cam, presets_of(avatar)[name].quality.scale)
+            avatar.apply_preset(name, size)
+            c = scaled(cam, avatar.presets[name].quality.scale)
             times = []
             for _ in range(3):
                 t0 = time.perf_counter()

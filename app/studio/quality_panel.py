@@ -9,8 +9,7 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from app.turntable import presets_of
-from models.quality import PRESET_NAMES
+from models.avatars.quality import PRESET_NAMES
 
 if TYPE_CHECKING:
     from app.studio.app import Studio
@@ -21,7 +20,7 @@ def draw(studio: Studio) -> None:
     if studio.session.avatar is None:
         imgui.text("No avatar open.")
         return
-    presets = presets_of(studio.session.avatar)
+    presets = studio.session.avatar.presets
     imgui.text("refine to:")
     for name in PRESET_NAMES:
         imgui.same_line()
@@ -54,7 +53,7 @@ def draw(studio: Studio) -> None:
         imgui.end_table()
     imgui.text_wrapped("ms now: measured on this avatar at 128 px when it opened (median of 3 renders, this "
                        "machine).")
-    measured = getattr(studio.session.avatar, "presets_measured", {})
+    measured = studio.session.avatar.presets_measured
     if benched:
         where = f"{measured.get('image_px', '?')} px, {measured.get('machine', 'machine unknown')}"
         imgui.text_wrapped(f"bench: chosen from the Pareto front by `avatar-studio bench` ({where}); test PSNR and "

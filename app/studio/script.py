@@ -35,7 +35,7 @@ import numpy as np
 from imgui_bundle import hello_imgui
 from PIL import Image
 
-from models.quality import PRESET_NAMES
+from models.avatars.quality import PRESET_NAMES
 
 if TYPE_CHECKING:
     from app.studio.app import Studio

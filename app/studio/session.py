@@ -11,11 +11,10 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from models.avatar import Avatar
-from models.avatar_io import load_avatar
-from models.dataset import CaptureSplit, DatasetError, load_split
+from models.avatars.base import Avatar
+from models.avatars.registry import load_avatar
+from models.capture.dataset import CaptureSplit, DatasetError, load_split
 from models.head.controls import Controls
-from models.nerface import NerfaceAvatar
 from render.camera import Camera, framing_camera
 
 RECENT_FILE = Path.home() / ".config" / "avatar-studio" / "recent.json"
@@ -96,7 +95,7 @@ class Session:
 
     def __init__(self):
         self.folder: Path | None = None
-        self.avatar: Avatar | NerfaceAvatar | None = None
+        self.avatar: Avatar | None = None
         self.meta: dict = {}
         self.metrics: dict | None = None
         self.capture: CaptureSplit | None = None

@@ -11,6 +11,7 @@ import numpy as np
 from imgui_bundle import imgui
 
 from app.turntable import INSPECT, buffer_image
+from models.avatars.base import Avatar
 from models.head.head import posed_mesh
 from render.gl.context import GLContext
 from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
@@ -33,16 +34,18 @@ the factor existed) has no render without cast shadows: its buffers are the coun
 head's shadow inputs, and say so."""
 
 
-def buffer_label(name: str, avatar) -> str:
-    cfg = getattr(avatar, "field_cfg", None)
-    legacy = cfg is not None and "shadows" in cfg.effects and not cfg.shadow_factor
+def buffer_label(name: str, avatar: Avatar | None) -> str:
+    """An avatar that offers a render without cast shadows but not the light reaching the surface has no shadow
+    factor: its render without them is the neutral head's counterfactual, labelled so."""
+    offered = avatar.inspection_buffers() if avatar is not None else ()
+    legacy = "rgb_no_shadows" in offered and "rgb_light" not in offered
     return LEGACY_LABELS.get(name, BUFFER_LABELS[name]) if legacy else BUFFER_LABELS[name]
 
 
-def buffer_available(name: str, avatar, buffers: dict | None) -> bool:
-    """A plain buffer the last render has; an inspection buffer the avatar's effects make meaningful."""
+def buffer_available(name: str, avatar: Avatar | None, buffers: dict | None) -> bool:
+    """A plain buffer the last render has; an inspection buffer the avatar offers."""
     if name in INSPECT:
-        return INSPECT[name] in getattr(avatar, "inspection_variants", tuple)()
+        return avatar is not None and INSPECT[name] in avatar.inspection_buffers()
     return buffers is None or name in buffers
 
 

@@ -1,59 +1,15 @@
 """Per-pixel geometry of a mesh seen by a camera, in milliseconds on llvmpipe: which triangle each pixel
-sees, where along its ray, and the barycentric coordinates of that point (DESIGN 5: a sampler starts here)."""
+sees, where along its ray, and the barycentric coordinates of that point (DESIGN 5: a sampler starts here). The
+ray math that reads a Raster is in render/rays.py."""
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 
 from render.camera import Camera
 from render.gl.context import GLContext
-
-
-@dataclass(frozen=True)
-class Raster:
-    """H x W, rows top first."""
-
-    triangle: np.ndarray  # (H,W) int, -1 where the pixel sees no surface
-    depth: np.ndarray  # (H,W) metres along the view axis, inf where no surface
-    bary: np.ndarray  # (H,W,3) barycentric coordinates of the visible point (0 where no surface)
-
-    @property
-    def hit(self) -> np.ndarray:
-        return self.triangle >= 0
-
-
-def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """World origin (3,) and unit directions (H,W,3) through pixel centres, rows top first."""
-    h, w = camera.height_px, camera.width_px
-    t = np.tan(np.radians(camera.fov_y_deg) / 2)
-    j, i = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-    d_cam = np.stack([(2 * j / w - 1) * t * w / h, (1 - 2 * i / h) * t, -np.ones_like(j)], -1)
-    c2w = np.linalg.inv(camera.view)
-    d = d_cam @ c2w[:3, :3].T
-    return c2w[:3, 3], d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-
-def surface_distance(raster: Raster, cos_view: np.ndarray) -> np.ndarray:
-    """(H,W) distance along each pixel's unit ray to the visible surface, inf where it misses: the view
-    depth over the cosine between the ray and the view axis (cos_view, (H,W))."""
-    return np.where(raster.hit, raster.depth / np.maximum(cos_view, 1e-6), np.inf).astype(np.float32)
-
-
-def ray_triangle_barycentric(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates (N,3) where rays (origin, (N,3) dirs) meet the planes of (N,3,3) triangles
-    (Moller-Trumbore without the inside test: the rasterizer already chose the triangle)."""
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    p = np.cross(dirs, e2)
-    det = np.einsum("ij,ij->i", e1, p)
-    det = np.where(np.abs(det) < 1e-20, 1e-20, det)
-    s = origin - tri[:, 0]
-    u = np.einsum("ij,ij->i", s, p) / det
-    q = np.cross(s, e1)
-    v = np.einsum("ij,ij->i", dirs, q) / det
-    return np.clip(np.stack([1 - u - v, u, v], -1), 0.0, 1.0)
+from render.rays import Raster, pixel_rays, ray_triangle_barycentric
 
 
 class Rasterizer:

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import moderngl
 import numpy as np
+import torch
 
 from render.camera import look_at, orthographic
 from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
+from render.shadow_map import LIGHT_MAP_PX, LightDepthMap
 
 
 def light_camera(light_dir: np.ndarray, center: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -65,3 +68,13 @@ class ShadowMap:
             if r is not None:
                 r.release()
         self._fbo = self.texture = None
+
+
+def draw_light_depth(rasterizer: Rasterizer, vertices: np.ndarray, triangles: np.ndarray,
+                     light_dir: np.ndarray | tuple, px: int = LIGHT_MAP_PX) -> LightDepthMap:
+    """The depth map of a posed mesh (V,3) seen from a directional light (towards the light, world), as arrays
+    for render/shadow_map.py's lookup."""
+    view, projection = light_camera(light_dir, *bounding_sphere(vertices))
+    depth = rasterizer.depth_map(vertices, triangles, view, projection, px)
+    t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)
+    return LightDepthMap(t(view), t(projection), t(depth))

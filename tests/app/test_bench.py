@@ -13,17 +13,16 @@ import pytest
 import torch
 from PIL import Image
 
-from app.bench import REFERENCE, SETTINGS, BenchConfig, choose_presets, pareto, run_bench
+from app.bench import REFERENCE, SETTINGS, BenchConfig, choose_presets, run_bench
 from app.cli import main
-from app.turntable import apply_preset
-from models.avatar import Avatar, RaySamples, fine_samples
-from models.avatar_io import load_avatar
-from models.dataset import load_split
-from models.metrics import psnr
-from models.quality import Quality, load_presets
-from models.train import TrainConfig, Trainer
-from models.train_data import camera_of
+from models.avatars.quality import Quality, load_presets, pareto
+from models.avatars.registry import load_avatar
+from models.capture.dataset import load_split
+from models.capture.frames import camera_of
+from models.training.metrics import psnr
+from models.training.trainer import TrainConfig, prepare_training
 from render.gl.raster import Rasterizer
+from render.sampling import RaySamples, fine_samples
 
 pytestmark = pytest.mark.gl
 
@@ -63,7 +62,7 @@ def capture(synth_capture) -> Path:
 @pytest.fixture(scope="module")
 def tiny_avatar(capture, gl, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("bench") / "all"
-    Trainer(TrainConfig(dataset=capture, out=out, effects="all", steps=60), gl).run(gl)
+    prepare_training(TrainConfig(dataset=capture, out=out, effects="all", steps=60), gl).run(gl)
     return out
 
 
@@ -74,7 +73,7 @@ def test_every_setting_is_finite_and_near_the_reference(tiny_avatar, capture, gl
     import cv2
 
     avatar, _ = load_avatar(tiny_avatar)
-    assert isinstance(avatar, Avatar)
+    assert avatar.quality_knobs == ("samples", "fine", "bf16")
     split = load_split(capture, "test")
     f = split.frames[0]
     cam = camera_of(split, f.camera_to_world)
@@ -132,7 +131,7 @@ def test_a_tiny_bench_run_writes_results_charts_and_presets(capture, tmp_path):
         assert p.ms == chosen[name]["ms"]
     preview = presets["preview"].quality
     avatar, _ = load_avatar(avatar_dir)
-    apply_preset(avatar, "preview", 24)
+    avatar.apply_preset("preview", 24)
     assert (avatar.render_cfg.samples_per_ray, avatar.render_cfg.fine_samples) == (preview.samples, preview.fine)
     # A second run into the same folder refuses (exit 2) and leaves the first run's results as they were.
     before = (out / "results.json").read_bytes()

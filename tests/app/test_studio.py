@@ -33,10 +33,10 @@ def capture(synth_capture) -> Path:
 
 @pytest.fixture(scope="module")
 def avatar(capture, gl, tmp_path_factory) -> Path:
-    from models.train import TrainConfig, Trainer
+    from models.training.trainer import TrainConfig, prepare_training
 
     out = tmp_path_factory.mktemp("studio") / "avatar"
-    t = Trainer(TrainConfig(dataset=capture, out=out, effects="all", steps=40, rays_per_step=256,
+    t = prepare_training(TrainConfig(dataset=capture, out=out, effects="all", steps=40, rays_per_step=256,
                             checkpoint_seconds=1e9), gl)
     t.run(gl)
     return out

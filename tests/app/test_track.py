@@ -13,11 +13,11 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from app.cli import main
-from models.avatar_io import load_avatar
-from models.dataset import load_split
+from models.avatars.registry import load_avatar
+from models.capture.dataset import load_split
+from models.capture.frames import camera_of
 from models.head.controls import Controls
-from models.train import TrainConfig, Trainer
-from models.train_data import camera_of
+from models.training.trainer import TrainConfig, prepare_training
 from render.gl.raster import Rasterizer
 
 pytestmark = pytest.mark.gl
@@ -115,7 +115,7 @@ def test_blinks_and_open_jaw_get_their_expression_weights(d3_dataset, landmarker
 
 def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     out = tmp_path / "avatar"
-    Trainer(TrainConfig(dataset=d3_dataset, out=out, effects="none", steps=40), gl).run(gl)
+    prepare_training(TrainConfig(dataset=d3_dataset, out=out, effects="none", steps=40), gl).run(gl)
     avatar, _ = load_avatar(out)
     test = load_split(d3_dataset, "test")
     raster = Rasterizer(gl)
@@ -156,8 +156,8 @@ def test_synthetic_capture_recovers_pose_and_expression(synth_ict_video, landmar
 
 @pytest.fixture(scope="module")
 def synth_ict_video(tmp_path_factory, gl, ict_npz):
+    from models.capture.synthetic import SynthConfig, synthesize
     from models.head.sources import load_head
-    from models.synthetic import SynthConfig, synthesize
     from render.video import write_video
 
     folder = tmp_path_factory.mktemp("synth_ict")

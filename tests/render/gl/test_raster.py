@@ -8,7 +8,8 @@ import pytest
 
 from render.camera import Camera, framing_camera, look_at
 from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
-from render.gl.raster import Rasterizer, pixel_rays
+from render.gl.raster import Rasterizer
+from render.rays import pixel_rays
 
 pytestmark = pytest.mark.gl
 

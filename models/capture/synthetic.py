@@ -14,12 +14,12 @@ import cv2
 import numpy as np
 import torch
 
-from models.capture_script import FrameSpec, Rig, held_out_script, make_rig, training_script
-from models.dataset import write_split
+from models.capture.dataset import write_split
+from models.capture.scenes import SceneName, eye_attribute, head_appearance, lighting_record, scene_lighting
+from models.capture.script import FrameSpec, Rig, held_out_script, make_rig, training_script
 from models.head.controls import Controls, controls_to_dict
 from models.head.head import Head
 from models.head.model import HeadModel, portrait_vertices
-from models.synthetic_scenes import SceneName, eye_attribute, head_appearance, lighting_record, scene_lighting
 from render.camera import Camera, look_at
 from render.gl.capture import CaptureBuffers, CaptureMesh, CaptureRenderer
 from render.gl.context import GLContext

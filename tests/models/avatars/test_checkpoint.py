@@ -8,7 +8,7 @@ import os
 import pytest
 import torch
 
-from models.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from models.avatars.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 
 
 def tensors(seed: int) -> dict[str, torch.Tensor]:

@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from models.avatar import Avatar
-from models.checkpoint import CheckpointError
+from models.avatars.checkpoint import CheckpointError
 
 PRESET_NAMES = ("draft", "preview", "final")
 
@@ -38,14 +37,6 @@ class Quality:
     def size(self, size: int) -> int:
         """The image size this setting renders at for a requested size (even, at least 8)."""
         return max(8, 2 * round(size * self.scale / 2))
-
-    def apply(self, avatar: Avatar | object, size: int) -> int:
-        """Set the avatar's render settings; returns the image size to render at. (The NerFACE baseline always
-        samples densely: only its size changes.)"""
-        if isinstance(avatar, Avatar):
-            avatar.render_cfg = replace(avatar.render_cfg, samples_per_ray=self.samples, fine_samples=self.fine,
-                                        bf16=self.bf16)
-        return self.size(size)
 
 
 BUILTIN_PRESETS = {"draft": Quality(0.5, 6), "preview": Quality(1.0, 8), "final": Quality(1.0, 16)}
@@ -91,3 +82,17 @@ def save_presets(folder: str | Path, presets: dict[str, Preset], measured: dict)
                               indent=1) + "\n")
     os.replace(tmp, path)
     return path
+
+
+def pareto(points: list[tuple[float, float]]) -> list[bool]:
+    """For (time, error) points, whether each is on the Pareto front: no other point is as fast and as
+    accurate and strictly better in one of the two.
+
+    >>> pareto([(1.0, 5.0), (2.0, 3.0), (3.0, 4.0), (2.0, 3.0), (0.5, 9.0)])
+    [True, True, False, True, True]
+    """
+    front = []
+    for i, (t, e) in enumerate(points):
+        front.append(not any(t2 <= t and e2 <= e and (t2 < t or e2 < e)
+                             for j, (t2, e2) in enumerate(points) if j != i))
+    return front

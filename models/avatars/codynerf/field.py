@@ -27,26 +27,11 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from models.fields.encoding import encoded_size, frequency_encoding
-from models.fields.mlp import MLP
-from models.fields.prior import PriorSamples
+from models.avatars.codynerf.prior import PriorSamples
+from models.avatars.components.encoding import encoded_size, frequency_encoding
+from models.avatars.components.mlp import MLP
 
-EFFECTS = ("shading", "specular", "shadows")
 SHADOW_BIAS = 4.0  # the shadow factor's logit at initialisation: 98% of the light reaches every point
-
-
-def parse_effects(text: str) -> tuple[str, ...]:
-    """'none', 'all' or a comma list of shading, specular, shadows -> a sorted tuple."""
-    text = text.strip().lower()
-    if text in ("", "none"):
-        return ()
-    if text == "all":
-        return EFFECTS
-    parts = {p.strip() for p in text.split(",") if p.strip()}
-    unknown = sorted(parts - set(EFFECTS))
-    if unknown:
-        raise ValueError(f"unknown effect(s) {unknown}: expected none, all or a comma list of {', '.join(EFFECTS)}")
-    return tuple(e for e in EFFECTS if e in parts)
 
 
 @dataclass(frozen=True)
@@ -72,8 +57,9 @@ class FieldConfig:
     """Half the extent that position encodings cover without aliasing."""
     light_dir: tuple[float, float, float] | None = None
     """The capture's key light (world, towards the light), where its lighting record has one. With shadows,
-    the colour is then T's L (1 - k (1 - S)): S, the key light's visibility, read from the guide mesh's shadow
-    map (models/fields/mesh_light.py) and tau, so the render without cast shadows (S = 1) is the model's own.
+    the colour is then T's L (1 - k (1 - S)): S, the key light's visibility, from tau and the guide mesh's shadow
+    map (looked up by the avatar, render/shadow_map.py), so the render without cast shadows (S = 1) is the
+    model's own.
     Without a light (a tracked video, avatars trained before), Eq. 7 as written: one T reads everything."""
 
     @property

@@ -10,10 +10,11 @@ import math
 import pytest
 import torch
 
-from models import losses
-from models.fields.codynerf import EFFECTS, SHADOW_BIAS, CoDyNeRFField, FieldConfig, FieldOutput
-from models.fields.encoding import encoded_size, frequency_encoding
-from models.fields.prior import PriorSamples
+from models.avatars.codynerf.field import SHADOW_BIAS, CoDyNeRFField, FieldConfig, FieldOutput
+from models.avatars.codynerf.prior import PriorSamples
+from models.avatars.components import losses
+from models.avatars.components.encoding import encoded_size, frequency_encoding
+from models.avatars.effects import EFFECTS
 
 L = 5  # landmarks
 LIT = FieldConfig(effects=EFFECTS, light_dir=(0.0, 1.0, 0.0))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from models.fields.prior import PriorMeshes, deformation_prior, nearest_vertices
+from models.avatars.codynerf.prior import PriorMeshes, deformation_prior, nearest_vertices
 
 D = torch.float64
 

@@ -15,21 +15,22 @@ unposed mesh onto the posed one, so any head model works without knowing its joi
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from models.avatar import RayOutput, RenderCancelled, image_rays, scatter_rays
-from models.fields.encoding import encoded_size, frequency_encoding
+from models.avatars.base import Avatar, RayOutput, TrainingBatch
+from models.avatars.components import losses
+from models.avatars.components.encoding import encoded_size, frequency_encoding
 from models.head.controls import Controls
-from models.head.head import Head
 from models.head.model import HeadModel
 from render.camera import Camera
 from render.gl.raster import Rasterizer
+from render.rays import Raster, Rays
 from render.sampling import RaySamples, stratified
 from render.volume import composite, expected_depth, ray_aabb_intersect, sample_pdf, weights_from_density
 
@@ -89,14 +90,37 @@ class NerfaceMLP(nn.Module):
 
 @dataclass
 class NerfaceGeometry:
-    """One frame as NerFACE sees it: the rigid head pose and the expression vector."""
+    """One frame as NerFACE sees it: the rigid head pose and the expression vector (and the posed mesh, which
+    training uses to find the face's box)."""
 
     rotation: torch.Tensor  # (3,3) canonical -> world
     translation: torch.Tensor  # (3,)
     expression: torch.Tensor  # (1,E)
+    posed: torch.Tensor  # (V,3)
 
     def to(self, device: torch.device | str) -> NerfaceGeometry:
-        return NerfaceGeometry(self.rotation.to(device), self.translation.to(device), self.expression.to(device))
+        return NerfaceGeometry(self.rotation.to(device), self.translation.to(device), self.expression.to(device),
+                               self.posed.to(device))
+
+
+@dataclass
+class NerfaceRays:
+    """The internals of one render_rays: the coarse pass's colours (trained too) and the fine pass's samples."""
+
+    coarse_rgb: torch.Tensor  # (R,3)
+    weights: torch.Tensor  # (R,S)
+    sigma: torch.Tensor  # (R,S)
+    samples: RaySamples
+
+
+def face_box(hit: np.ndarray, margin_px: int) -> np.ndarray:
+    """(H,W) the bounding box of the mesh's pixels grown by margin_px: where NerFACE draws most rays."""
+    box = np.zeros_like(hit)
+    if hit.any():
+        rows, cols = np.nonzero(hit.any(1))[0], np.nonzero(hit.any(0))[0]
+        top, left = max(rows[0] - margin_px, 0), max(cols[0] - margin_px, 0)
+        box[top:rows[-1] + margin_px + 1, left:cols[-1] + margin_px + 1] = True
+    return box
 
 
 def kabsch(source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -108,32 +132,50 @@ def kabsch(source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, to
     return r, ct - r @ cs
 
 
-class NerfaceAvatar(nn.Module):
-    """The baseline, with the avatar's interface: geometry, render_rays, render_image."""
+class NerfaceAvatar(Avatar):
+    """The baseline, behind the avatar interface."""
 
-    model_name = "nerface"
+    name: ClassVar[str] = "nerface"
+    rays_per_step: ClassVar[int] = 256
+    """Each of its rays costs 128 samples of an 8x256 MLP."""
 
-    def __init__(self, head_model: HeadModel, cfg: NerfaceConfig, n_frames: int, background: np.ndarray):
-        super().__init__()
-        self.head_model = head_model
-        self.head = Head(head_model)
+    def __init__(self, head_model: HeadModel, cfg: NerfaceConfig, n_frames: int, background: np.ndarray,
+                 codes_weight: float = 1e-3):
+        super().__init__(head_model, n_frames, background)
         self.cfg = cfg
+        self.codes_weight = codes_weight
         self.expression_dim = head_model.num_expression + 3 * len(NONRIGID_JOINTS)
         condition = self.expression_dim + cfg.latent_dim
         self.coarse = NerfaceMLP(cfg, condition)
         self.fine = NerfaceMLP(cfg, condition)
         self.latent = nn.Embedding(n_frames, cfg.latent_dim)
         nn.init.zeros_(self.latent.weight)
-        self.register_buffer("background", torch.as_tensor(np.asarray(background, np.float32)))
         template = torch.as_tensor(head_model.template, dtype=torch.float32)
         self.register_buffer("box_min", template.min(0).values - cfg.box_margin_m)
         self.register_buffer("box_max", template.max(0).values + cfg.box_margin_m)
         self.scale_m = float((self.box_max - self.box_min).max()) / 2
 
-    @property
-    def needs_normals(self) -> bool:
-        return False
+    # ---- making and describing -------------------------------------------------------------------------
+    @classmethod
+    def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
+                    lighting: dict | None, config: NerfaceConfig | None = None) -> NerfaceAvatar:
+        """NerFACE models no lighting effects: the effect set and the lighting record are not read (as before the
+        avatar interface: `train --model nerface` takes the default --effects all and trains the baseline)."""
+        del effects, lighting
+        return cls(head_model, config or NerfaceConfig(), n_frames, background)
 
+    @classmethod
+    def from_meta(cls, head_model: HeadModel, meta: dict) -> NerfaceAvatar:
+        return cls(head_model, NerfaceConfig(**meta["nerface"]), int(meta["frames"]),
+                   np.asarray(meta["background"], np.float32))
+
+    def meta(self) -> dict:
+        return {"model": self.name, "effects": [], "nerface": asdict(self.cfg)}
+
+    def describe_rendering(self) -> str:
+        return f"{self.cfg.coarse_samples}+{self.cfg.fine_samples} samples, {self.cfg.depth}x{self.cfg.width} MLPs"
+
+    # ---- per frame -------------------------------------------------------------------------------------
     @torch.no_grad()
     def geometry(self, controls: Controls) -> NerfaceGeometry:
         unposed = Controls(shape=controls.shape, expression=controls.expression)
@@ -145,21 +187,50 @@ class NerfaceAvatar(nn.Module):
         for k, joint in enumerate(NONRIGID_JOINTS):
             expr[self.head_model.num_expression + 3 * k:self.head_model.num_expression + 3 * k + 3] = \
                 controls.rotation(joint)
-        return NerfaceGeometry(rotation, translation, torch.as_tensor(expr)[None].to(rotation.device))
+        return NerfaceGeometry(rotation, translation, torch.as_tensor(expr)[None].to(rotation.device), v[1])
 
-    def codes(self, frame: torch.Tensor | None) -> torch.Tensor:
-        """The latent code of training frames (1,) or the mean code (novel controls)."""
-        return self.latent(frame) if frame is not None else self.latent.weight.mean(0, keepdim=True)
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> NerfaceGeometry:
+        del rasterizer  # NerFACE samples every ray densely; it does not need the mesh
+        return self.geometry(controls)
 
-    def render_rays(self, origins: torch.Tensor, directions: torch.Tensor, geo: NerfaceGeometry,
-                    latent: torch.Tensor, generator: torch.Generator | None = None
-                    ) -> tuple[RayOutput, torch.Tensor]:
-        """The fine pass's output and the coarse pass's colours (R,3) (both are trained)."""
+    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+        """Every pixel (rays that miss the head's box see the background)."""
+        return np.ones((camera.height_px, camera.width_px), bool)
+
+    def training_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+        """The face's box (the mesh's pixels' bounding box, grown a little)."""
+        return face_box(raster.hit, margin_px=max(2, camera.width_px // 32))
+
+    def draw_training_pixels(self, active: torch.Tensor, n_pixels: int, n: int, generator: torch.Generator
+                             ) -> torch.Tensor:
+        """Most rays in the face's box, the rest anywhere in the image (face_ray_fraction)."""
+        pick = active[torch.randint(len(active), (n,), generator=generator)]
+        n_any = round(n * (1 - self.cfg.face_ray_fraction))
+        pick[:n_any] = torch.randint(n_pixels, (n_any,), generator=generator)
+        return pick
+
+    def codes(self, frame: int | None) -> torch.Tensor:
+        """The latent code (1,C) of a training frame, or the mean code (novel controls)."""
+        if frame is None:
+            return self.latent.weight.mean(0, keepdim=True)
+        return self.latent(torch.tensor([frame], device=self.latent.weight.device))
+
+    @property
+    def chunk_rays(self) -> int:
+        return self.cfg.chunk_rays
+
+    # ---- rays ------------------------------------------------------------------------------------------
+    def render_rays(self, rays: Rays, geometry: NerfaceGeometry, frame: int | None,
+                    generator: torch.Generator | None = None, training: bool = False) -> RayOutput:
+        """The fine pass's colour, opacity and depth; the coarse pass's colours in the internals (both are
+        trained). Display and training render alike (no shortcuts)."""
+        del training
         c = self.cfg
-        R = len(origins)
+        R = len(rays)
+        geo, latent = geometry, self.codes(frame)
         rot, tr = geo.rotation, geo.translation
-        o = (origins - tr) @ rot  # R^T (o - t), row vectors
-        d = directions @ rot
+        o = (rays.origins - tr) @ rot  # R^T (o - t), row vectors
+        d = rays.directions @ rot
         near, far, hits = ray_aabb_intersect(o, d, self.box_min, self.box_max)
         near, far = torch.where(hits, near, 0.0), torch.where(hits, far, 0.0)
         condition = torch.cat([geo.expression, latent], -1).expand(R, -1)
@@ -185,29 +256,13 @@ class NerfaceAvatar(nn.Module):
         f0 = torch.cat([near[:, None], mids], 1)
         f1 = torch.cat([mids, far[:, None]], 1)
         w, rem, rgb, sigma, t_mid = run(self.fine, f0, f1)
-        out = RayOutput(composite(w, rgb, rem, self.background), w.sum(-1), expected_depth(w, t_mid), None, None, w,
-                        sigma, RaySamples(f0, f1, hits))
-        return out, coarse_rgb
+        buffers = {"rgb": composite(w, rgb, rem, self.background), "opacity": w.sum(-1),
+                   "depth": expected_depth(w, t_mid)}
+        return RayOutput(buffers, NerfaceRays(coarse_rgb, w, sigma, RaySamples(f0, f1, hits)))
 
-    @torch.inference_mode()
-    def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer | None = None,
-                     frame: int | None = None, dense_samples: int | None = None,
-                     should_stop: Callable[[], bool] | None = None) -> dict[str, np.ndarray]:
-        """RGB, opacity and depth (H,W,...) of every pixel whose ray crosses the head's box."""
-        del rasterizer, dense_samples  # NerFACE samples every ray densely; it does not need the mesh
-        geo = self.geometry(controls)
-        origin, dirs = image_rays(camera)
-        device = self.background.device
-        origin, dirs = origin.to(device), dirs.to(device)
-        latent = self.codes(torch.tensor([frame], device=device) if frame is not None else None)
-        parts: dict[str, list[torch.Tensor]] = {"rgb": [], "opacity": [], "depth": []}
-        for a in range(0, len(dirs), self.cfg.chunk_rays):
-            if should_stop is not None and should_stop():
-                raise RenderCancelled
-            d = dirs[a:a + self.cfg.chunk_rays]
-            r, _ = self.render_rays(origin.expand(len(d), 3), d, geo, latent)
-            parts["rgb"].append(r.rgb)
-            parts["opacity"].append(r.opacity)
-            parts["depth"].append(torch.where(r.opacity > 0.5, r.depth, torch.full_like(r.depth, np.inf)))
-        return scatter_rays(parts, camera, np.arange(camera.width_px * camera.height_px),
-                            self.background.cpu().numpy())
+    def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
+        """NerFACE's losses: photometric on the coarse and the fine pass, and a small latent-code prior."""
+        out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)
+        return {"photometric": losses.photometric(out.buffers["rgb"], batch.target),
+                "photometric_coarse": losses.photometric(out.internals.coarse_rgb, batch.target),
+                "codes": self.codes_weight * losses.code_l2(self.codes(batch.frame))}

@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from app.cli import main
-from models.dataset import DatasetError, load_split
+from models.capture.dataset import DatasetError, load_split
 from models.head.lbs import rotation_matrix_from_axis_angle
 
 

@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 import torch
 
-from models.avatar_io import load_avatar
-from models.fields.codynerf import parse_effects
+from models.avatars.effects import parse_effects
+from models.avatars.registry import load_avatar
 from models.head.controls import Controls
-from models.train import TrainConfig, Trainer
+from models.training.trainer import TrainConfig, prepare_training
 from render.camera import Camera, look_at
 from render.gl.raster import Rasterizer
+from render.rays import Rays
 
 pytestmark = pytest.mark.gl
 
@@ -31,7 +32,7 @@ def trained(capture, gl, tmp_path_factory):
     """150 steps of the effect set none on the 32x32 capture; the photometric loss before and after."""
     cfg = TrainConfig(dataset=capture, out=tmp_path_factory.mktemp("av") / "none", effects="none", steps=150,
                       rays_per_step=512, checkpoint_seconds=1e9)
-    t = Trainer(cfg, gl)
+    t = prepare_training(cfg, gl)
     first = np.mean([t.train_step(0.0)["photometric"] for _ in range(5)])
     for k in range(5, 150):
         t.train_step(k / 150)
@@ -58,14 +59,14 @@ def test_checkpoint_round_trip_bit_exact(trained):
 def test_resume_is_exact(capture, gl, tmp_path):
     cfg = TrainConfig(dataset=capture, out=tmp_path / "a", effects="shading", steps=8, rays_per_step=128,
                       checkpoint_seconds=1e9)
-    straight = Trainer(cfg, gl)
+    straight = prepare_training(cfg, gl)
     for k in range(8):
         straight.train_step(k / 8)
-    halves = Trainer(replace(cfg, out=tmp_path / "b"), gl)
+    halves = prepare_training(replace(cfg, out=tmp_path / "b"), gl)
     for k in range(4):
         halves.train_step(k / 8)
     halves.save()
-    resumed = Trainer(replace(cfg, out=tmp_path / "b", resume=True), gl)
+    resumed = prepare_training(replace(cfg, out=tmp_path / "b", resume=True), gl)
     assert resumed.step == 4
     for k in range(4, 8):
         resumed.train_step(k / 8)
@@ -81,27 +82,31 @@ def test_shell_sampler_matches_dense_reference(trained, gl):
     density at the surface, where the shell looks)."""
     t, _, _ = trained
     f = t.split.frames[3]
-    from models.train_data import camera_of
+    from models.capture.frames import camera_of
 
     cam = camera_of(t.split, f.camera_to_world)
     r = Rasterizer(gl)
     fast = t.avatar.render_image(f.controls, cam, r, frame=3)["rgb"]
-    dense = t.avatar.render_image(f.controls, cam, r, frame=3, dense_samples=256)["rgb"]
+    t.avatar.render_cfg = replace(t.avatar.render_cfg, dense_samples=256)
+    try:
+        dense = t.avatar.render_image(f.controls, cam, r, frame=3)["rgb"]
+    finally:
+        t.avatar.render_cfg = replace(t.avatar.render_cfg, dense_samples=0)
     err = np.abs(fast - dense)
     print("fast vs dense: mean abs error", err.mean(), "99%", np.quantile(err, 0.99))
     assert err.mean() < 0.02
 
 
 def test_effect_sets_build_only_what_they_need(capture, gl, tmp_path):
-    none = Trainer(TrainConfig(dataset=capture, out=tmp_path / "n", effects="none", steps=1), gl)
+    none = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "n", effects="none", steps=1), gl)
     assert none.avatar.field.normals is None and none.avatar.field.landmarks is None
-    shadows = Trainer(TrainConfig(dataset=capture, out=tmp_path / "s", effects="shadows", steps=1), gl)
+    shadows = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "s", effects="shadows", steps=1), gl)
     assert shadows.avatar.field.normals is None and shadows.avatar.field.landmarks is not None
-    full = Trainer(TrainConfig(dataset=capture, out=tmp_path / "a", effects="all", steps=1), gl)
+    full = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "a", effects="all", steps=1), gl)
     assert full.avatar.field.normals is not None
     # No density gradients for `none`: it renders under inference_mode, where autograd cannot run at all.
     f = none.split.frames[0]
-    from models.train_data import camera_of
+    from models.capture.frames import camera_of
 
     with torch.inference_mode():
         out = none.avatar.render_image(f.controls, camera_of(none.split, f.camera_to_world), Rasterizer(gl))
@@ -127,9 +132,9 @@ def test_hard_cases_stay_finite(trained, gl):
     edge = geo.box_max.clone()
     d = torch.stack([torch.tensor([0.0, 0.0, -1.0]), torch.tensor([0.0, 1.0, 0.0])])
     o[0, :2] = edge[:2]  # along the box's edge: a grazing ray
-    out = av.render_rays(o, d, torch.full((2,), float("inf")), geo, av.omega.weight[:1], av.phi.weight[:1])
-    assert torch.isfinite(out.rgb).all() and torch.isfinite(out.depth).all()
-    torch.testing.assert_close(out.rgb[1], av.background)  # the ray that misses the box sees the background
+    out = av.render_rays(Rays(o, d, torch.full((2,), float("inf"))), geo, 0).buffers
+    assert torch.isfinite(out["rgb"]).all() and torch.isfinite(out["depth"]).all()
+    torch.testing.assert_close(out["rgb"][1], av.background)  # the ray that misses the box sees the background
 
 
 def test_occupancy_grid_is_off_by_default_and_its_error_is_known(trained, gl):
@@ -141,7 +146,7 @@ def test_occupancy_grid_is_off_by_default_and_its_error_is_known(trained, gl):
     av = t.avatar
     assert bool(av.occupancy.built) and float(av.occupancy.occupied.float().mean()) < 0.9
     f = t.split.frames[5]
-    from models.train_data import camera_of
+    from models.capture.frames import camera_of
 
     cam, r = camera_of(t.split, f.camera_to_world), Rasterizer(gl)
     default = av.render_image(f.controls, cam, r, frame=5)["rgb"]
@@ -161,7 +166,7 @@ def test_occupancy_grid_is_off_by_default_and_its_error_is_known(trained, gl):
     assert np.isfinite(skipped).all() and err.mean() < 0.02
 
 
-def test_inspection_variants(capture, gl, tmp_path):
+def test_inspection_buffers(capture, gl, tmp_path):
     """The buffers behind the viewport's shadow and shading views, for `all`: finite; the plain colour unchanged
     by asking for them; the key light's visibility in [0, 1] and 1 off the head; the render without cast
     shadows never darker than the render (the factor only takes light away) and brighter somewhere; the
@@ -169,15 +174,15 @@ def test_inspection_variants(capture, gl, tmp_path):
     avatar.json: trained before it existed, or on a capture that records no light) loads, and shows the
     counterfactual of the neutral head's shadow inputs: equal to the render for the neutral head, different
     with the head turned and the jaw open."""
-    from models.checkpoint import save_checkpoint
-    from models.train_data import camera_of
+    from models.avatars.checkpoint import save_checkpoint
+    from models.capture.frames import camera_of
 
-    t = Trainer(TrainConfig(dataset=capture, out=tmp_path / "all", effects="all", steps=30, rays_per_step=512,
+    t = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "all", effects="all", steps=30, rays_per_step=512,
                             checkpoint_seconds=1e9), gl)
     for k in range(30):
         t.train_step(k / 30)
     av = t.avatar.eval()
-    assert av.inspection_variants() == ("no_shadows", "light", "flat")
+    assert av.inspection_buffers() == ("rgb_no_shadows", "rgb_light", "rgb_flat")
     f = t.split.frames[3]
     cam, r = camera_of(t.split, f.camera_to_world), Rasterizer(gl)
     out = av.render_image(f.controls, cam, r, frame=3, inspect=True)
@@ -191,7 +196,7 @@ def test_inspection_variants(capture, gl, tmp_path):
 
     meta = t.meta()
     meta["field"].pop("light_dir")  # as avatar.json was before the factor existed
-    legacy_cfg = replace(t.field_cfg, light_dir=None)
+    legacy_cfg = replace(av.field_cfg, light_dir=None)
     torch.manual_seed(0)
     legacy = type(av)(av.head_model, legacy_cfg, len(t.split.frames), av.background.numpy(), av.render_cfg)
     legacy.load_state_dict({k: v for k, v in av.state_dict().items()  # the trained geometry, a new appearance
@@ -199,7 +204,7 @@ def test_inspection_variants(capture, gl, tmp_path):
     assert legacy.field.shadow_net is None
     save_checkpoint(tmp_path / "legacy", meta, legacy.state_dict(), 0)
     old, _ = load_avatar(tmp_path / "legacy")
-    assert old.field.shadow_net is None and old.inspection_variants() == ("no_shadows", "flat")
+    assert old.field.shadow_net is None and old.inspection_buffers() == ("rgb_no_shadows", "rgb_flat")
     neutral = Controls()
     out = old.render_image(neutral, cam, r, inspect=True)
     np.testing.assert_allclose(out["rgb_no_shadows"], out["rgb"], atol=1e-5)
@@ -217,7 +222,7 @@ def test_cuda_matches_cpu(capture, gl, tmp_path):
     same losses and weights to float tolerance, with second derivatives on (progress past Eq. 13's ramp)."""
     cfg = TrainConfig(dataset=capture, out=tmp_path / "cpu", effects="all", steps=4, rays_per_step=128,
                       checkpoint_seconds=1e9)
-    cpu, gpu = Trainer(cfg, gl), Trainer(replace(cfg, out=tmp_path / "gpu", device="cuda"), gl)
+    cpu, gpu = prepare_training(cfg, gl), prepare_training(replace(cfg, out=tmp_path / "gpu", device="cuda"), gl)
     for _ in range(4):
         a, b = cpu.train_step(0.9), gpu.train_step(0.9)
         assert b["loss"] == pytest.approx(a["loss"], rel=1e-3)
@@ -226,7 +231,7 @@ def test_cuda_matches_cpu(capture, gl, tmp_path):
     gpu.save()
     avatar, _ = load_avatar(gpu.cfg.out, "cuda")
     f = cpu.split.frames[0]
-    from models.train_data import camera_of
+    from models.capture.frames import camera_of
 
     cam = camera_of(cpu.split, f.camera_to_world)
     on_gpu = avatar.render_image(f.controls, cam, Rasterizer(gl))["rgb"]

@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 import torch
 
-from models.avatar_io import load_avatar
+from models.avatars.nerface.avatar import NerfaceAvatar, NerfaceConfig, kabsch
+from models.avatars.registry import load_avatar
+from models.capture.frames import camera_of
 from models.head.controls import Controls
-from models.nerface import NerfaceAvatar, NerfaceConfig, kabsch
-from models.train import TrainConfig, Trainer
-from models.train_data import camera_of
+from models.training.trainer import TrainConfig, prepare_training
 from render.gl.raster import Rasterizer
+from render.rays import Rays
 
 pytestmark = pytest.mark.gl
 
@@ -55,7 +56,7 @@ def capture(synth_capture) -> Path:
 def test_tiny_nerface_run(capture, gl, tmp_path):
     cfg = TrainConfig(dataset=capture, out=tmp_path / "nf", model="nerface", steps=100, rays_per_step=256,
                       checkpoint_seconds=1e9)
-    t = Trainer(cfg, gl, nerface=SMALL)
+    t = prepare_training(cfg, gl, SMALL)
     first = np.mean([t.train_step(0.0)["photometric"] for _ in range(3)])
     for k in range(3, 97):
         t.train_step(k / 100)
@@ -71,6 +72,6 @@ def test_tiny_nerface_run(capture, gl, tmp_path):
     out = avatar.render_image(f.controls, camera_of(t.split, f.camera_to_world), Rasterizer(gl))
     assert out["rgb"].shape == (32, 32, 3) and np.isfinite(out["rgb"]).all()
     # Rays that miss the head's box see exactly the background.
-    far = avatar.render_rays(torch.tensor([[0.0, 0.0, 5.0]]), torch.tensor([[0.0, 1.0, 0.0]]),
-                             avatar.geometry(Controls()), avatar.codes(None))[0]
-    torch.testing.assert_close(far.rgb[0], avatar.background)
+    far = avatar.render_rays(Rays(torch.tensor([[0.0, 0.0, 5.0]]), torch.tensor([[0.0, 1.0, 0.0]]),
+                                  torch.tensor([float("inf")])), avatar.geometry(Controls()), None)
+    torch.testing.assert_close(far.buffers["rgb"][0], avatar.background)

@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import torch
 
-from models.fields.occupancy import OccupancyGrid
+from models.avatars.codynerf.occupancy import OccupancyGrid
 
 R = 0.5  # sphere radius, in a [-1, 1]^3 box of 8^3 cells (cells 0.25 wide)
 

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 import torch
 
-from models.fields.mesh_light import BIAS_M, SOFT_M, mesh_light
 from render.gl.raster import Rasterizer
+from render.gl.shadow import draw_light_depth
+from render.shadow_map import BIAS_M, SOFT_M
 
 pytestmark = pytest.mark.gl
 
@@ -27,7 +28,7 @@ def blocked_by_plate(x: np.ndarray, light: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("light", [(0.0, 1.0, 0.0), (0.4, 0.8, 0.3)])
 def test_plate_shadow_matches_ray_casting(gl, light):
     light = np.asarray(light) / np.linalg.norm(light)
-    ml = mesh_light(PLATE, PLATE_TRIS, light, Rasterizer(gl))
+    ml = draw_light_depth(Rasterizer(gl), PLATE, PLATE_TRIS, light)
     rng = np.random.default_rng(0)
     x = rng.uniform([-0.15, -0.1, -0.15], [0.15, -0.01, 0.15], (4000, 3)).astype(np.float32)  # below the plate
     vis = ml.visibility(torch.as_tensor(x)).numpy()
@@ -44,7 +45,7 @@ def test_plate_shadow_matches_ray_casting(gl, light):
 
 def test_bias_keeps_the_surface_lit(gl):
     """Points on the plate and just under it are lit; deeper than the bias plus the soft band, blocked."""
-    ml = mesh_light(PLATE, PLATE_TRIS, (0.0, 1.0, 0.0), Rasterizer(gl))
+    ml = draw_light_depth(Rasterizer(gl), PLATE, PLATE_TRIS, (0.0, 1.0, 0.0))
     depths = np.array([0.0, BIAS_M * 0.5, BIAS_M + SOFT_M, 0.02])
     x = torch.as_tensor(np.stack([np.full(4, 0.013), -depths, np.full(4, -0.021)], 1), dtype=torch.float32)
     vis = ml.visibility(x).numpy()
@@ -55,7 +56,7 @@ def test_bias_keeps_the_surface_lit(gl):
 
 
 def test_points_off_the_map_or_not_finite_are_lit(gl):
-    ml = mesh_light(PLATE, PLATE_TRIS, (0.0, 1.0, 0.0), Rasterizer(gl))
+    ml = draw_light_depth(Rasterizer(gl), PLATE, PLATE_TRIS, (0.0, 1.0, 0.0))
     x = torch.tensor([[5.0, -0.05, 0.0], [float("nan"), -0.05, 0.0], [float("inf"), 0, 0], [0, -1e30, 0]])
     vis = ml.visibility(x)
     assert torch.isfinite(vis).all() and (vis[:3] > 1 - 1e-6).all() and 0 <= vis[3] <= 1

@@ -12,9 +12,9 @@ import pytest
 from PIL import Image
 
 from app.cli import main
-from models.dataset import load_split
+from models.capture.dataset import load_split
+from models.capture.synthetic import SynthConfig, read_png16, synthesize
 from models.head.sources import load_builtin
-from models.synthetic import SynthConfig, read_png16, synthesize
 
 pytestmark = pytest.mark.gl
 

@@ -1,17 +1,12 @@
-"""Whether the guide mesh stands between a point and the capture's key light: a shadow map of the posed mesh
-(its depth seen from the light, drawn by the GL rasterizer), looked up at any point in space. The shadow
-factor reads it beside its learnt inputs where the capture records its light, so the shadows it learns follow
-the geometry that casts them, also where a region was in shadow in every training frame."""
+"""A directional light's depth map of a mesh, looked up at any point in space: whether the mesh stands between
+the point and the light. Pure tensor math over the map's arrays; the map itself is drawn by the GL rasterizer
+(render/gl/shadow.py, draw_light_depth)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import torch
-
-from render.gl.raster import Rasterizer
-from render.gl.shadow import bounding_sphere, light_camera
 
 LIGHT_MAP_PX = 256
 """Shadow-map size: 1.2 mm a texel over a 30 cm head."""
@@ -19,11 +14,11 @@ BIAS_M = 0.004
 """A point this far behind the nearest surface (seen from the light) still counts as lit: the surface's own
 samples, within the shell's spacing of it, do not shadow themselves."""
 SOFT_M = 0.004
-"""Depth over which the test goes from lit to blocked (a smooth input for the network, not a hard step)."""
+"""Depth over which the test goes from lit to blocked (a smooth input for a network, not a hard step)."""
 
 
 @dataclass
-class MeshLight:
+class LightDepthMap:
     view: torch.Tensor  # (4,4) world -> light camera
     projection: torch.Tensor  # (4,4) orthographic
     depth: torch.Tensor  # (N,N) distance from the light to the nearest surface, inf where none; rows top first
@@ -52,14 +47,5 @@ class MeshLight:
             out = out + w * torch.where(inside & torch.isfinite(texel), lit, torch.ones_like(lit))
         return torch.where(finite, out.clamp(0, 1), torch.ones_like(out))
 
-    def to(self, device: torch.device | str) -> MeshLight:
-        return MeshLight(self.view.to(device), self.projection.to(device), self.depth.to(device))
-
-
-def mesh_light(vertices: np.ndarray, triangles: np.ndarray, light_dir: np.ndarray | tuple, rasterizer: Rasterizer,
-               px: int = LIGHT_MAP_PX) -> MeshLight:
-    """The shadow map of a posed mesh (V,3) for a directional light (towards the light, world)."""
-    view, projection = light_camera(light_dir, *bounding_sphere(vertices))
-    depth = rasterizer.depth_map(vertices, triangles, view, projection, px)
-    t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)
-    return MeshLight(t(view), t(projection), t(depth))
+    def to(self, device: torch.device | str) -> LightDepthMap:
+        return LightDepthMap(self.view.to(device), self.projection.to(device), self.depth.to(device))

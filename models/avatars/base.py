@@ -1,0 +1,234 @@
+"""The avatar interface (DESIGN 1): what every model implements, and all that the rest of the program (the
+trainer, eval, bench, the quality presets, turntables, the studio) asks of an avatar.
+
+An avatar is built for a capture (`for_capture`) or from its avatar.json (`from_meta`), and describes itself
+for avatar.json (`meta`). Per frame it makes a geometry from the head model's controls (`frame_geometry`:
+whatever it needs, meshes, a shadow map, a rigid pose) and says which pixels' rays it renders. For a batch of
+rays it gives named buffers (`render_rays`: rgb, opacity, depth, and what its effects provide), its loss terms
+for a training batch (`loss_terms`: named, weighted), and after the hot path the inspection buffers it
+declares (`inspect`). `render_image` is the same for every model: rays of a camera in batches, cancellable,
+scattered back into images.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from torch import nn
+
+from models.avatars.quality import BUILTIN_PRESETS, Preset, Quality
+from models.head.controls import Controls
+from models.head.head import Head
+from models.head.model import HeadModel
+from render.camera import Camera
+from render.gl.raster import Rasterizer
+from render.rays import Raster, Rays, camera_surface_distance, image_rays, rays_to_images
+
+BACKGROUND = "background"
+"""The fill of colour buffers outside the rendered pixels: the avatar's background colour."""
+BASE_LAYOUT: dict[str, tuple[int, float | str]] = {"rgb": (3, BACKGROUND), "opacity": (0, 0.0),
+                                                   "depth": (0, float("inf"))}
+"""The buffers every avatar renders: channels (0: scalar) and the value of pixels not rendered."""
+
+
+class RenderCancelled(Exception):
+    """A render stopped part-way because a newer request replaced it."""
+
+
+@dataclass
+class RayOutput:
+    """What a model renders for R rays."""
+
+    buffers: dict[str, torch.Tensor]
+    """Named per-ray buffers: rgb (R,3), opacity (R,), depth (R,) (expected distance along the ray), and the
+    model's own (e.g. normals (R,3))."""
+    internals: Any = None
+    """The model's intermediate values (samples, weights, per-sample features): its losses and inspection
+    buffers read them; nothing outside the model does."""
+
+
+@dataclass
+class TrainingBatch:
+    """One frame's rays of a training step."""
+
+    frame: int  # index of the training frame (its per-frame codes)
+    rays: Rays
+    target: torch.Tensor  # (R,3) the capture's colours
+    geometry: Any  # the frame's geometry (frame_geometry)
+    progress: float  # share of the run done, in [0,1]: schedules read it
+    generator: torch.Generator  # every random draw of the step (its state is checkpointed)
+
+
+class Avatar(nn.Module, ABC):
+    """A head avatar that follows a morphable head model's controls."""
+
+    name: ClassVar[str]
+    """The registry's name (models/avatars/registry.py); avatar.json's "model"."""
+    rays_per_step: ClassVar[int] = 1024
+    """Training rays a step unless told otherwise."""
+    quality_knobs: ClassVar[tuple[str, ...]] = ()
+    """Which fields of a Quality setting change this model's rendering besides the image size (none: the
+    model always renders the same way, as the dense NerFACE baseline does)."""
+
+    def __init__(self, head_model: HeadModel, n_frames: int, background: np.ndarray):
+        super().__init__()
+        self.head_model = head_model
+        self.head = Head(head_model)
+        self.n_frames = n_frames
+        self.register_buffer("background", torch.as_tensor(np.asarray(background, np.float32)))
+        self.presets: dict[str, Preset] = {k: Preset(q) for k, q in BUILTIN_PRESETS.items()}
+        """draft/preview/final: those `bench` measured on this avatar (presets.json), else the built-in ones."""
+        self.presets_measured: dict = {}
+
+    # ---- making and describing -------------------------------------------------------------------------
+    @classmethod
+    @abstractmethod
+    def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
+                    lighting: dict | None, config: Any = None) -> Avatar:
+        """A new avatar for a capture of n_frames with this lighting record; `config`: the model's own sizes
+        (None: its defaults)."""
+
+    @classmethod
+    @abstractmethod
+    def from_meta(cls, head_model: HeadModel, meta: dict) -> Avatar:
+        """The avatar avatar.json describes (before its weights are loaded); KeyError/TypeError/ValueError on
+        a description that does not fit."""
+
+    @abstractmethod
+    def meta(self) -> dict:
+        """What from_meta reads back: the model's name, effects and sizes (JSON data)."""
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """The lighting effects the avatar models (empty: none)."""
+        return ()
+
+    def describe_effects(self) -> str:
+        return ", ".join(self.effects) or "none"
+
+    def describe_rendering(self) -> str:
+        """How the avatar renders, in a few words (reports)."""
+        return self.name
+
+    # ---- per frame -------------------------------------------------------------------------------------
+    @abstractmethod
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> Any:
+        """Everything about one frame's head that its rays need (with `.to(device)` and `.posed`, the posed
+        vertices (V,3))."""
+
+    @abstractmethod
+    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+        """(H,W) bool: the pixels whose rays are rendered in an image (the rest take each buffer's fill)."""
+
+    def training_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+        """(H,W) bool: where training draws its rays."""
+        return self.image_pixels(camera, raster)
+
+    def draw_training_pixels(self, active: torch.Tensor, n_pixels: int, n: int, generator: torch.Generator
+                             ) -> torch.Tensor:
+        """n flat pixel indices of one frame for a training step, from its active ones (K,)."""
+        del n_pixels
+        return active[torch.randint(len(active), (n,), generator=generator)]
+
+    def fit_to_capture(self, foreground_reach_m: np.ndarray | None) -> None:
+        """Adapt the render settings to the capture: how far (metres, per foreground pixel of the masks) the
+        capture's foreground reaches beyond the mesh's silhouette; None where it has no masks."""
+
+    # ---- rays ------------------------------------------------------------------------------------------
+    @abstractmethod
+    def render_rays(self, rays: Rays, geometry: Any, frame: int | None, generator: torch.Generator | None = None,
+                    training: bool = False) -> RayOutput:
+        """Named buffers of R rays. frame: a training frame's codes (None: the mean code, for novel controls).
+        training: the exact path with every random draw from `generator` (display may take the shortcuts its
+        render settings allow)."""
+
+    @abstractmethod
+    def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
+        """The training losses on one frame's rays: named scalars, each already weighted."""
+
+    def inspection_buffers(self) -> tuple[str, ...]:
+        """The inspection buffers this avatar's effects make meaningful (beyond BASE_LAYOUT and `layout`)."""
+        return ()
+
+    def inspect(self, out: RayOutput, geometry: Any, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
+        """The named inspection buffers (R,...) of rays already rendered, from their internals."""
+        del out, geometry
+        if names:
+            raise ValueError(f"{self.name} avatars have no inspection buffers {names}")
+        return {}
+
+    def layout(self) -> dict[str, tuple[int, float | str]]:
+        """Every buffer this avatar can render, with its channels and the fill of pixels not rendered."""
+        return dict(BASE_LAYOUT)
+
+    def display_mode(self) -> contextlib.AbstractContextManager:
+        """The autograd mode of display rendering (no gradients unless the model needs some)."""
+        return torch.inference_mode()
+
+    # ---- settings and lifecycle ------------------------------------------------------------------------
+    def set_quality(self, quality: Quality) -> None:
+        """Apply a quality setting's knobs (quality_knobs); the image size is the caller's."""
+        del quality
+
+    def apply_preset(self, preset: str, size: int) -> int:
+        """Set the render settings of one of the avatar's presets; returns the image size it renders at."""
+        quality = self.presets[preset].quality
+        self.set_quality(quality)
+        return quality.size(size)
+
+    def before_save(self, geometry: Any) -> None:
+        """Called before each checkpoint with the first training frame's geometry (display caches follow the
+        weights)."""
+
+    # ---- images: the same for every model --------------------------------------------------------------
+    def image_rays(self, geometry: Any, camera: Camera, rasterizer: Rasterizer | None) -> tuple[Rays, np.ndarray]:
+        """The rays of the pixels this avatar renders, and their flat pixel indices."""
+        origin, dirs = image_rays(camera)
+        if rasterizer is None:
+            raster = Raster(np.full((camera.height_px, camera.width_px), -1), np.full(
+                (camera.height_px, camera.width_px), np.inf), np.zeros((camera.height_px, camera.width_px, 3)))
+        else:
+            raster = rasterizer.rasterize(geometry.posed.cpu().numpy(), self.head_model.triangles, camera)
+        surface_t = camera_surface_distance(raster, camera, dirs.numpy())
+        idx = np.nonzero(self.image_pixels(camera, raster).ravel())[0]
+        return Rays(origin.expand(len(idx), 3), dirs[idx], torch.as_tensor(surface_t.ravel()[idx])), idx
+
+    def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer | None, frame: int | None = None,
+                     should_stop: Callable[[], bool] | None = None, inspect: bool = False) -> dict[str, np.ndarray]:
+        """The avatar's buffers as images (H,W,...). `frame` picks a training frame's codes; None uses the mean
+        code (novel controls). `should_stop` is asked between batches of rays; when it says yes,
+        RenderCancelled is raised (a newer request won). `inspect` adds the inspection buffers."""
+        device = self.background.device
+        geo = self.frame_geometry(controls, rasterizer).to(device)
+        rays, idx = self.image_rays(geo, camera, rasterizer)
+        rays = rays.to(device)
+        names = self.inspection_buffers() if inspect else ()
+        parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *self.default_buffers(), *names)}
+        with self.display_mode():
+            for a in range(0, len(rays), self.chunk_rays):
+                if should_stop is not None and should_stop():
+                    raise RenderCancelled
+                out = self.render_rays(rays[a:a + self.chunk_rays], geo, frame)
+                buffers = out.buffers | self.inspect(out, geo, names)
+                buffers["depth"] = torch.where(buffers["opacity"] > 0.5, buffers["depth"],
+                                               torch.full_like(buffers["depth"], np.inf))
+                for k, v in buffers.items():
+                    parts[k].append(v.detach())
+        background = self.background.cpu().numpy()
+        layout = {k: (c, background if fill == BACKGROUND else fill) for k, (c, fill) in self.layout().items()}
+        return rays_to_images(parts, camera.height_px, camera.width_px, idx, layout)
+
+    def default_buffers(self) -> tuple[str, ...]:
+        """The buffers render_rays gives besides rgb, opacity and depth."""
+        return ()
+
+    @property
+    def chunk_rays(self) -> int:
+        """Rays per batch when rendering an image (memory)."""
+        return 4096

@@ -1,0 +1,374 @@
+"""The CoDyNeRF avatar (DESIGN 3): a head model, the CoDyNeRF fields and per-frame codes, rendered along rays.
+
+Rendering a frame: the posed mesh is rasterized (GL) for the distance to its surface along each pixel's ray;
+rays near the head's silhouette sample a shell about the surface (or the head's box where they miss the
+mesh), every other pixel is background. Samples take the 3DMM prior (Eq. 3-4), the fields (Eq. 2, 5, 7, 8),
+and are composited over the background (Eq. 1); the steps are in render.py.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import asdict, dataclass, replace
+from typing import ClassVar
+
+import numpy as np
+import torch
+from scipy.ndimage import binary_dilation
+from torch import nn
+
+from models.avatars.base import BACKGROUND, Avatar, RayOutput, TrainingBatch
+from models.avatars.codynerf import render
+from models.avatars.codynerf.field import CoDyNeRFField, FieldConfig
+from models.avatars.codynerf.geometry import FrameGeometry, frame_geometry, with_light_depth
+from models.avatars.codynerf.occupancy import OccupancyGrid
+from models.avatars.codynerf.prior import nearest_vertices, prior_within, vertex_tree
+from models.avatars.codynerf.training import LossWeights, loss_terms
+from models.avatars.quality import Quality
+from models.head.controls import Controls
+from models.head.model import HeadModel
+from render.camera import Camera
+from render.gl.raster import Rasterizer
+from render.rays import Raster, Rays
+from render.volume import composite, expected_depth
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """How many samples, where. Lengths in metres."""
+
+    samples_per_ray: int = 12
+    """Samples in the shell about the surface (or across the box for rays that miss the mesh)."""
+    shell_m: float = 0.03
+    """Half-thickness of the shell about the rasterized surface."""
+    box_margin_m: float = 0.03
+    """The head's box: the posed mesh's bounds grown by this much."""
+    silhouette_px: int = 3
+    """Rays within this many pixels of the mesh's silhouette are rendered (at least as many as the shell
+    spans at the head's distance); farther ones are background."""
+    silhouette_m: float | None = None
+    """How far the capture's foreground reaches beyond the mesh's silhouette (hair, shoulders), metres,
+    measured from the capture's masks when training starts; None (no masks): the whole shell."""
+    prior_falloff_m: float = 0.05
+    """Length over which the 3DMM prior fades with distance from the mesh."""
+    stop_below: float = 1e-3
+    """Display ends a ray early once less than this share of the light gets through its front half."""
+    occupancy: bool = False
+    """Display skips the density network where the occupancy grid says the canonical point is empty. Off:
+    measured on the 25-minute ICT sun avatar (all effects), it cost 4-6 dB PSNR on test frames (likely cause,
+    not proven: 4 random points per 5 mm cell miss a sharp surface's thin shell); an earlier, cheaper lookup
+    saved 8% of the time (149 to 137 ms at 128 px)."""
+    bf16: bool = False
+    """Display runs the networks in bfloat16 (training is always float32)."""
+    fine_samples: int = 0
+    """Display: a second pass adds this many samples where the first pass's weights lie (0: one pass)."""
+    min_weight: float = 1e-4
+    """Display skips the colour of samples that add less than this to their pixel (training never does)."""
+    chunk_rays: int = 4096
+    """Rays per batch when rendering an image (memory)."""
+    dense_samples: int = 0
+    """The slow reference (tests): ignore the mesh and spread this many samples over the head's box on every
+    pixel's ray, with no shortcut (0: the shell sampler)."""
+
+
+def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -> int:
+    """Pixels around the mesh's silhouette to render: how far the capture's foreground reaches beyond the
+    mesh (cfg.silhouette_m; else the shell, as density lives within shell_m of the mesh) at the nearest
+    surface's distance, at least cfg.silhouette_px."""
+    finite = depth[np.isfinite(depth)]
+    if len(finite) == 0:
+        return cfg.silhouette_px
+    reach = cfg.shell_m if cfg.silhouette_m is None else min(cfg.silhouette_m, cfg.shell_m)
+    return max(cfg.silhouette_px, int(np.ceil(reach * camera.focal_px() / max(finite.min(), 1e-3))))
+
+
+def active_pixels(cfg: RenderConfig, camera: Camera, raster: Raster) -> np.ndarray:
+    """(H,W) pixels whose rays are rendered: those within the silhouette margin of the rasterized mesh."""
+    if not raster.hit.any():
+        return raster.hit
+    return binary_dilation(raster.hit, iterations=silhouette_margin_px(cfg, camera, raster.depth))
+
+
+def mean_code(embedding: nn.Embedding) -> torch.Tensor:
+    return embedding.weight.mean(0, keepdim=True)
+
+
+@dataclass
+class CoDyNeRFRays:
+    """The internals of one render_rays: what the losses and the inspection buffers read."""
+
+    samples: render.RaySamples
+    densities: render.Densities
+    sigma: torch.Tensor  # (R,S)
+    weights: torch.Tensor  # (R,S)
+    remaining: torch.Tensor  # (R,) light passing every sample
+    shown: render.Shown
+    phi: torch.Tensor  # (1,C) the appearance code
+    mesh_visibility: torch.Tensor | None  # (M,) the guide mesh's visibility of the key light at the shown samples
+    lit: torch.Tensor  # (R,S,3) colour without cast shadows
+    factor: torch.Tensor | None  # (R,S,1) share of the lit colour the cast shadows leave
+    visibility: torch.Tensor | None  # (M,1) the key light's visibility S at the shown samples
+    point_normal: torch.Tensor | None = None  # (R,S,3)
+    point_grad_normal: torch.Tensor | None = None  # (R,S,3)
+
+    def to_rays(self, values: torch.Tensor) -> torch.Tensor:
+        """Values (M,C) of the shown samples -> (R,S,C)."""
+        R, S = self.weights.shape
+        return self.shown.to_rays(values, len(self.densities.keep), self.densities.keep, R, S)
+
+
+class CoDyNeRFAvatar(Avatar):
+    name: ClassVar[str] = "codynerf"
+    quality_knobs: ClassVar[tuple[str, ...]] = ("samples", "fine", "bf16")
+
+    def __init__(self, head_model: HeadModel, field_cfg: FieldConfig, n_frames: int, background: np.ndarray,
+                 render_cfg: RenderConfig = RenderConfig(), loss_weights: LossWeights | None = None):
+        super().__init__(head_model, n_frames, background)
+        self.field_cfg = field_cfg
+        self.render_cfg = render_cfg
+        self.loss_weights = loss_weights or LossWeights()
+        self.field = CoDyNeRFField(field_cfg, max(head_model.landmarks.count, 1))
+        self.omega = nn.Embedding(n_frames, field_cfg.deform_code_dim)
+        self.phi = nn.Embedding(n_frames, field_cfg.appearance_code_dim)
+        nn.init.zeros_(self.omega.weight)
+        nn.init.zeros_(self.phi.weight)
+        template = torch.as_tensor(head_model.template, dtype=torch.float32)
+        margin = render_cfg.shell_m + 0.02
+        self.occupancy = OccupancyGrid(template.min(0).values - margin, template.max(0).values + margin)
+
+    # ---- making and describing -------------------------------------------------------------------------
+    @classmethod
+    def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
+                    lighting: dict | None, config: LossWeights | None = None) -> CoDyNeRFAvatar:
+        field_cfg = FieldConfig(effects=effects, light_dir=key_light_dir(lighting) if "shadows" in effects else None)
+        return cls(head_model, field_cfg, n_frames, background, RenderConfig(), config or LossWeights())
+
+    @classmethod
+    def from_meta(cls, head_model: HeadModel, meta: dict) -> CoDyNeRFAvatar:
+        return cls(head_model, field_config(meta), int(meta["frames"]), np.asarray(meta["background"], np.float32),
+                   RenderConfig(**meta["render"]))
+
+    def meta(self) -> dict:
+        return {"model": self.name, "effects": list(self.field_cfg.effects), "field": asdict(self.field_cfg),
+                "render": asdict(self.render_cfg)}
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        return self.field_cfg.effects
+
+    # ---- per frame -------------------------------------------------------------------------------------
+    def geometry(self, controls: Controls) -> FrameGeometry:
+        """The frame's meshes, tree, landmarks and box (no shadow map)."""
+        return frame_geometry(self.head, controls, self.render_cfg.box_margin_m)
+
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> FrameGeometry:
+        geo = self.geometry(controls)
+        if not self.field_cfg.shadow_factor:
+            return geo
+        if rasterizer is None:
+            raise ValueError("this avatar's shadow factor reads the posed mesh's shadow map: pass a rasterizer")
+        return with_light_depth(geo, self.head_model.triangles, self.field_cfg.light_dir, rasterizer)
+
+    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+        if self.render_cfg.dense_samples:  # the reference renders every pixel whose ray crosses the head's box
+            return np.ones_like(raster.hit)
+        return active_pixels(self.render_cfg, camera, raster)
+
+    def fit_to_capture(self, foreground_reach_m: np.ndarray | None) -> None:
+        """Render only as far beyond the mesh as the capture's foreground goes (99.9% of its pixels, + 2 mm):
+        none of the shell's width where the capture shows nothing there."""
+        if foreground_reach_m is None:
+            return
+        reach = float(np.quantile(foreground_reach_m, 0.999)) if len(foreground_reach_m) else 0.0
+        self.render_cfg = replace(self.render_cfg, silhouette_m=reach + 0.002)
+
+    # ---- the field -------------------------------------------------------------------------------------
+    def support(self, distance: torch.Tensor) -> torch.Tensor:
+        """The field's support: 1 near the mesh, fading to 0 at shell_m from it, so every sampler (the shell,
+        the box, the dense reference) sees the same field and nothing floats far from the head."""
+        rc = self.render_cfg
+        return ((rc.shell_m - distance) / (0.25 * rc.shell_m)).clamp(0.0, 1.0)
+
+    @torch.no_grad()
+    def build_occupancy(self, canonical: torch.Tensor, threshold: float = 0.5) -> float:
+        """Fill the occupancy grid from the trained density about a canonical mesh (V,3) (the capture's
+        identity, no expression, no pose). threshold: density (1/m) below which a cell counts as empty; at
+        the shell sampler's spacing (5 mm) such a sample is at most 0.25% opaque. Returns the occupied share."""
+        tree = vertex_tree(canonical)
+
+        def density(x: torch.Tensor) -> torch.Tensor:
+            idx = nearest_vertices(x, canonical, tree)
+            distance = (x - canonical[idx]).norm(dim=-1)
+            return self.field.canonical_density(x, distance)[0] * self.support(distance)
+
+        return self.occupancy.build(density, threshold, generator=torch.Generator().manual_seed(0))
+
+    def codes(self, frame: int | None) -> tuple[torch.Tensor, torch.Tensor]:
+        """omega and phi (1,C) of a training frame, or the mean codes (novel controls)."""
+        if frame is None:
+            return mean_code(self.omega), mean_code(self.phi)
+        idx = torch.tensor([frame], device=self.omega.weight.device)
+        return self.omega(idx), self.phi(idx)
+
+    # ---- rays ------------------------------------------------------------------------------------------
+    def settings(self, training: bool, create_graph: bool = False) -> render.RaySettings:
+        """The exact path for training; display's shortcuts from the render config."""
+        rc = self.render_cfg
+        if training or rc.dense_samples:
+            return render.RaySettings(rc.samples_per_ray, rc.shell_m, dense=0 if training else rc.dense_samples,
+                                      create_graph=create_graph)
+        return render.RaySettings(rc.samples_per_ray, rc.shell_m, fine=rc.fine_samples, stop_below=rc.stop_below,
+                                  min_weight=rc.min_weight, skip_empty=rc.occupancy)
+
+    def render_rays(self, rays: Rays, geometry: FrameGeometry, frame: int | None,
+                    generator: torch.Generator | None = None, training: bool = False,
+                    create_graph: bool = False) -> RayOutput:
+        """Colour, opacity, depth (and, with normals, predicted and density-gradient normals) of R rays.
+        create_graph: keep the density gradients' graph (training through the normals, Eq. 13)."""
+        omega, phi = self.codes(frame)
+        if not training:
+            omega, phi = omega.detach(), phi.detach()
+        return self.trace(rays, geometry, omega, phi, self.settings(training, create_graph), generator)
+
+    def trace(self, rays: Rays, geo: FrameGeometry, omega: torch.Tensor, phi: torch.Tensor,
+              settings: render.RaySettings, generator: torch.Generator | None = None,
+              samples: render.RaySamples | None = None) -> RayOutput:
+        """render_rays with given codes (1,C) and settings: sample, evaluate the density, (a fine pass),
+        colour the samples that show, composite."""
+        assert omega.shape[0] == 1 and phi.shape[0] == 1, "one code per batch of rays (a frame's, or the mean)"
+        samples = samples if samples is not None else render.sample_rays(rays, geo.box_min, geo.box_max, settings,
+                                                                          generator)
+        d, sigma, weights, remaining = self._densities(rays, geo, omega, samples, settings)
+        if settings.fine > 0:
+            samples = render.with_fine_pass(samples, weights, settings.fine, generator)
+            d, sigma, weights, remaining = self._densities(rays, geo, omega, samples, replace(settings, stop_below=0))
+        shown = render.shown_samples(d, weights, rays.directions, settings.min_weight)
+        mesh_vis = geo.light.visibility(render.sample_points(rays, samples)[shown.keep]) \
+            if self.field_cfg.shadow_factor else None
+        lit, factor, visibility = self.field.appearance_terms(shown.field, shown.prior, shown.view, phi,
+                                                              geo.landmarks, mesh_vis)
+        R, S = weights.shape
+        internals = CoDyNeRFRays(samples, d, sigma, weights, remaining, shown, phi, mesh_vis, None, None,
+                                 visibility)
+        internals.lit = internals.to_rays(lit)
+        internals.factor = None if factor is None else internals.to_rays(factor)
+        colour = internals.lit * (1.0 if internals.factor is None else internals.factor)
+        buffers = {"rgb": composite(weights, colour, remaining, self.background), "opacity": weights.sum(-1),
+                   "depth": expected_depth(weights, samples.t_mid)}
+        if d.field.normal is not None:
+            pn = render.scatter(d.field.normal, d.keep, R * S).reshape(R, S, 3)
+            pg = render.scatter(d.field.grad_normal, d.keep, R * S).reshape(R, S, 3)
+            internals.point_normal, internals.point_grad_normal = pn, pg
+            buffers["normals"], buffers["grad_normals"] = composite(weights, pn), composite(weights, pg)
+        return RayOutput(buffers, internals)
+
+    def _densities(self, rays: Rays, geo: FrameGeometry, omega: torch.Tensor, samples: render.RaySamples,
+                   settings: render.RaySettings):
+        """The field at the samples (all, or with the early stop), and the compositing weights."""
+        pts = render.sample_points(rays, samples)
+        S = samples.t_starts.shape[1]
+        valid = samples.valid.repeat_interleave(S)
+        occupied = self.occupancy.lookup if settings.skip_empty else None
+        rc = self.render_cfg
+
+        def evaluate(idx: torch.Tensor) -> render.Densities:
+            """Prior and geometry at flat sample indices; samples outside the field's support are not evaluated
+            at all (exactly: their density is zero)."""
+            near, prior_in = prior_within(pts[idx], geo.meshes, rc.shell_m, rc.prior_falloff_m, geo.tree)
+            support = self.support(prior_in.distance) * valid[idx[near]]
+            inside = torch.nonzero(support > 0).squeeze(1)
+            prior_in = prior_in.take(inside) if len(inside) < len(near) else prior_in
+            keep = idx[near[inside]]
+            out = self.field.geometry(pts[keep], prior_in, omega, settings.create_graph, occupied)
+            return render.Densities(keep, prior_in, out, support[inside])
+
+        d = render.densities_early_stop(evaluate, samples, settings.stop_below)
+        return (d, *render.weights_of(d, samples))
+
+    def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
+        return loss_terms(self, batch)
+
+    # ---- inspection ------------------------------------------------------------------------------------
+    def inspection_buffers(self) -> tuple[str, ...]:
+        """The render without cast shadows (for an avatar without a shadow factor: with the neutral head's
+        shadow inputs), the key light's visibility (with a factor), and the render with every normal turned to
+        the viewer (with normals)."""
+        shadows = ("rgb_no_shadows", "rgb_light") if self.field.shadow_net is not None else ("rgb_no_shadows",)
+        return (shadows if "shadows" in self.field_cfg.effects else ()) + (
+            ("rgb_flat",) if self.field_cfg.needs_normals else ())
+
+    def inspect(self, out: RayOutput, geometry: FrameGeometry, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
+        r: CoDyNeRFRays = out.internals
+        unknown = set(names) - set(self.inspection_buffers())
+        if unknown:
+            raise ValueError(f"this avatar (effects: {self.describe_effects()}) has no buffers {sorted(unknown)}")
+        result = {}
+        for name in names:
+            if name == "rgb_no_shadows" and r.factor is not None:  # the shadow factor at 1: lit everywhere
+                result[name] = composite(r.weights, r.lit, r.remaining, self.background)
+            elif name == "rgb_no_shadows":  # no factor: the neutral head's shadow inputs, no expression or pose
+                zero = torch.zeros_like(r.shown.prior.offset)
+                neutral = replace(r.shown.prior, expression_offset=zero, pose_offset=zero)
+                landmarks = self.geometry(Controls(shape=geometry.shape)).landmarks.to(zero.device)
+                result[name] = composite(r.weights, self._colour(r, r.shown.field, neutral, landmarks),
+                                         r.remaining, self.background)
+            elif name == "rgb_light":  # the key light's visibility (1: no cast shadow), grey
+                light = composite(r.weights, r.to_rays(r.visibility), r.remaining, r.visibility.new_ones(1))
+                result[name] = light.expand(len(r.weights), 3)
+            elif name == "rgb_flat":  # every surface facing the viewer: the shading's contribution is what changes
+                flat = replace(r.shown.field, normal=r.shown.view)
+                result[name] = composite(r.weights, self._colour(r, flat, r.shown.prior, geometry.landmarks),
+                                         r.remaining, self.background)
+        return result
+
+    def _colour(self, r: CoDyNeRFRays, field_out, prior, landmarks: torch.Tensor) -> torch.Tensor:
+        """(R,S,3) the colour of the shown samples under other appearance inputs."""
+        return r.to_rays(self.field.appearance(field_out, prior, r.shown.view, r.phi, landmarks, r.mesh_visibility))
+
+    def layout(self) -> dict[str, tuple[int, float | str]]:
+        return super().layout() | {"normals": (3, 0.0), "grad_normals": (3, 0.0), "rgb_no_shadows": (3, BACKGROUND),
+                                   "rgb_light": (3, 1.0), "rgb_flat": (3, BACKGROUND)}
+
+    def default_buffers(self) -> tuple[str, ...]:
+        return ("normals", "grad_normals") if self.field_cfg.needs_normals else ()
+
+    def display_mode(self) -> contextlib.AbstractContextManager:
+        """No gradients, except that density-gradient normals need autograd (no_grad, not inference_mode);
+        bf16 where the render config says."""
+        stack = contextlib.ExitStack()
+        stack.enter_context(torch.no_grad() if self.field_cfg.needs_normals else torch.inference_mode())
+        stack.enter_context(torch.autocast(self.background.device.type, torch.bfloat16, enabled=self.render_cfg.bf16))
+        return stack
+
+    @property
+    def chunk_rays(self) -> int:
+        return self.render_cfg.chunk_rays
+
+    # ---- settings and lifecycle ------------------------------------------------------------------------
+    def set_quality(self, quality: Quality) -> None:
+        self.render_cfg = replace(self.render_cfg, samples_per_ray=quality.samples, fine_samples=quality.fine,
+                                  bf16=quality.bf16)
+
+    def before_save(self, geometry: FrameGeometry) -> None:
+        """The display's occupancy grid follows the density: rebuilt with every checkpoint."""
+        self.build_occupancy(geometry.meshes.canonical)
+
+
+def field_config(meta: dict) -> FieldConfig:
+    """The field's sizes from avatar.json (avatars written before the shadow factor existed have no light_dir)."""
+    f = meta["field"]
+    light = f.get("light_dir")
+    return FieldConfig(**{**f, "effects": tuple(f["effects"]),
+                          "light_dir": None if light is None else tuple(float(v) for v in light)})
+
+
+def key_light_dir(lighting: dict | None) -> tuple[float, float, float] | None:
+    """The key light's direction (world, towards the light) from a capture's lighting record, if it has one
+    (synthetic captures do; a tracked video does not)."""
+    try:
+        d = np.asarray((lighting or {})["key_light"]["direction"], np.float64)
+    except (KeyError, TypeError):
+        return None
+    if d.shape != (3,) or not np.isfinite(d).all() or np.linalg.norm(d) < 1e-9:
+        return None
+    return tuple(float(v) for v in d / np.linalg.norm(d))

@@ -1,0 +1,28 @@
+"""Lighting effects an avatar models (DESIGN 3.1): simulate only what the scene calls for."""
+
+from __future__ import annotations
+
+EFFECTS = ("shading", "specular", "shadows")
+
+
+def parse_effects(text: str) -> tuple[str, ...]:
+    """'none', 'all' or a comma list of shading, specular, shadows -> a sorted tuple."""
+    text = text.strip().lower()
+    if text in ("", "none"):
+        return ()
+    if text == "all":
+        return EFFECTS
+    parts = {p.strip() for p in text.split(",") if p.strip()}
+    unknown = sorted(parts - set(EFFECTS))
+    if unknown:
+        raise ValueError(f"unknown effect(s) {unknown}: expected none, all or a comma list of {', '.join(EFFECTS)}")
+    return tuple(e for e in EFFECTS if e in parts)
+
+
+def effects_name(effects: list[str] | tuple[str, ...]) -> str:
+    """none, all, or the effects joined by +.
+
+    >>> effects_name([]), effects_name(EFFECTS), effects_name(["shading", "specular"])
+    ('none', 'all', 'shading+specular')
+    """
+    return "none" if not effects else "all" if tuple(effects) == EFFECTS else "+".join(effects)

@@ -1,0 +1,58 @@
+"""Which avatar models exist, by name (avatar.json's "model", `train --model`), and avatars from their folders.
+Adding a model: its folder under models/avatars/ and one line in AVATARS."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from models.avatars.base import Avatar
+from models.avatars.checkpoint import CheckpointError, load_checkpoint
+from models.avatars.codynerf.avatar import CoDyNeRFAvatar
+from models.avatars.nerface.avatar import NerfaceAvatar
+from models.avatars.quality import load_presets
+from models.device import device_of
+from models.head.sources import load_head
+
+AVATARS: dict[str, type[Avatar]] = {cls.name: cls for cls in (
+    CoDyNeRFAvatar,
+    NerfaceAvatar,
+)}
+ModelName = Literal[tuple(AVATARS)]  # the choices of --model
+DEFAULT_MODEL = "codynerf"
+BASELINE_MODEL = "nerface"
+"""The dense renderer `bench` times beside the others."""
+
+
+def avatar_class(name: str) -> type[Avatar]:
+    try:
+        return AVATARS[name]
+    except KeyError:
+        raise ValueError(f"unknown avatar model {name!r}: expected one of {', '.join(AVATARS)}") from None
+
+
+def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar, dict]:
+    """The avatar avatar.json describes (its "model"; avatars written before models had names are CoDyNeRF's)
+    with its weights and presets, on `device`, in eval mode; and avatar.json."""
+    ck = load_checkpoint(folder)
+    meta = ck.meta
+    try:
+        head = load_head(meta["head_model"])
+        cls = avatar_class(meta.get("model", DEFAULT_MODEL))
+        avatar = cls.from_meta(head, meta)
+        avatar.load_state_dict(ck.weights)
+    except (KeyError, TypeError, ValueError, RuntimeError) as e:
+        raise CheckpointError(f"{Path(folder) / 'avatar.json'}: does not describe these weights ({e})") from None
+    avatar.eval()
+    # draft/preview/final, chosen and measured by `bench` (and where: machine, image size), else built in
+    avatar.presets, avatar.presets_measured = load_presets(folder)
+    return avatar.to(device_of(device)), meta
+
+
+def untrained_avatar(name: str, head_model, background: np.ndarray | None = None) -> Avatar:
+    """An untrained avatar of a model with its default sizes, for one frame (timing: the weights do not change
+    the work)."""
+    bg = np.ones(3, np.float32) if background is None else background
+    return avatar_class(name).for_capture(head_model, 1, bg, (), None).eval()

@@ -1,0 +1,226 @@
+"""Training an avatar on a capture: batches of rays from random frames, the losses of Eq. 9-14, Adam,
+crash-safe checkpoints, exact resume, and a progress log the studio can read."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+
+from models.avatars.base import Avatar, TrainingBatch
+from models.avatars.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from models.avatars.effects import parse_effects
+from models.avatars.registry import DEFAULT_MODEL, ModelName, avatar_class
+from models.capture.dataset import DatasetError, load_split
+from models.device import device_of
+from models.head.sources import load_head
+from models.training.data import FrameSet, ValidationFrame, build_frames, validation_frame
+from models.training.metrics import psnr
+from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
+from render.rays import Rays
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    dataset: Path
+    """Capture folder (transforms_{train,val,test}.json with a head model)."""
+    out: Path = Path("out/avatar")
+    """Avatar folder: avatar.json, weights, progress.jsonl."""
+    effects: str = "all"
+    """Lighting effects to model: none, all, or a comma list of shading, specular, shadows."""
+    model: ModelName = DEFAULT_MODEL
+    """The avatar model (models/avatars/registry.py): codynerf, or the NerFACE baseline."""
+    minutes: float | None = None
+    """Time budget; training stops when it is spent (checkpointed)."""
+    steps: int | None = None
+    """Step budget (instead of, or as well as, --minutes); with neither, 2000 steps."""
+    resume: bool = False
+    """Continue the checkpoint in --out exactly where it stopped."""
+    device: Literal["cpu", "cuda"] = "cpu"
+    """Where the networks run."""
+    seed: int = 0
+    """Seed of initialisation and ray sampling."""
+    rays_per_step: int | None = None
+    """Rays a step; default: the model's (1024 codynerf; 256 nerface, each of whose rays costs 128 samples of an
+    8x256 MLP)."""
+    frames_per_step: int = 4
+    lr: float = 5e-3
+    """Adam learning rate at the start; it decays tenfold over the run."""
+    checkpoint_seconds: float = 60.0
+    """How often to checkpoint."""
+    grad_clip: float = 1.0
+    """Largest gradient norm of a step."""
+
+
+def _adam_state_tensors(opt: torch.optim.Adam) -> dict[str, torch.Tensor]:
+    out = {}
+    for i, (p, st) in enumerate((p, opt.state[p]) for g in opt.param_groups for p in g["params"]):
+        del p
+        for k, v in st.items():
+            out[f"adam.{i}.{k}"] = v if torch.is_tensor(v) else torch.tensor(v)
+    return out
+
+
+def _load_adam_state(opt: torch.optim.Adam, tensors: dict[str, torch.Tensor]) -> None:
+    for i, p in enumerate(p for g in opt.param_groups for p in g["params"]):
+        st = {k.split(".", 2)[2]: v for k, v in tensors.items() if k.startswith(f"adam.{i}.")}
+        if st:
+            # Adam keeps its step count on the CPU, its moments beside the parameter.
+            opt.state[p] = {k: v.clone() if k == "step" else v.to(p.device) for k, v in st.items()}
+
+
+def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) -> Trainer:
+    """A training run from its config: read the capture and the head model (and the checkpoint to resume), build
+    the avatar the registry names, read and rasterize the frames. model_config: the model's own sizes or loss
+    weights (its for_capture's `config`; None: its defaults)."""
+    split, val_split = load_split(cfg.dataset, "train"), load_split(cfg.dataset, "val")
+    if not split.trains_codynerf:
+        raise DatasetError(f"{cfg.dataset}: the capture has no head model tracked on its frames; "
+                           "every avatar here reads the head's pose and expression from it")
+    head = load_head(split.head_model)
+    bg = split.background if isinstance(split.background, np.ndarray) else np.ones(3)
+    torch.manual_seed(cfg.seed)
+    resumed = load_checkpoint(cfg.out, with_train_state=True) if cfg.resume else None
+    if resumed is not None:  # the checkpoint's own model and sizes (an older one: no shadow factor)
+        cls = avatar_class(resumed.meta.get("model", DEFAULT_MODEL))
+        avatar = cls.from_meta(head, {**resumed.meta, "frames": len(split.frames), "background": bg.tolist()})
+    else:
+        avatar = avatar_class(cfg.model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects),
+                                                     split.lighting, model_config)
+    frames = build_frames(split, avatar, gl)
+    validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
+    return Trainer(cfg, avatar, frames, validation, resumed)
+
+
+class Trainer:
+    """A training run; its state (step, weights, optimiser, sampler) is a value that can be saved and resumed.
+    Built from data (prepare_training reads the files)."""
+
+    def __init__(self, cfg: TrainConfig, avatar: Avatar, frames: FrameSet, validation: ValidationFrame | None = None,
+                 resumed: Checkpoint | None = None):
+        self.cfg = cfg
+        self.avatar = avatar
+        self.frames = frames
+        self.split = frames.split
+        self.validation = validation
+        self.rays_per_step = cfg.rays_per_step or avatar.rays_per_step
+        # The networks and each frame's geometry go to the device; images, rays, the k-d trees and the random
+        # generator (its state is part of the checkpoint) stay on the CPU, and each step's rays are moved over.
+        self.device = device_of(cfg.device)
+        self.avatar.to(self.device)
+        self.frames.geometry = [geo.to(self.device) for geo in self.frames.geometry]
+        self.opt = torch.optim.Adam(self.avatar.parameters(), lr=cfg.lr)
+        self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.step = 0
+        self.elapsed = 0.0
+        self.stop_requested = False
+        """Set (from a signal handler) to end the run after the current step, with a checkpoint."""
+        if resumed is not None:
+            self._resume(resumed)
+
+    # ---- state -----------------------------------------------------------------------------------------
+    def meta(self) -> dict:
+        return {**self.avatar.meta(), "head_model": self.split.head_model, "frames": len(self.split.frames),
+                "background": self.avatar.background.tolist(),
+                "provenance": {"dataset": str(self.cfg.dataset),
+                               "dataset_resolved": str(Path(self.cfg.dataset).resolve()), "steps": self.step,
+                               "seconds": round(self.elapsed, 1), "config": {k: str(v) for k, v in
+                                                                            asdict(self.cfg).items()}}}
+
+    def save(self) -> None:
+        self.avatar.before_save(self.frames.geometry[0])
+        state = _adam_state_tensors(self.opt)
+        state["generator"] = self.generator.get_state()
+        state["elapsed"] = torch.tensor(self.elapsed, dtype=torch.float64)
+        save_checkpoint(self.cfg.out, self.meta(), self.avatar.state_dict(), self.step, state)
+
+    def _resume(self, ck: Checkpoint) -> None:
+        self.avatar.load_state_dict(ck.weights)
+        _load_adam_state(self.opt, ck.train_state)
+        self.generator.set_state(ck.train_state["generator"])
+        self.elapsed = float(ck.train_state["elapsed"])
+        self.step = ck.step
+
+    # ---- one step --------------------------------------------------------------------------------------
+    def lr_at(self, progress: float) -> float:
+        return self.cfg.lr * 0.1 ** min(max(progress, 0.0), 1.0)
+
+    def train_step(self, progress: float) -> dict[str, float]:
+        fs, g, cfg = self.frames, self.generator, self.cfg
+        for group in self.opt.param_groups:
+            group["lr"] = self.lr_at(progress)
+        frame_ids = torch.randint(len(fs), (cfg.frames_per_step,), generator=g)
+        terms: dict[str, torch.Tensor] = {}
+        total = torch.zeros((), device=self.device)
+        per_frame = self.rays_per_step // cfg.frames_per_step
+        for fid in frame_ids.tolist():
+            if len(fs.active_index[fid]) == 0:
+                continue
+            pick = self.avatar.draw_training_pixels(fs.active_index[fid], fs.images[fid][..., 0].numel(), per_frame, g)
+            rays = Rays(fs.origins[fid].expand(len(pick), 3), fs.directions[fid].reshape(-1, 3)[pick],
+                        fs.surface_t[fid].reshape(-1)[pick]).to(self.device)
+            target = fs.images[fid].reshape(-1, 3)[pick].to(self.device)
+            parts = self.avatar.loss_terms(TrainingBatch(fid, rays, target, fs.geometry[fid], progress, g))
+            for k, v in parts.items():
+                terms[k] = terms.get(k, 0.0) + v.detach() / len(frame_ids)
+                total = total + v / len(frame_ids)
+        self.opt.zero_grad(set_to_none=True)
+        total.backward()
+        # Second derivatives (density-gradient normals) can spike; a bounded step keeps the field alive.
+        torch.nn.utils.clip_grad_norm_(self.avatar.parameters(), self.cfg.grad_clip)
+        self.opt.step()
+        self.step += 1
+        return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}
+
+    # ---- validation ------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def validation_psnr(self, gl: GLContext) -> float:
+        v = self.validation
+        r = Rasterizer(gl)
+        img = self.avatar.render_image(v.controls, v.camera, r)["rgb"]
+        r.release()
+        return psnr(img, v.image)
+
+    # ---- the loop --------------------------------------------------------------------------------------
+    def run(self, gl: GLContext, on_progress: Callable[[dict], None] | None = None) -> dict:
+        cfg = self.cfg
+        budget_s = cfg.minutes * 60 if cfg.minutes else math.inf
+        budget_steps = cfg.steps if cfg.steps else math.inf
+        if budget_s == math.inf and budget_steps == math.inf:
+            budget_steps = 2000
+        log = Path(cfg.out) / "progress.jsonl"
+        Path(cfg.out).mkdir(parents=True, exist_ok=True)
+        last_ck = time.perf_counter()
+        start_elapsed, t0 = self.elapsed, time.perf_counter()
+        record: dict = {}
+        while self.step < budget_steps and self.elapsed < budget_s and not self.stop_requested:
+            progress = max(self.step / budget_steps if budget_steps != math.inf else 0.0,
+                           self.elapsed / budget_s if budget_s != math.inf else 0.0)
+            terms = self.train_step(progress)
+            self.elapsed = start_elapsed + time.perf_counter() - t0
+            finished = (self.step >= budget_steps or self.elapsed >= budget_s or self.stop_requested)
+            if self.step % 50 == 0 or self.step == 1 or finished:  # the last step is always logged
+                rate = self.step / max(self.elapsed, 1e-9)
+                eta = min((budget_steps - self.step) / max(rate, 1e-9) if budget_steps != math.inf else math.inf,
+                          budget_s - self.elapsed)
+                record = {"step": self.step, **{k: round(v, 6) for k, v in terms.items()},
+                          "elapsed_s": round(self.elapsed, 1), "eta_s": round(eta, 1)}
+                if self.validation is not None and (self.step % 250 == 0 or finished):
+                    record["val_psnr"] = round(self.validation_psnr(gl), 2)
+                with open(log, "a") as f:
+                    f.write(json.dumps(record) + "\n")
+                if on_progress:
+                    on_progress(record)
+            if time.perf_counter() - last_ck > cfg.checkpoint_seconds:
+                self.save()
+                last_ck = time.perf_counter()
+        self.save()
+        return record

@@ -1,0 +1,118 @@
+"""Rays through a camera's pixels and what a rasterized mesh tells them: pure numpy/torch, no GL. The GL
+rasterizer (render/gl/raster.py) fills a Raster; these functions turn it into distances along rays, and
+per-ray results back into images."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from render.camera import Camera
+
+
+@dataclass(frozen=True)
+class Raster:
+    """What a camera's pixels see of a mesh, H x W, rows top first."""
+
+    triangle: np.ndarray  # (H,W) int, -1 where the pixel sees no surface
+    depth: np.ndarray  # (H,W) metres along the view axis, inf where no surface
+    bary: np.ndarray  # (H,W,3) barycentric coordinates of the visible point (0 where no surface)
+
+    @property
+    def hit(self) -> np.ndarray:
+        return self.triangle >= 0
+
+
+@dataclass(frozen=True)
+class Rays:
+    """R rays: where they start, where they go, and how far along each the guide mesh's surface lies."""
+
+    origins: torch.Tensor  # (R,3) world, metres
+    directions: torch.Tensor  # (R,3) unit
+    surface_t: torch.Tensor  # (R,) distance to the rasterized surface, inf where the ray misses it
+
+    def __post_init__(self):
+        R = len(self.origins)
+        assert self.origins.shape == (R, 3) and self.directions.shape == (R, 3) and self.surface_t.shape == (R,), \
+            (tuple(self.origins.shape), tuple(self.directions.shape), tuple(self.surface_t.shape))
+
+    def __len__(self) -> int:
+        return len(self.origins)
+
+    def __getitem__(self, idx: slice | torch.Tensor) -> Rays:
+        return Rays(self.origins[idx], self.directions[idx], self.surface_t[idx])
+
+    def to(self, device: torch.device | str) -> Rays:
+        return Rays(self.origins.to(device), self.directions.to(device), self.surface_t.to(device))
+
+
+def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """World origin (3,) and unit directions (H,W,3) through pixel centres, rows top first."""
+    h, w = camera.height_px, camera.width_px
+    t = np.tan(np.radians(camera.fov_y_deg) / 2)
+    j, i = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    d_cam = np.stack([(2 * j / w - 1) * t * w / h, (1 - 2 * i / h) * t, -np.ones_like(j)], -1)
+    c2w = np.linalg.inv(camera.view)
+    d = d_cam @ c2w[:3, :3].T
+    return c2w[:3, 3], d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def image_rays(camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
+    """The camera's origin (1,3) and its pixels' unit ray directions (H*W,3), float32, rows top first."""
+    origin, dirs = pixel_rays(camera)
+    return torch.as_tensor(origin, dtype=torch.float32)[None], torch.as_tensor(dirs.reshape(-1, 3), dtype=torch.float32)
+
+
+def surface_distance(raster: Raster, cos_view: np.ndarray) -> np.ndarray:
+    """(H,W) distance along each pixel's unit ray to the visible surface, inf where it misses: the view
+    depth over the cosine between the ray and the view axis (cos_view, (H,W)).
+
+    >>> r = Raster(np.array([[0, -1]]), np.array([[2.0, np.inf]]), np.zeros((1, 2, 3)))
+    >>> surface_distance(r, np.array([[0.5, 1.0]])).tolist()  # 2 m deep at 60 degrees off axis: 4 m along the ray
+    [[4.0, inf]]
+    """
+    return np.where(raster.hit, raster.depth / np.maximum(cos_view, 1e-6), np.inf).astype(np.float32)
+
+
+def camera_surface_distance(raster: Raster, camera: Camera, directions: np.ndarray) -> np.ndarray:
+    """(H,W) surface distance along the camera's pixel rays (directions (H*W,3) or (H,W,3), world, unit)."""
+    cos_view = (np.asarray(directions).reshape(-1, 3) @ -np.linalg.inv(camera.view)[:3, 2]).reshape(raster.hit.shape)
+    return surface_distance(raster, cos_view)
+
+
+def ray_triangle_barycentric(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (N,3) where rays (origin, (N,3) dirs) meet the planes of (N,3,3) triangles
+    (Moller-Trumbore without the inside test: the rasterizer already chose the triangle)."""
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    p = np.cross(dirs, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    det = np.where(np.abs(det) < 1e-20, 1e-20, det)
+    s = origin - tri[:, 0]
+    u = np.einsum("ij,ij->i", s, p) / det
+    q = np.cross(s, e1)
+    v = np.einsum("ij,ij->i", dirs, q) / det
+    return np.clip(np.stack([1 - u - v, u, v], -1), 0.0, 1.0)
+
+
+def rays_to_images(parts: dict[str, list[torch.Tensor]], height: int, width: int, idx: np.ndarray,
+                   layout: dict[str, tuple[int, np.ndarray | float]]) -> dict[str, np.ndarray]:
+    """Images (H,W) or (H,W,C) from per-ray results computed in chunks for the flat pixel indices `idx`
+    ((R,) or (R,C) per chunk). layout: each buffer's channels (0: a scalar image) and the value of the
+    pixels not rendered.
+
+    >>> imgs = rays_to_images({"depth": [torch.tensor([2.0])]}, 1, 2, np.array([1]), {"depth": (0, np.inf)})
+    >>> imgs["depth"].tolist()
+    [[inf, 2.0]]
+    """
+    out = {}
+    for k, chunks in parts.items():
+        channels, fill = layout[k]
+        shape = (channels,) if channels else ()
+        img = np.zeros((height * width, *shape), np.float32)
+        img[:] = fill
+        if len(idx):
+            img[idx] = torch.cat(chunks).float().cpu().numpy().reshape(len(idx), *shape)
+        out[k] = img.reshape(height, width, *shape)
+    return out
