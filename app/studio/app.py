@@ -20,11 +20,14 @@ from PIL import Image
 
 from app.errors import INPUT_ERRORS
 from app.jobs import JobQueue
+from app.studio import actions as a
 from app.studio import avatar_panel, controls_panel, export_panel, jobs_panel, quality_panel, viewport
 from app.studio.config import StudioConfig
+from app.studio.context import PanelContext
+from app.studio.exporting import Exporter
 from app.studio.neural import NeuralWorker, Request
 from app.studio.script import Script
-from app.studio.session import Session, View, remember_recent
+from app.studio.session import AvatarFiles, Session, read_avatar_folder, remember_recent
 from render.gl.context import GLContext
 
 REPO = Path(__file__).resolve().parents[2]
@@ -62,48 +65,73 @@ class Opening:
 
     folder: Path
     thread: threading.Thread | None = None
-    session: Session | None = None
+    files: AvatarFiles | None = None
     error: str | None = None
     seconds: float = 0.0
 
 
 class Studio:
+    """The application: the Session (one value), the workers that serve it (the neural render, training jobs,
+    exports, avatar reading), the panels that draw it, and the actions that change it."""
+
     def __init__(self, cfg: StudioConfig):
         self.cfg = cfg
         self.session = Session()
         self.opening: Opening | None = None
         self.loading_s: list[float] = []
         """Seconds each avatar took to read (off the window's thread)."""
-        self.view = View()
         self.worker = NeuralWorker()
         self.jobs = JobQueue()
-        self.errors: list[str] = []
+        self.exporter = Exporter()
         self.gui_ms: deque = deque(maxlen=240)
         """Time the window's own Python code takes a frame (the rest of a frame is drawing and presenting)."""
-        self.buffer = "rgb"
-        self.guide_pass = "shaded"
-        self.wireframe = False
-        self.landmarks = False
-        self.layout = "beside"
-        self.overlay_alpha = 0.5
-        self.neural_size = 160
-        self.refine_to = "final"
-        self.timeline_frame = -1  # -1: the sliders' own controls; k: capture frame k
-        self.dirty = True
         self.last_submit_id = 0
         self.last_submit_time = 0.0
         self.latency_ms: float | None = None
-        self.shown_result_id = -1
         self.clock = FrameClock()
         self.frame_count = 0
         self.gl: GLContext | None = None
         self.viewport = viewport.Viewport()
-        self.export = export_panel.ExportState()
         self.script = Script.load(cfg.script) if cfg.script else None
         self.confirm_close = False
-        self.jobs_form = jobs_panel.JobForm()
 
-    # ---- avatars -----------------------------------------------------------------------------------------
+    # ---- actions -----------------------------------------------------------------------------------------
+    def act(self, action: a.Action | a.Command) -> None:
+        """Apply an action to the Session, or carry out a command."""
+        if isinstance(action, a.Action):
+            action.apply(self.session)
+            return
+        match action:
+            case a.OpenAvatar(folder):
+                self.open_avatar(folder)
+            case a.StartTraining():
+                self._report_if(jobs_panel.start(self.jobs, action))
+            case a.StartFromVideo():
+                self._report_if(jobs_panel.start_from_video(self.jobs, action))
+            case a.CancelJob(job_id):
+                for job in self.jobs.jobs:
+                    if job_id is None or job.id == job_id:
+                        self.jobs.cancel(job)
+            case a.ResumeJob(job_id):
+                for job in self.jobs.jobs:
+                    if job.id == job_id:
+                        self.jobs.resume(job)
+            case a.ExportTurntable(cfg):
+                if cfg.out.suffix.lower() != ".mp4":
+                    self.session.report(f"{cfg.out}: the turntable is written as an .mp4")
+                else:
+                    self.exporter.start(cfg, self.session.controls())
+            case a.CancelExport():
+                self.exporter.cancel()
+            case a.SaveViewport(path):
+                self.save_viewport(path)
+            case _:
+                raise TypeError(f"no such studio command: {action!r}")
+
+    def _report_if(self, message: str | None) -> None:
+        if message:
+            self.session.report(message)
+
     def open_avatar(self, folder: str | Path) -> None:
         """Start reading an avatar folder on a thread of its own; the window goes on drawing (with the open
         avatar, if any) and the new one takes its place when read (poll_opening). A later request wins."""
@@ -112,7 +140,7 @@ class Studio:
         def read() -> None:
             t0 = time.perf_counter()
             try:
-                opening.session = Session.load(opening.folder)
+                opening.files = read_avatar_folder(opening.folder)
             except INPUT_ERRORS as e:
                 opening.error = str(e)
             except Exception as e:  # a broken file is the file's problem, never the studio's end
@@ -122,6 +150,7 @@ class Studio:
         opening.thread = threading.Thread(target=read, name="open-avatar", daemon=True)
         opening.thread.start()
         self.opening = opening
+        self.session.opening = opening.folder
 
     def poll_opening(self) -> None:
         o = self.opening
@@ -130,36 +159,39 @@ class Studio:
         self.opening = None
         self.loading_s.append(o.seconds)
         if o.error is not None:
-            self.report(o.error)
+            self.act(a.OpenFailed(o.error))
             return
-        self.session = o.session
+        self.act(a.AvatarOpened(o.files))
         remember_recent(o.folder)
-        self.worker.set_avatar(self.session.avatar)
-        self.timeline_frame = -1
-        self.dirty = True
+        self.worker.set_avatar(o.files.avatar)
 
-    def report(self, message: str) -> None:
-        self.errors.append(message)
-        del self.errors[:-8]
-
-    def controls(self):
-        s = self.session
-        if s.capture is not None and 0 <= self.timeline_frame < len(s.capture.frames):
-            return s.capture.frames[self.timeline_frame].controls
-        return s.sliders.controls()
+    def save_viewport(self, path: Path) -> None:
+        """The neural render as shown (its current buffer), as a PNG."""
+        img = self.viewport.neural_image
+        if img is None:
+            self.session.report("nothing rendered yet to save")
+            return
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(img).save(path)
+        self.exporter.message = f"saved {path}"
 
     # ---- per frame ---------------------------------------------------------------------------------------
     def submit_render(self) -> None:
         s = self.session
         if s.avatar is None:
             return
-        cam = self.view.camera(s.avatar.head_model.template, self.neural_size, self.neural_size)
-        passes = ("draft", "preview", "final")[: ("draft", "preview", "final").index(self.refine_to) + 1]
-        frame = self.timeline_frame if self.timeline_frame >= 0 else None
-        self.last_submit_id = self.worker.submit(Request(self.controls(), cam, passes, frame,
-                                                         inspect=self.buffer in viewport.INSPECT))
+        size = s.display.neural_size
+        cam = s.view.camera(s.avatar.head_model.template, size, size)
+        passes = ("draft", "preview", "final")[: ("draft", "preview", "final").index(s.display.refine_to) + 1]
+        frame = s.timeline_frame if s.timeline_frame >= 0 else None
+        self.last_submit_id = self.worker.submit(Request(s.controls(), cam, passes, frame,
+                                                         inspect=s.display.buffer in viewport.INSPECT))
         self.last_submit_time = time.perf_counter()
-        self.dirty = False
+        s.dirty = False
+
+    def context(self) -> PanelContext:
+        return PanelContext(self.session, self.act, self.worker, self.jobs, self.exporter, self.clock.fps(),
+                            float(np.median(self.gui_ms)) if self.gui_ms else None, self.latency_ms)
 
     def gui(self) -> None:
         t0 = time.perf_counter()
@@ -189,14 +221,15 @@ class Studio:
 
         w, h = imgui.get_io().display_size
         left, right = 330, 420
-        self._window("Avatar", (0, 0), (left, 260), lambda: avatar_panel.draw(self))
-        self._window("Controls", (0, 260), (left, h - 260), lambda: controls_panel.draw(self))
-        self._window("Viewport", (left, 0), (w - left - right, h), lambda: viewport.draw(self))
-        self._window("Quality", (w - right, 0), (right, 200), lambda: quality_panel.draw(self))
-        self._window("Jobs", (w - right, 200), (right, h - 440), lambda: jobs_panel.draw(self))
-        self._window("Export", (w - right, h - 240), (right, 240), lambda: export_panel.draw(self))
+        ctx = self.context()
+        self._window("Avatar", (0, 0), (left, 260), lambda: avatar_panel.draw(ctx))
+        self._window("Controls", (0, 260), (left, h - 260), lambda: controls_panel.draw(ctx))
+        self._window("Viewport", (left, 0), (w - left - right, h), lambda: viewport.draw(ctx, self.viewport))
+        self._window("Quality", (w - right, 0), (right, 200), lambda: quality_panel.draw(ctx))
+        self._window("Jobs", (w - right, 200), (right, h - 440), lambda: jobs_panel.draw(ctx))
+        self._window("Export", (w - right, h - 240), (right, 240), lambda: export_panel.draw(ctx))
         self._close_dialog()
-        if self.dirty:
+        if self.session.dirty:
             self.latency_ms = None
             self.submit_render()
         self.frame_count += 1
@@ -214,7 +247,7 @@ class Studio:
             try:
                 body()
             except Exception as e:  # a panel's bug shows as a message, the window goes on
-                self.report(f"{title}: {type(e).__name__}: {e}")
+                self.session.report(f"{title}: {type(e).__name__}: {e}")
         imgui.end()
 
     def _close_dialog(self) -> None:
@@ -265,11 +298,11 @@ class Studio:
                 "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 1),
                 "last_pass": None if r is None else {"pass": r.pass_name, "ms": round(r.ms, 1)},
                 "presets": {"ms": self.worker.figures.ms, "psnr_vs_final": self.worker.figures.psnr_vs_final},
-                "errors": list(self.errors)}
+                "errors": list(self.session.errors)}
 
     def close(self) -> None:
         self.worker.close()
-        self.export.cancel()
+        self.exporter.cancel()
 
 
 def run_studio(cfg: StudioConfig) -> int:

@@ -3,14 +3,13 @@ head model, effect set, training provenance and measured metrics."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from pathlib import Path
 
 from imgui_bundle import imgui, portable_file_dialogs
 
+from app.studio.actions import ClearMessages, OpenAvatar, Report
+from app.studio.context import PanelContext
 from app.studio.session import recent_folders
-
-if TYPE_CHECKING:
-    from app.studio.app import Studio
 
 
 class PanelState:
@@ -18,55 +17,55 @@ class PanelState:
     dialog = None
 
 
-def draw(studio: Studio) -> None:
-    s = studio.session
+def draw(ctx: PanelContext) -> None:
+    s, act = ctx.session, ctx.act
     imgui.set_next_item_width(200)
     _, PanelState.path = imgui.input_text("##folder", PanelState.path)
     imgui.same_line()
     if imgui.button("Open") and PanelState.path:
-        studio.open_avatar(PanelState.path.strip())
+        act(OpenAvatar(Path(PanelState.path.strip())))
     imgui.same_line()
     if imgui.button("Browse...") and PanelState.dialog is None:
         try:
             PanelState.dialog = portable_file_dialogs.select_folder("Open an avatar folder")
         except Exception as e:  # no dialog program on this desktop: typing the path still works
-            studio.report(f"file dialog unavailable ({e}); type the folder instead")
+            act(Report(f"file dialog unavailable ({e}); type the folder instead"))
     if PanelState.dialog is not None and PanelState.dialog.ready():
         chosen = PanelState.dialog.result()
         PanelState.dialog = None
         if chosen:
             PanelState.path = chosen
-            studio.open_avatar(chosen)
+            act(OpenAvatar(Path(chosen)))
     recent = recent_folders()
     if recent and imgui.begin_combo("recent", "open a recent avatar"):
         for folder in recent:
             if imgui.selectable(folder, False)[0]:
                 PanelState.path = folder
-                studio.open_avatar(folder)
+                act(OpenAvatar(Path(folder)))
         imgui.end_combo()
     imgui.separator()
-    if studio.opening is not None:
-        imgui.text(f"opening {studio.opening.folder.name}...")
+    if s.opening is not None:
+        imgui.text(f"opening {s.opening.name}...")
     if s.avatar is None:
         imgui.text("No avatar open.")
     else:
-        m = s.meta
+        m = s.files.meta
         prov = m.get("provenance", {})
-        imgui.text(f"{s.name}  ({m.get('model', 'codynerf')})")
+        imgui.text(f"{s.name}  ({s.avatar.name})")
         imgui.text(f"head model: {s.avatar.head_model.name}")
-        imgui.text(f"effects: {', '.join(m.get('effects') or []) or 'none'}")
+        imgui.text(f"effects: {s.avatar.describe_effects()}")
         imgui.text(f"trained {prov.get('steps', '?')} steps, {prov.get('seconds', 0) / 60:.1f} min")
         imgui.text_wrapped(f"on {prov.get('dataset', '?')}")
-        if s.metrics:
-            met = s.metrics
+        if s.files.metrics:
+            met = s.files.metrics
             imgui.text(f"test PSNR {met.get('psnr', float('nan')):.2f} dB, SSIM {met.get('ssim', float('nan')):.3f}")
             if "normal_deg" in met:
                 imgui.text(f"normal error {met['normal_deg']:.1f} deg")
-    for e in studio.errors[-3:]:
+    for e in s.errors[-3:]:
         imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.35, 1.0), "")
         imgui.same_line()
         imgui.push_text_wrap_pos(0)
         imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.35, 1.0), e)
         imgui.pop_text_wrap_pos()
-    if studio.errors and imgui.small_button("clear messages"):
-        studio.errors.clear()
+    if s.errors and imgui.small_button("clear messages"):
+        act(ClearMessages())

@@ -4,60 +4,50 @@ capture's frames that loads a frame's controls and shows its image beside the re
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from imgui_bundle import imgui
 
-from app.studio.session import Sliders, View
-
-if TYPE_CHECKING:
-    from app.studio.app import Studio
+from app.studio import actions as a
+from app.studio.context import PanelContext
 
 
 class PanelState:
     filter_text = ""
 
 
-def _angles(label: str, values: np.ndarray, names: tuple[str, ...], limit: float) -> bool:
+def _angles(label: str, values: np.ndarray, names: tuple[str, ...], limit: float) -> tuple[float, ...] | None:
+    """Sliders for a set of angles (degrees); the new values where one moved."""
+    new = [float(v) for v in values]
     changed = False
     for i, n in enumerate(names):
-        c, v = imgui.slider_float(f"{n}##{label}", float(values[i]), -limit, limit, "%.1f deg")
-        if c:
-            values[i] = v
-            changed = True
-    return changed
+        c, new[i] = imgui.slider_float(f"{n}##{label}", new[i], -limit, limit, "%.1f deg")
+        changed |= c
+    return tuple(new) if changed else None
 
 
-def draw(studio: Studio) -> None:
-    s = studio.session
+def draw(ctx: PanelContext) -> None:
+    s, act = ctx.session, ctx.act
     if s.avatar is None:
         imgui.text("Open an avatar to drive it.")
         return
     sl = s.sliders
     head = s.avatar.head_model
-    changed = False
-
     if s.capture is not None and s.capture.frames:
         n = len(s.capture.frames)
         imgui.text("Timeline (capture frames; -1: the sliders)")
-        c, k = imgui.slider_int("frame", studio.timeline_frame, -1, n - 1)
+        c, k = imgui.slider_int("frame", s.timeline_frame, -1, n - 1)
         if c:
-            studio.timeline_frame = k
-            studio.dirty = True
-        if studio.timeline_frame >= 0 and imgui.button("Copy this frame to the sliders"):
-            s.sliders = Sliders.of(s.capture.frames[studio.timeline_frame].controls, head.num_expression)
-            studio.timeline_frame = -1
-            changed = True
-    elif s.capture_note:
-        imgui.text_wrapped(s.capture_note)
-    if studio.timeline_frame >= 0:
+            act(a.ShowFrame(k))
+        if s.timeline_frame >= 0 and imgui.button("Copy this frame to the sliders"):
+            act(a.CopyFrameToSliders())
+    elif s.files.capture_note:
+        imgui.text_wrapped(s.files.capture_note)
+    if s.timeline_frame >= 0:
         imgui.text_wrapped("Showing a capture frame: the sliders below take over when you move them.")
 
     if imgui.collapsing_header("Expression", imgui.TreeNodeFlags_.default_open):
         if imgui.button("Reset expression"):
-            sl.expression[:] = 0
-            changed = True
+            act(a.ResetExpression())
         imgui.same_line()
         imgui.set_next_item_width(140)
         _, PanelState.filter_text = imgui.input_text("filter", PanelState.filter_text)
@@ -68,49 +58,45 @@ def draw(studio: Studio) -> None:
                 continue
             c, v = imgui.slider_float(name, float(sl.expression[i]), -1.0, 1.5, "%.2f")
             if c:
-                sl.expression[i] = v
-                changed = True
+                act(a.SetExpression(i, v))
     if imgui.collapsing_header("Head and neck", imgui.TreeNodeFlags_.default_open):
         if imgui.button("Reset pose"):
-            sl.head[:] = 0
-            sl.neck[:] = 0
-            changed = True
-        changed |= _angles("head", sl.head, ("head yaw", "head pitch", "head roll"), 60)
-        if "neck" in head.joint_names:
-            changed |= _angles("neck", sl.neck, ("neck yaw", "neck pitch", "neck roll"), 45)
+            act(a.ResetPose())
+        if (moved := _angles("head", sl.head, ("head yaw", "head pitch", "head roll"), 60)) is not None:
+            act(a.SetAngles("head", moved))
+        if "neck" in head.joint_names and (
+                moved := _angles("neck", sl.neck, ("neck yaw", "neck pitch", "neck roll"), 45)) is not None:
+            act(a.SetAngles("neck", moved))
     if "jaw" in head.joint_names and imgui.collapsing_header("Jaw", imgui.TreeNodeFlags_.default_open):
         c, v = imgui.slider_float("jaw open", sl.jaw_open_deg, -5.0, 30.0, "%.1f deg")
         if c:
-            sl.jaw_open_deg = v
-            changed = True
+            act(a.SetJaw(v))
     if {"eye_l", "eye_r"} <= set(head.joint_names) and imgui.collapsing_header("Gaze"):
-        c, sl.gaze_linked = imgui.checkbox("both eyes together", sl.gaze_linked)
-        changed |= c
-        changed |= _angles("gl", sl.gaze_left, ("gaze yaw" if sl.gaze_linked else "left yaw",
-                                                "gaze pitch" if sl.gaze_linked else "left pitch"), 30)
-        if not sl.gaze_linked:
-            changed |= _angles("gr", sl.gaze_right, ("right yaw", "right pitch"), 30)
+        c, linked = imgui.checkbox("both eyes together", sl.gaze_linked)
+        if c:
+            act(a.LinkGaze(linked))
+        names = ("gaze yaw", "gaze pitch") if sl.gaze_linked else ("left yaw", "left pitch")
+        if (moved := _angles("gl", sl.gaze_left, names, 30)) is not None:
+            act(a.SetAngles("gaze_left", moved))
+        if not sl.gaze_linked and (moved := _angles("gr", sl.gaze_right, ("right yaw", "right pitch"), 30)) is not None:
+            act(a.SetAngles("gaze_right", moved))
         if imgui.button("Reset gaze"):
-            sl.gaze_left[:] = 0
-            sl.gaze_right[:] = 0
-            changed = True
+            act(a.ResetGaze())
     if imgui.collapsing_header("Camera", imgui.TreeNodeFlags_.default_open):
-        v = studio.view
-        moved = False
-        c, v.yaw_deg = imgui.slider_float("orbit yaw", v.yaw_deg, -180, 180, "%.0f deg")
-        moved |= c
-        c, v.pitch_deg = imgui.slider_float("orbit pitch", v.pitch_deg, -85, 85, "%.0f deg")
-        moved |= c
-        c, v.zoom = imgui.slider_float("zoom", v.zoom, 0.25, 8.0, "%.2fx", imgui.SliderFlags_.logarithmic)
-        moved |= c
-        c, v.fov_deg = imgui.slider_float("field of view", v.fov_deg, 5, 60, "%.0f deg")
-        moved |= c
+        v = s.view
+        c, yaw = imgui.slider_float("orbit yaw", v.yaw_deg, -180, 180, "%.0f deg")
+        if c:
+            act(a.SetView(yaw_deg=yaw))
+        c, pitch = imgui.slider_float("orbit pitch", v.pitch_deg, -85, 85, "%.0f deg")
+        if c:
+            act(a.SetView(pitch_deg=pitch))
+        c, zoom = imgui.slider_float("zoom", v.zoom, 0.25, 8.0, "%.2fx", imgui.SliderFlags_.logarithmic)
+        if c:
+            act(a.SetView(zoom=zoom))
+        c, fov = imgui.slider_float("field of view", v.fov_deg, 5, 60, "%.0f deg")
+        if c:
+            act(a.SetView(fov_deg=fov))
         if imgui.button("Reset camera"):
-            studio.view = View()
-            moved = True
+            act(a.ResetView())
         imgui.same_line()
         imgui.text("drag: orbit, right-drag: pan, wheel: zoom")
-        studio.dirty |= moved
-    if changed:  # a slider moved: the sliders' controls are shown again
-        studio.timeline_frame = -1
-        studio.dirty = True

@@ -7,16 +7,15 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from imgui_bundle import imgui, implot
 
+from app.jobs import JobQueue
+from app.studio.actions import CancelJob, OpenAvatar, ResumeJob, StartFromVideo, StartTraining
+from app.studio.context import PanelContext
 from models.avatars.registry import AVATARS
 from models.capture.dataset import DatasetError, load_split
-
-if TYPE_CHECKING:
-    from app.studio.app import Studio
 
 MODELS = tuple(AVATARS)
 EFFECTS = ("all", "none", "shading", "shading,specular", "shadows")
@@ -34,46 +33,42 @@ class JobForm:
     landmarker: str = field(default_factory=lambda: os.environ.get("AVATAR_STUDIO_LANDMARKER", ""))
 
 
-def start_from_video(studio: Studio, video: str, head: str, landmarker: str, out: str, effects: str = "all",
-                     minutes: float | None = None, steps: int | None = None, size: int = 256,
-                     fps: float = 10.0) -> bool:
-    """Queue a job that tracks the video into a dataset beside the avatar folder, then trains on it."""
-    video_path, out_path = Path(video), Path(out)
+def start_from_video(jobs: JobQueue, c: StartFromVideo) -> str | None:
+    """Queue a job that tracks the video into a dataset beside the avatar folder, then trains on it; or why
+    not."""
+    video_path, out_path = Path(c.video), Path(c.out)
     if not video_path.is_file():
-        studio.report(f"{video_path}: no such video file")
-        return False
-    if not landmarker or not Path(landmarker).is_file():
-        studio.report(f"{landmarker or '(none given)'}: MediaPipe's face landmarker bundle is needed "
-                      "(face_landmarker_v2_with_blendshapes.task)")
-        return False
+        return f"{video_path}: no such video file"
+    if not c.landmarker or not Path(c.landmarker).is_file():
+        return (f"{c.landmarker or '(none given)'}: MediaPipe's face landmarker bundle is needed "
+                "(face_landmarker_v2_with_blendshapes.task)")
     if out_path.exists():
-        studio.report(f"{out_path}: already exists; choose a new avatar folder")
-        return False
+        return f"{out_path}: already exists; choose a new avatar folder"
     dataset = out_path.with_name(out_path.name + "_dataset")
-    studio.jobs.submit(dataset, out_path, effects=effects, minutes=minutes, steps=steps, video=video_path,
-                       head=head.strip() or "builtin", landmarker=Path(landmarker), track_size=size,
-                       track_fps=fps)
-    return True
+    jobs.submit(dataset, out_path, effects=c.effects, minutes=c.minutes, steps=c.steps, video=video_path,
+                head=c.head.strip() or "builtin", landmarker=Path(c.landmarker), track_size=c.size, track_fps=c.fps)
+    return None
 
 
-def start(studio: Studio, dataset: str, out: str, model: str = "codynerf", effects: str = "all",
-          minutes: float | None = None, steps: int | None = None) -> bool:
-    """Check the dataset here (a clear message in the window), then queue the job."""
+def start(jobs: JobQueue, c: StartTraining) -> str | None:
+    """Check the dataset here (a clear message in the window), then queue the job; or why not."""
     try:
-        load_split(dataset, "train")
+        load_split(c.dataset, "train")
     except DatasetError as e:
-        studio.report(str(e))
-        return False
-    out_path = Path(out)
+        return str(e)
+    out_path = Path(c.out)
     if (out_path / "avatar.json").exists():
-        studio.report(f"{out_path}: already holds an avatar; choose a new folder (or resume its job)")
-        return False
-    studio.jobs.submit(Path(dataset), out_path, model=model, effects=effects, minutes=minutes, steps=steps)
-    return True
+        return f"{out_path}: already holds an avatar; choose a new folder (or resume its job)"
+    jobs.submit(Path(c.dataset), out_path, model=c.model, effects=c.effects, minutes=c.minutes, steps=c.steps)
+    return None
 
 
-def draw(studio: Studio) -> None:
-    f = studio.jobs_form
+FORM = JobForm()
+"""The panel's form (widget state)."""
+
+
+def draw(ctx: PanelContext) -> None:
+    f, act, jobs = FORM, ctx.act, ctx.jobs
     _, f.dataset = imgui.input_text("dataset", f.dataset)
     _, f.out = imgui.input_text("avatar folder", f.out)
     imgui.set_next_item_width(110)
@@ -85,20 +80,20 @@ def draw(studio: Studio) -> None:
     _, f.minutes = imgui.input_float("minutes", f.minutes, 5.0, 10.0, "%.0f")
     imgui.same_line()
     if imgui.button("Start training"):
-        start(studio, f.dataset.strip(), f.out.strip(), MODELS[f.model], EFFECTS[f.effects], max(f.minutes, 0.1))
+        act(StartTraining(f.dataset.strip(), f.out.strip(), MODELS[f.model], EFFECTS[f.effects], max(f.minutes, 0.1)))
     if imgui.collapsing_header("New avatar from video"):
         _, f.video = imgui.input_text("video", f.video)
         _, f.head = imgui.input_text("head model", f.head)
         _, f.landmarker = imgui.input_text("landmarker (.task)", f.landmarker)
         if imgui.button("Track and train"):
-            start_from_video(studio, f.video.strip(), f.head, f.landmarker.strip(), f.out.strip(),
-                             EFFECTS[f.effects], max(f.minutes, 0.1))
+            act(StartFromVideo(f.video.strip(), f.head, f.landmarker.strip(), f.out.strip(), EFFECTS[f.effects],
+                               max(f.minutes, 0.1)))
         imgui.same_line()
         imgui.text_disabled("(avatar folder, effects and minutes from above)")
     imgui.separator()
-    for job in reversed(studio.jobs.jobs):
+    for job in reversed(jobs.jobs):
         imgui.push_id(job.id)
-        imgui.text(f"#{job.id} {job.out.name}: {job.model} {job.effects} - {studio.jobs.status(job)}"
+        imgui.text(f"#{job.id} {job.out.name}: {job.model} {job.effects} - {jobs.status(job)}"
                    + (" (resumed)" if job.resume else ""))
         last = job.progress[-1] if job.progress else {}
         eta = last.get("eta_s")
@@ -124,13 +119,13 @@ def draw(studio: Studio) -> None:
                 implot.plot_line("val PSNR", np.ascontiguousarray(val[:, 0]), np.ascontiguousarray(val[:, 1]))
             implot.end_plot()
         if job.state in ("queued", "running") and imgui.small_button("Cancel"):
-            studio.jobs.cancel(job)
+            act(CancelJob(job.id))
         if job.state in ("cancelled", "done") and (job.out / "avatar.json").exists():
             if imgui.small_button("Open"):
-                studio.open_avatar(job.out)
+                act(OpenAvatar(job.out))
             if job.state == "cancelled":
                 imgui.same_line()
                 if imgui.small_button("Resume"):
-                    studio.jobs.resume(job)
+                    act(ResumeJob(job.id))
         imgui.separator()
         imgui.pop_id()

@@ -5,28 +5,25 @@ while the controls rest."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from imgui_bundle import imgui
 
+from app.studio.actions import RefineTo
+from app.studio.context import PanelContext
 from models.avatars.quality import PRESET_NAMES
 
-if TYPE_CHECKING:
-    from app.studio.app import Studio
 
-
-def draw(studio: Studio) -> None:
-    fig = studio.worker.figures
-    if studio.session.avatar is None:
+def draw(ctx: PanelContext) -> None:
+    fig = ctx.worker.figures
+    avatar = ctx.session.avatar
+    if avatar is None:
         imgui.text("No avatar open.")
         return
-    presets = studio.session.avatar.presets
+    presets = avatar.presets
     imgui.text("refine to:")
     for name in PRESET_NAMES:
         imgui.same_line()
-        if imgui.radio_button(name, studio.refine_to == name):
-            studio.refine_to = name
-            studio.dirty = True
+        if imgui.radio_button(name, ctx.session.display.refine_to == name):
+            ctx.act(RefineTo(name))
     benched = any(p.ms is not None for p in presets.values())
     flags = imgui.TableFlags_.borders | imgui.TableFlags_.row_bg
     # With the bench's figures: those (time, error against final, test PSNR) and this machine's time now;
@@ -53,7 +50,7 @@ def draw(studio: Studio) -> None:
         imgui.end_table()
     imgui.text_wrapped("ms now: measured on this avatar at 128 px when it opened (median of 3 renders, this "
                        "machine).")
-    measured = studio.session.avatar.presets_measured
+    measured = avatar.presets_measured
     if benched:
         where = f"{measured.get('image_px', '?')} px, {measured.get('machine', 'machine unknown')}"
         imgui.text_wrapped(f"bench: chosen from the Pareto front by `avatar-studio bench` ({where}); test PSNR and "

@@ -27,20 +27,53 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from imgui_bundle import hello_imgui
 from PIL import Image
 
+from app.jobs import JobQueue
+from app.studio import actions as a
+from app.studio.exporting import Exporter
+from app.studio.neural import NeuralWorker
+from app.studio.session import Session
+from app.studio.viewport import Viewport
+from app.turntable import TurntableConfig
 from models.avatars.quality import PRESET_NAMES
 
-if TYPE_CHECKING:
-    from app.studio.app import Studio
-
 WAIT_S = 300.0
+
+
+class Driven(Protocol):
+    """What a script sees of the studio: the Session, its workers, and `act` (the same door the panels use)."""
+
+    session: Session
+    worker: NeuralWorker
+    jobs: JobQueue
+    exporter: Exporter
+    viewport: Viewport
+    last_submit_id: int
+
+    def act(self, action: a.Action | a.Command) -> None: ...
+
+    def read_window(self) -> np.ndarray: ...
+
+
+Step = Callable[["Script", Driven, dict], bool]
+"""A step: True when it is done, False to be called again next frame (a wait)."""
+STEPS: dict[str, Step] = {}
+
+
+def step(key: str) -> Callable[[Step], Step]:
+    """Register a step function for the JSON key that names it."""
+    def register(fn: Step) -> Step:
+        STEPS[key] = fn
+        return fn
+    return register
 
 
 @dataclass
@@ -59,136 +92,198 @@ class Script:
         data = json.loads(Path(path).read_text())
         return Script(list(data["steps"]), Path(data["report"]) if data.get("report") else None)
 
-    def _fail(self, message: str) -> None:
+    def fail(self, message: str) -> bool:
         self.failed = f"step {self.index} {self.steps[self.index]}: {message}"
         hello_imgui.get_runner_params().app_shall_exit = True
+        return False
 
     def _done(self) -> None:
         self.index += 1
         self.waited_frames = 0
         self.wait_started = 0.0
 
-    def _waiting(self, condition: bool) -> bool:
+    def waiting(self, condition: bool) -> bool:
         """True while the step must wait; fails it after WAIT_S seconds."""
         if condition:
             return False
         if not self.wait_started:
             self.wait_started = time.perf_counter()
         elif time.perf_counter() - self.wait_started > WAIT_S:
-            self._fail(f"still waiting after {WAIT_S:.0f} s")
+            self.fail(f"still waiting after {WAIT_S:.0f} s")
         return True
 
-    def step(self, studio: Studio) -> None:
+    def step(self, studio: Driven) -> None:
         if self.failed or self.pending_screenshot is not None:
             return
-        if self._waiting(studio.opening is None):  # every step acts on the avatar being opened, once it is open
+        if self.waiting(studio.session.opening is None):  # every step acts on the avatar being opened, once open
             return
         if self.index >= len(self.steps):
             hello_imgui.get_runner_params().app_shall_exit = True
             return
         s = self.steps[self.index]
-        sl = studio.session.sliders
-        if "open" in s:
-            studio.open_avatar(s["open"])
-        elif "expression" in s:
-            head = studio.session.avatar.head_model
-            key = s["expression"]
-            i = key if isinstance(key, int) else head.expression_index(key)
-            sl.expression[i] = float(s["value"])
-            studio.timeline_frame = -1
-            studio.dirty = True
-        elif "jaw_open_deg" in s:
-            sl.jaw_open_deg = float(s["jaw_open_deg"])
-            studio.dirty = True
-        elif "head" in s:
-            sl.head[:] = np.asarray(s["head"], np.float32)
-            studio.dirty = True
-        elif "view" in s:
-            for k, v in s["view"].items():
-                setattr(studio.view, k, v)
-            studio.dirty = True
-        elif "buffer" in s:
-            from app.studio.viewport import INSPECT
+        key = next((k for k in s if k in STEPS), None)
+        if key is None:
+            self.fail("unknown step")
+            return
+        if STEPS[key](self, studio, s) and not self.failed:
+            self._done()
 
-            if s["buffer"] in INSPECT and studio.buffer not in INSPECT:
-                studio.dirty = True  # as the combo does: render again with the variants the buffer is made of
-            studio.buffer = s["buffer"]
-        elif "timeline" in s:
-            studio.timeline_frame = int(s["timeline"])
-            studio.dirty = True
-        elif "refine_to" in s:
-            studio.refine_to = s["refine_to"]
-            studio.dirty = True
-        elif "wait_render" in s:
-            r = studio.worker.result
-            target = list(PRESET_NAMES).index(s["wait_render"])
-            ok = (not studio.dirty and r is not None and r.request_id == studio.last_submit_id
-                  and list(PRESET_NAMES).index(r.pass_name) >= target and studio.viewport.neural_image is not None
-                  and studio.viewport.shown == (r.request_id, r.pass_name, studio.buffer))
-            if self._waiting(ok or bool(studio.worker.error)):
-                return
-            if studio.worker.error:
-                return self._fail(studio.worker.error)
-        elif "save_neural" in s:
-            path = Path(s["save_neural"])
-            path.parent.mkdir(parents=True, exist_ok=True)
-            Image.fromarray(studio.viewport.neural_image).save(path)
-        elif "screenshot" in s:
-            self.pending_screenshot = Path(s["screenshot"])  # read after this frame is drawn
-        elif "train" in s:
-            from app.studio.jobs_panel import start
-
-            t = s["train"]
-            start(studio, t["dataset"], t["out"], t.get("model", "codynerf"), t.get("effects", "none"),
-                  t.get("minutes"), t.get("steps"))
-        elif "from_video" in s:
-            from app.studio.jobs_panel import start_from_video
-
-            v = s["from_video"]
-            start_from_video(studio, v["video"], v.get("head", "builtin"), v["landmarker"], v["out"],
-                             v.get("effects", "none"), v.get("minutes"), v.get("steps"), int(v.get("size", 256)),
-                             float(v.get("fps", 10.0)))
-        elif "expect_open" in s:
-            folder = studio.session.folder
-            if folder is None or Path(folder).resolve() != Path(s["expect_open"]).resolve():
-                return self._fail(f"open avatar is {studio.session.folder}, not {s['expect_open']}")
-        elif "wait_job" in s:
-            if self._waiting(not any(j.state in ("queued", "running") for j in studio.jobs.jobs)):
-                return
-        elif "cancel_jobs" in s:
-            for job in studio.jobs.jobs:
-                studio.jobs.cancel(job)
-        elif "open_job" in s:
-            studio.open_avatar(studio.jobs.jobs[-1].out)
-        elif "export" in s:
-            from app.studio.export_panel import export_turntable
-
-            e, x = studio.export, s["export"]
-            e.out, e.frames, e.size = x["out"], int(x.get("frames", 12)), int(x.get("size", 64))
-            e.preset = list(PRESET_NAMES).index(x.get("preset", "draft"))
-            e.animate = bool(x.get("animate", False))
-            export_turntable(studio)
-        elif "wait_export" in s:
-            if self._waiting(not studio.export.running):
-                return
-        elif "orbit" in s:  # a mouse drag of dx pixels, as the viewport applies it
-            studio.view.orbit(float(s["orbit"]), 0.0)
-            studio.dirty = True
-        elif "wait_frames" in s:
-            self.waited_frames += 1
-            if self.waited_frames < int(s["wait_frames"]):
-                return
-        elif "expect_error" in s:
-            if not any(s["expect_error"] in e for e in studio.errors):
-                return self._fail(f"no message containing {s['expect_error']!r} (messages: {studio.errors})")
-        else:
-            return self._fail("unknown step")
-        self._done()
-
-    def after_frame(self, studio: Studio) -> None:
+    def after_frame(self, studio: Driven) -> None:
         """Called with the frame complete (before it is shown): take a pending screenshot."""
         if self.pending_screenshot is not None:
             path, self.pending_screenshot = self.pending_screenshot, None
             path.parent.mkdir(parents=True, exist_ok=True)
             Image.fromarray(studio.read_window()).save(path)
             self._done()
+
+
+# ---- the steps ---------------------------------------------------------------------------------------------
+@step("open")
+def _open(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.OpenAvatar(Path(s["open"])))
+    return True
+
+
+@step("expression")
+def _expression(sc: Script, st: Driven, s: dict) -> bool:
+    key = s["expression"]
+    i = key if isinstance(key, int) else st.session.avatar.head_model.expression_index(key)
+    st.act(a.SetExpression(i, float(s["value"])))
+    return True
+
+
+@step("jaw_open_deg")
+def _jaw(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.SetJaw(float(s["jaw_open_deg"])))
+    return True
+
+
+@step("head")
+def _head(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.SetAngles("head", tuple(float(v) for v in s["head"])))
+    return True
+
+
+@step("view")
+def _view(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.SetView(**s["view"]))
+    return True
+
+
+@step("buffer")
+def _buffer(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.ShowBuffer(s["buffer"]))
+    return True
+
+
+@step("timeline")
+def _timeline(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.ShowFrame(int(s["timeline"])))
+    return True
+
+
+@step("refine_to")
+def _refine(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.RefineTo(s["refine_to"]))
+    return True
+
+
+@step("wait_render")
+def _wait_render(sc: Script, st: Driven, s: dict) -> bool:
+    r, session = st.worker.result, st.session
+    target = list(PRESET_NAMES).index(s["wait_render"])
+    ok = (not session.dirty and r is not None and r.request_id == st.last_submit_id
+          and list(PRESET_NAMES).index(r.pass_name) >= target and st.viewport.neural_image is not None
+          and st.viewport.shown == (r.request_id, r.pass_name, session.display.buffer))
+    if sc.waiting(ok or bool(st.worker.error)):
+        return False
+    return sc.fail(st.worker.error) if st.worker.error else True
+
+
+@step("save_neural")
+def _save_neural(sc: Script, st: Driven, s: dict) -> bool:
+    path = Path(s["save_neural"])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(st.viewport.neural_image).save(path)
+    return True
+
+
+@step("screenshot")
+def _screenshot(sc: Script, st: Driven, s: dict) -> bool:
+    sc.pending_screenshot = Path(s["screenshot"])  # read after this frame is drawn (after_frame ends the step)
+    return False
+
+
+@step("train")
+def _train(sc: Script, st: Driven, s: dict) -> bool:
+    t = s["train"]
+    st.act(a.StartTraining(t["dataset"], t["out"], t.get("model", "codynerf"), t.get("effects", "none"),
+                           t.get("minutes"), t.get("steps")))
+    return True
+
+
+@step("from_video")
+def _from_video(sc: Script, st: Driven, s: dict) -> bool:
+    v = s["from_video"]
+    st.act(a.StartFromVideo(v["video"], v.get("head", "builtin"), v["landmarker"], v["out"], v.get("effects", "none"),
+                            v.get("minutes"), v.get("steps"), int(v.get("size", 256)), float(v.get("fps", 10.0))))
+    return True
+
+
+@step("expect_open")
+def _expect_open(sc: Script, st: Driven, s: dict) -> bool:
+    folder = st.session.folder
+    if folder is None or Path(folder).resolve() != Path(s["expect_open"]).resolve():
+        return sc.fail(f"open avatar is {folder}, not {s['expect_open']}")
+    return True
+
+
+@step("wait_job")
+def _wait_job(sc: Script, st: Driven, s: dict) -> bool:
+    return not sc.waiting(not any(j.state in ("queued", "running") for j in st.jobs.jobs))
+
+
+@step("cancel_jobs")
+def _cancel_jobs(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.CancelJob(None))
+    return True
+
+
+@step("open_job")
+def _open_job(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.OpenAvatar(st.jobs.jobs[-1].out))
+    return True
+
+
+@step("export")
+def _export(sc: Script, st: Driven, s: dict) -> bool:
+    x = s["export"]
+    size = int(x.get("size", 64))
+    cfg = TurntableConfig(st.session.folder, Path(x["out"]), max(1, int(x.get("frames", 12))), 5.0, 1.0,
+                          max(16, size - size % 2), x.get("preset", "draft"), bool(x.get("animate", False)))
+    st.act(a.ExportTurntable(cfg))
+    return True
+
+
+@step("wait_export")
+def _wait_export(sc: Script, st: Driven, s: dict) -> bool:
+    return not sc.waiting(not st.exporter.running)
+
+
+@step("orbit")
+def _orbit(sc: Script, st: Driven, s: dict) -> bool:  # a mouse drag of dx pixels, as the viewport applies it
+    st.act(a.Orbit(float(s["orbit"])))
+    return True
+
+
+@step("wait_frames")
+def _wait_frames(sc: Script, st: Driven, s: dict) -> bool:
+    sc.waited_frames += 1
+    return sc.waited_frames >= int(s["wait_frames"])
+
+
+@step("expect_error")
+def _expect_error(sc: Script, st: Driven, s: dict) -> bool:
+    if not any(s["expect_error"] in e for e in st.session.errors):
+        return sc.fail(f"no message containing {s['expect_error']!r} (messages: {st.session.errors})")
+    return True

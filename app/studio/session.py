@@ -90,49 +90,106 @@ class View:
         self.zoom = float(np.clip(self.zoom * 1.1**wheel, 0.25, 8.0))
 
 
+@dataclass
+class Display:
+    """What the viewport shows and how the neural render refines."""
+
+    buffer: str = "rgb"
+    """The neural buffer on screen (viewport.BUFFERS)."""
+    guide_pass: str = "shaded"
+    wireframe: bool = False
+    landmarks: bool = False
+    layout: str = "beside"
+    """beside: guide and render side by side; over: the guide over the render."""
+    overlay_alpha: float = 0.5
+    neural_size: int = 160
+    """The neural render's size at the final preset, pixels."""
+    refine_to: str = "final"
+    """The last pass the viewport refines to while the controls rest."""
+
+
+@dataclass
+class AvatarFiles:
+    """An avatar folder as read (off the window's thread): the avatar, avatar.json, its test metrics and the
+    capture it was trained on, where that is still there."""
+
+    folder: Path
+    avatar: Avatar
+    meta: dict
+    metrics: dict | None = None
+    capture: CaptureSplit | None = None
+    capture_note: str = ""
+
+
+def read_avatar_folder(folder: str | Path) -> AvatarFiles:
+    """Read an avatar folder (CheckpointError etc. propagate with the reason). It only reads, so the studio runs it
+    off the window's thread."""
+    folder = Path(folder)
+    avatar, meta = load_avatar(folder)
+    files = AvatarFiles(folder, avatar, meta)
+    metrics = folder / "eval" / "metrics.json"
+    if metrics.is_file():
+        try:
+            files.metrics = json.loads(metrics.read_text()).get("metrics")
+        except (OSError, json.JSONDecodeError):
+            files.metrics = None
+    prov = meta.get("provenance", {})
+    for dataset in (prov.get("dataset"), prov.get("dataset_resolved")):  # as given, then absolute
+        if not dataset:
+            continue
+        try:
+            files.capture = load_split(dataset, "train")
+            files.capture_note = ""
+            break
+        except DatasetError as e:
+            files.capture_note = f"capture not available: {e}"
+    return files
+
+
+@dataclass
 class Session:
-    """The open avatar, if any, with its capture."""
+    """Everything the studio shows, as one value: the open avatar and its capture, the sliders, the camera, the
+    display settings, the timeline, the messages. Panels draw from it and change it only through actions
+    (app/studio/actions.py) that the application applies."""
 
-    def __init__(self):
-        self.folder: Path | None = None
-        self.avatar: Avatar | None = None
-        self.meta: dict = {}
-        self.metrics: dict | None = None
-        self.capture: CaptureSplit | None = None
-        self.capture_note = ""
-        self.sliders = Sliders(np.zeros(0, np.float32))
+    files: AvatarFiles | None = None
+    sliders: Sliders = field(default_factory=lambda: Sliders(np.zeros(0, np.float32)))
+    view: View = field(default_factory=View)
+    display: Display = field(default_factory=Display)
+    timeline_frame: int = -1
+    """-1: the sliders' own controls; k: capture frame k."""
+    dirty: bool = True
+    """The neural render is out of date: the application submits a new request."""
+    opening: Path | None = None
+    """A folder being read in the background."""
+    errors: list[str] = field(default_factory=list)
 
-    @classmethod
-    def load(cls, folder: str | Path) -> Session:
-        """A session with the avatar folder read (CheckpointError etc. propagate with the reason). It only reads,
-        so the studio runs it off the window's thread."""
-        s = cls()
-        folder = Path(folder)
-        avatar, meta = load_avatar(folder)
-        s.folder, s.avatar, s.meta = folder, avatar, meta
-        metrics = folder / "eval" / "metrics.json"
-        if metrics.is_file():
-            try:
-                s.metrics = json.loads(metrics.read_text()).get("metrics")
-            except (OSError, json.JSONDecodeError):
-                s.metrics = None
-        prov = meta.get("provenance", {})
-        for dataset in (prov.get("dataset"), prov.get("dataset_resolved")):  # as given, then absolute
-            if not dataset:
-                continue
-            try:
-                s.capture = load_split(dataset, "train")
-                s.capture_note = ""
-                break
-            except DatasetError as e:
-                s.capture_note = f"capture not available: {e}"
-        shape = s.capture.frames[0].controls.shape if s.capture and s.capture.frames else np.zeros(0)
-        s.sliders = Sliders(np.zeros(avatar.head_model.num_expression, np.float32), shape=np.asarray(shape))
-        return s
+    @property
+    def avatar(self) -> Avatar | None:
+        return None if self.files is None else self.files.avatar
+
+    @property
+    def folder(self) -> Path | None:
+        return None if self.files is None else self.files.folder
+
+    @property
+    def capture(self) -> CaptureSplit | None:
+        return None if self.files is None else self.files.capture
 
     @property
     def name(self) -> str:
         return self.folder.name if self.folder else "(none)"
+
+    def controls(self) -> Controls:
+        """What the avatar is shown with: a capture frame's controls on the timeline, else the sliders'."""
+        if self.capture is not None and 0 <= self.timeline_frame < len(self.capture.frames):
+            return self.capture.frames[self.timeline_frame].controls
+        return self.sliders.controls()
+
+    def report(self, message: str) -> None:
+        """A message in the window (the last 8 are kept)."""
+        self.errors.append(message)
+        del self.errors[:-8]
 
 
 def recent_folders() -> list[str]:

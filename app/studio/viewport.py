@@ -4,20 +4,19 @@ pass's measured time."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import moderngl
 import numpy as np
 from imgui_bundle import imgui
 
+from app.studio import actions as a
+from app.studio.context import PanelContext
+from app.studio.neural import Result
+from app.studio.session import Session
 from app.turntable import INSPECT, buffer_image
 from models.avatars.base import Avatar
 from models.head.head import posed_mesh
 from render.gl.context import GLContext
 from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
-
-if TYPE_CHECKING:
-    from app.studio.app import Studio
 
 BUFFERS = ("rgb", "normals", "grad_normals", "depth", "opacity", "rgb_no_shadows", "rgb_light", "shadow_change",
            "shading")
@@ -71,38 +70,35 @@ class Viewport:
             old.release()
         return self.gl.ctx.texture(size, 3)
 
-    def draw_guide(self, studio: Studio, size: int) -> None:
+    def draw_guide(self, s: Session, size: int) -> None:
         """Draw the guide mesh into its texture, only when something it shows changed."""
-        s = studio.session
-        sl = s.sliders
-        key = (size, studio.guide_pass, studio.wireframe, studio.landmarks, studio.timeline_frame,
+        sl, d, v = s.sliders, s.display, s.view
+        key = (size, d.guide_pass, d.wireframe, d.landmarks, s.timeline_frame,
                sl.expression.tobytes(), sl.head.tobytes(), sl.neck.tobytes(), sl.jaw_open_deg, sl.gaze_linked,
-               sl.gaze_left.tobytes(), sl.gaze_right.tobytes(), studio.view.yaw_deg, studio.view.pitch_deg,
-               studio.view.zoom, studio.view.fov_deg, studio.view.pan.tobytes(), id(s.avatar))
+               sl.gaze_left.tobytes(), sl.gaze_right.tobytes(), v.yaw_deg, v.pitch_deg, v.zoom, v.fov_deg,
+               v.pan.tobytes(), id(s.avatar))
         if key == self._guide_key and self.guide_tex is not None:
             return
         self._guide_key = key
         head = s.avatar.head_model
-        verts, lmks = posed_mesh(s.avatar.head, studio.controls())
-        cam = studio.view.camera(head.template, size, size)
-        settings = PreviewSettings(pass_name=studio.guide_pass, wireframe_overlay=studio.wireframe,
-                                   landmarks=studio.landmarks, samples=1, shadow_map_px=1024)
+        verts, lmks = posed_mesh(s.avatar.head, s.controls())
+        cam = v.camera(head.template, size, size)
+        settings = PreviewSettings(pass_name=d.guide_pass, wireframe_overlay=d.wireframe, landmarks=d.landmarks,
+                                   samples=1, shadow_map_px=1024)
         with self.gl.current():
-            fb = self.preview.draw(MeshFrame(verts, head.triangles, lmks if studio.landmarks else None), cam, settings)
+            fb = self.preview.draw(MeshFrame(verts, head.triangles, lmks if d.landmarks else None), cam, settings)
             self.guide_tex = self.texture(self.guide_tex, (size, size))
             self.gl.ctx.copy_framebuffer(self.guide_tex, fb)
             self.gl.ctx.detect_framebuffer(0).use()
         self.guide_image_size = (size, size)
 
-    def update_neural(self, studio: Studio) -> None:
-        r = studio.worker.result
+    def update_neural(self, r: Result | None, buffer: str) -> None:
         if r is None:
             return
-        key = (r.request_id, r.pass_name, studio.buffer)
+        key = (r.request_id, r.pass_name, buffer)
         if key == self.shown:
             return
-        needs = {"shadow_change": "rgb_no_shadows", "shading": "rgb_flat"}.get(studio.buffer, studio.buffer)
-        name = studio.buffer if needs in r.buffers else "rgb"
+        name = buffer if INSPECT.get(buffer, buffer) in r.buffers else "rgb"
         img = buffer_image(r.buffers, name)
         with self.gl.current():
             self.neural_tex = self.texture(self.neural_tex, (img.shape[1], img.shape[0]))
@@ -111,98 +107,95 @@ class Viewport:
         self.shown = key
 
 
-def draw(studio: Studio) -> None:
-    vp = studio.viewport
-    s = studio.session
-    r = studio.worker.result
-    imgui.text(f"interface {studio.clock.fps():.0f} fps")
-    if imgui.is_item_hovered() and studio.gui_ms:
-        imgui.set_tooltip(f"the window's own code: {np.median(studio.gui_ms):.1f} ms a frame; the rest is drawing "
+def draw(ctx: PanelContext, vp: Viewport) -> None:
+    s, act, worker = ctx.session, ctx.act, ctx.worker
+    d = s.display
+    r = worker.result
+    imgui.text(f"interface {ctx.fps:.0f} fps")
+    if imgui.is_item_hovered() and ctx.gui_ms is not None:
+        imgui.set_tooltip(f"the window's own code: {ctx.gui_ms:.1f} ms a frame; the rest is drawing "
                           "and presenting (software GL here)")
     imgui.same_line()
     if r is not None:
         imgui.text(f"| neural {r.pass_name} pass {r.ms:.0f} ms")
         imgui.same_line()
-    if studio.latency_ms is not None:
-        imgui.text(f"| slider to first pixels {studio.latency_ms:.0f} ms")
+    if ctx.latency_ms is not None:
+        imgui.text(f"| slider to first pixels {ctx.latency_ms:.0f} ms")
         imgui.same_line()
-    imgui.text("| rendering..." if studio.worker.busy else "| at rest")
-    if studio.worker.error:
-        imgui.text_colored(imgui.ImVec4(1, 0.4, 0.3, 1), studio.worker.error)
+    imgui.text("| rendering..." if worker.busy else "| at rest")
+    if worker.error:
+        imgui.text_colored(imgui.ImVec4(1, 0.4, 0.3, 1), worker.error)
     if s.avatar is None:
         imgui.text("No avatar open: open one in the Avatar panel.")
         return
     # What to show.
     available = [b for b in BUFFERS if buffer_available(b, s.avatar, None if r is None else r.buffers)]
     imgui.set_next_item_width(300)
-    if imgui.begin_combo("buffer", buffer_label(studio.buffer, s.avatar)):
+    if imgui.begin_combo("buffer", buffer_label(d.buffer, s.avatar)):
         for b in available:
-            if imgui.selectable(buffer_label(b, s.avatar), b == studio.buffer)[0]:
-                if b in INSPECT and studio.buffer not in INSPECT:
-                    studio.dirty = True  # render again with the variants this buffer is made of
-                studio.buffer = b
+            if imgui.selectable(buffer_label(b, s.avatar), b == d.buffer)[0]:
+                act(a.ShowBuffer(b))
         imgui.end_combo()
     imgui.same_line()
     imgui.set_next_item_width(110)
     passes = ("shaded", "normals", "shadow")
-    changed, k = imgui.combo("guide", passes.index(studio.guide_pass), list(passes))
+    changed, k = imgui.combo("guide", passes.index(d.guide_pass), list(passes))
     if changed:
-        studio.guide_pass = passes[k]
+        act(a.SetDisplay({"guide_pass": passes[k]}))
     imgui.same_line()
-    _, studio.wireframe = imgui.checkbox("wireframe", studio.wireframe)
-    imgui.same_line()
-    _, studio.landmarks = imgui.checkbox("landmarks", studio.landmarks)
-    imgui.same_line()
-    if imgui.radio_button("beside", studio.layout == "beside"):
-        studio.layout = "beside"
-    imgui.same_line()
-    if imgui.radio_button("over", studio.layout == "over"):
-        studio.layout = "over"
-    if studio.layout == "over":
+    for name in ("wireframe", "landmarks"):
+        c, on = imgui.checkbox(name, getattr(d, name))
+        if c:
+            act(a.SetDisplay({name: on}))
+        imgui.same_line()
+    for layout in ("beside", "over"):
+        if imgui.radio_button(layout, d.layout == layout):
+            act(a.SetDisplay({"layout": layout}))
+        if layout == "beside":
+            imgui.same_line()
+    if d.layout == "over":
         imgui.same_line()
         imgui.set_next_item_width(100)
-        _, studio.overlay_alpha = imgui.slider_float("guide opacity", studio.overlay_alpha, 0.0, 1.0)
+        c, alpha = imgui.slider_float("guide opacity", d.overlay_alpha, 0.0, 1.0)
+        if c:
+            act(a.SetDisplay({"overlay_alpha": alpha}))
 
     avail = imgui.get_content_region_avail()
-    n = 2 if studio.layout == "beside" else 1
+    n = 2 if d.layout == "beside" else 1
     size = int(max(64, min((avail.x - 8 * (n - 1)) / n, avail.y - 4)))
-    vp.draw_guide(studio, size)
-    vp.update_neural(studio)
+    vp.draw_guide(s, size)
+    vp.update_neural(r, d.buffer)
     origin = imgui.get_cursor_screen_pos()
     guide_ref = imgui.ImTextureRef(vp.guide_tex.glo)
     flip = (imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))  # GL framebuffers run bottom-up
-    if studio.layout == "beside":
+    if d.layout == "beside":
         imgui.image(guide_ref, imgui.ImVec2(size, size), *flip)
-        _mouse(studio, size)
+        _mouse(act, size)
         imgui.same_line()
         if vp.neural_tex is not None:
             imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
-            _mouse(studio, size)
+            _mouse(act, size)
     else:
         if vp.neural_tex is not None:
             imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
         draw_list = imgui.get_window_draw_list()
-        alpha = int(255 * studio.overlay_alpha)
+        alpha = int(255 * d.overlay_alpha)
         draw_list.add_image(guide_ref, origin, imgui.ImVec2(origin.x + size, origin.y + size), flip[0], flip[1],
                             imgui.IM_COL32(255, 255, 255, alpha))
         if vp.neural_tex is None:
             imgui.dummy(imgui.ImVec2(size, size))
-        _mouse(studio, size)
+        _mouse(act, size)
 
 
-def _mouse(studio: Studio, size: int) -> None:
+def _mouse(act, size: int) -> None:
     """Orbit, pan and zoom when the mouse is over the last drawn image."""
     if not imgui.is_item_hovered():
         return
     io = imgui.get_io()
     d = io.mouse_delta
     if imgui.is_mouse_dragging(imgui.MouseButton_.left) and (d.x or d.y):
-        studio.view.orbit(d.x, d.y)
-        studio.dirty = True
+        act(a.Orbit(d.x, d.y))
     elif imgui.is_mouse_dragging(imgui.MouseButton_.right) and (d.x or d.y):
-        cam = studio.view.camera(studio.session.avatar.head_model.template, size, size)
-        studio.view.pan_by(d.x, d.y, cam)
-        studio.dirty = True
+        act(a.Pan(d.x, d.y, size))
     if io.mouse_wheel:
-        studio.view.zoom_by(io.mouse_wheel)
-        studio.dirty = True
+        act(a.Zoom(io.mouse_wheel))

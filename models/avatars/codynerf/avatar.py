@@ -22,8 +22,9 @@ from models.avatars.codynerf import render
 from models.avatars.codynerf.field import CoDyNeRFField, FieldConfig
 from models.avatars.codynerf.geometry import FrameGeometry, frame_geometry, with_light_depth
 from models.avatars.codynerf.occupancy import OccupancyGrid
-from models.avatars.codynerf.prior import nearest_vertices, prior_within, vertex_tree
-from models.avatars.codynerf.training import LossWeights, loss_terms
+from models.avatars.codynerf.prior import deformation_prior, nearest_vertices, prior_within, vertex_tree
+from models.avatars.codynerf.training import LossWeights, consistency_weight, ray_terms
+from models.avatars.components import losses
 from models.avatars.quality import Quality
 from models.head.controls import Controls
 from models.head.model import HeadModel
@@ -91,30 +92,6 @@ def active_pixels(cfg: RenderConfig, camera: Camera, raster: Raster) -> np.ndarr
 
 def mean_code(embedding: nn.Embedding) -> torch.Tensor:
     return embedding.weight.mean(0, keepdim=True)
-
-
-@dataclass
-class CoDyNeRFRays:
-    """The internals of one render_rays: what the losses and the inspection buffers read."""
-
-    samples: render.RaySamples
-    densities: render.Densities
-    sigma: torch.Tensor  # (R,S)
-    weights: torch.Tensor  # (R,S)
-    remaining: torch.Tensor  # (R,) light passing every sample
-    shown: render.Shown
-    phi: torch.Tensor  # (1,C) the appearance code
-    mesh_visibility: torch.Tensor | None  # (M,) the guide mesh's visibility of the key light at the shown samples
-    lit: torch.Tensor  # (R,S,3) colour without cast shadows
-    factor: torch.Tensor | None  # (R,S,1) share of the lit colour the cast shadows leave
-    visibility: torch.Tensor | None  # (M,1) the key light's visibility S at the shown samples
-    point_normal: torch.Tensor | None = None  # (R,S,3)
-    point_grad_normal: torch.Tensor | None = None  # (R,S,3)
-
-    def to_rays(self, values: torch.Tensor) -> torch.Tensor:
-        """Values (M,C) of the shown samples -> (R,S,C)."""
-        R, S = self.weights.shape
-        return self.shown.to_rays(values, len(self.densities.keep), self.densities.keep, R, S)
 
 
 class CoDyNeRFAvatar(Avatar):
@@ -248,7 +225,7 @@ class CoDyNeRFAvatar(Avatar):
         lit, factor, visibility = self.field.appearance_terms(shown.field, shown.prior, shown.view, phi,
                                                               geo.landmarks, mesh_vis)
         R, S = weights.shape
-        internals = CoDyNeRFRays(samples, d, sigma, weights, remaining, shown, phi, mesh_vis, None, None,
+        internals = render.CoDyNeRFRays(samples, d, sigma, weights, remaining, shown, phi, mesh_vis, None, None,
                                  visibility)
         internals.lit = internals.to_rays(lit)
         internals.factor = None if factor is None else internals.to_rays(factor)
@@ -286,7 +263,30 @@ class CoDyNeRFAvatar(Avatar):
         return (d, *render.weights_of(d, samples))
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
-        return loss_terms(self, batch)
+        """The losses of Eq. 9-14 (and the shadow factor's) on one frame's rays, weighted."""
+        w = self.loss_weights
+        consistency = consistency_weight(w, batch.progress)
+        # Second derivatives only while Eq. 13 ties density gradients to the normals: before that the density
+        # gradient is an input the normals network reads, not something to train through.
+        second_order = self.field_cfg.needs_normals and consistency > 0
+        out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True,
+                               create_graph=second_order)
+        parts = ray_terms(w, out.internals, out.buffers["rgb"], batch.target, batch.rays.directions,
+                          batch.progress, self.codes(batch.frame))
+        if out.internals.point_normal is not None:
+            parts["mesh_normals"] = w.mesh_normals * self.mesh_normal_term(batch, second_order)
+        return parts
+
+    def mesh_normal_term(self, batch: TrainingBatch, second_order: bool) -> torch.Tensor:
+        """Eq. 9 on a random subset of the frame's posed vertices (DistToMesh = 0 there)."""
+        geo = batch.geometry
+        n = self.loss_weights.mesh_normal_vertices
+        idx = torch.randint(len(geo.meshes.posed), (n,), generator=batch.generator).to(geo.meshes.posed.device)
+        pts = geo.meshes.posed[idx]
+        prior = deformation_prior(pts, geo.meshes, self.render_cfg.prior_falloff_m, geo.tree)
+        omega, _ = self.codes(batch.frame)
+        out = self.field.geometry(pts, prior, omega.expand(n, -1), create_graph=second_order)
+        return losses.mesh_normal_consistency(out.normal, geo.meshes.normals[idx])
 
     # ---- inspection ------------------------------------------------------------------------------------
     def inspection_buffers(self) -> tuple[str, ...]:
@@ -298,7 +298,7 @@ class CoDyNeRFAvatar(Avatar):
             ("rgb_flat",) if self.field_cfg.needs_normals else ())
 
     def inspect(self, out: RayOutput, geometry: FrameGeometry, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
-        r: CoDyNeRFRays = out.internals
+        r: render.CoDyNeRFRays = out.internals
         unknown = set(names) - set(self.inspection_buffers())
         if unknown:
             raise ValueError(f"this avatar (effects: {self.describe_effects()}) has no buffers {sorted(unknown)}")
@@ -321,7 +321,7 @@ class CoDyNeRFAvatar(Avatar):
                                          r.remaining, self.background)
         return result
 
-    def _colour(self, r: CoDyNeRFRays, field_out, prior, landmarks: torch.Tensor) -> torch.Tensor:
+    def _colour(self, r: render.CoDyNeRFRays, field_out, prior, landmarks: torch.Tensor) -> torch.Tensor:
         """(R,S,3) the colour of the shown samples under other appearance inputs."""
         return r.to_rays(self.field.appearance(field_out, prior, r.shown.view, r.phi, landmarks, r.mesh_visibility))
 

@@ -150,3 +150,27 @@ def with_fine_pass(samples: RaySamples, weights: torch.Tensor, n: int, generator
                    ) -> RaySamples:
     """The samples of the second pass: the first pass's and n more where its weights lie."""
     return fine_samples(samples, weights.detach(), n, generator)
+
+
+@dataclass
+class CoDyNeRFRays:
+    """The internals of one render_rays: what the losses and the inspection buffers read."""
+
+    samples: RaySamples
+    densities: Densities
+    sigma: torch.Tensor  # (R,S)
+    weights: torch.Tensor  # (R,S)
+    remaining: torch.Tensor  # (R,) light passing every sample
+    shown: Shown
+    phi: torch.Tensor  # (1,C) the appearance code
+    mesh_visibility: torch.Tensor | None  # (M,) the guide mesh's visibility of the key light at the shown samples
+    lit: torch.Tensor  # (R,S,3) colour without cast shadows
+    factor: torch.Tensor | None  # (R,S,1) share of the lit colour the cast shadows leave
+    visibility: torch.Tensor | None  # (M,1) the key light's visibility S at the shown samples
+    point_normal: torch.Tensor | None = None  # (R,S,3)
+    point_grad_normal: torch.Tensor | None = None  # (R,S,3)
+
+    def to_rays(self, values: torch.Tensor) -> torch.Tensor:
+        """Values (M,C) of the shown samples -> (R,S,C)."""
+        R, S = self.weights.shape
+        return self.shown.to_rays(values, len(self.densities.keep), self.densities.keep, R, S)

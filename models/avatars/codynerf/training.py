@@ -1,18 +1,14 @@
-"""CoDyNeRF's training losses (paper 000, Eq. 9-14) on one frame's rays, with their weights and schedules."""
+"""CoDyNeRF's training losses (paper 000, Eq. 10-14) on rendered rays, with their weights and schedules (Eq. 9, on the
+mesh's vertices, is the avatar's mesh_normal_term)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import torch
 
-from models.avatars.base import TrainingBatch
-from models.avatars.codynerf.prior import deformation_prior
+from models.avatars.codynerf.render import CoDyNeRFRays
 from models.avatars.components import losses
-
-if TYPE_CHECKING:
-    from models.avatars.codynerf.avatar import CoDyNeRFAvatar
 
 
 @dataclass(frozen=True)
@@ -56,40 +52,21 @@ def consistency_weight(w: LossWeights, progress: float) -> float:
     return w.normal_consistency * ramp(progress, w.consistency_start, w.consistency_ramp)
 
 
-def loss_terms(avatar: CoDyNeRFAvatar, batch: TrainingBatch) -> dict[str, torch.Tensor]:
-    """The losses of Eq. 9-14 (and the shadow factor's) on one frame's rays, weighted."""
-    w = avatar.loss_weights
-    consistency = consistency_weight(w, batch.progress)
-    # Second derivatives only while Eq. 13 ties density gradients to the normals: before that the density
-    # gradient is an input the normals network reads, not something to train through.
-    second_order = avatar.field_cfg.needs_normals and consistency > 0
-    out = avatar.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True,
-                             create_graph=second_order)
-    r = out.internals
-    omega, phi = avatar.codes(batch.frame)
-    parts = {"photometric": losses.photometric(out.buffers["rgb"], batch.target),
+def ray_terms(w: LossWeights, r: CoDyNeRFRays, rgb: torch.Tensor, target: torch.Tensor, directions: torch.Tensor,
+              progress: float, codes: tuple[torch.Tensor, ...]) -> dict[str, torch.Tensor]:
+    """The losses on rendered rays, weighted: photometric (R,3) colours against the capture's, Cauchy sparsity
+    (Eq. 14), the codes' L2, the light the shadow factor takes away, and with normals Eq. 10 and Eq. 13."""
+    parts = {"photometric": losses.photometric(rgb, target),
              "cauchy": w.cauchy * losses.cauchy_sparsity(r.sigma, w.cauchy_c),
-             "codes": w.codes * losses.code_l2(omega, phi)}
+             "codes": w.codes * losses.code_l2(*codes)}
     if r.factor is not None:
-        parts["shadow"] = ramp(batch.progress, w.shadow_start, w.shadow_ramp) * w.shadow * \
+        parts["shadow"] = ramp(progress, w.shadow_start, w.shadow_ramp) * w.shadow * \
             losses.blocked_light(r.weights, r.factor[..., 0])
     if r.point_normal is not None:
-        parts["normals_facing"] = w.normals_facing * losses.normals_facing_camera(
-            r.weights, r.point_normal, batch.rays.directions)
+        parts["normals_facing"] = w.normals_facing * losses.normals_facing_camera(r.weights, r.point_normal,
+                                                                                  directions)
+        consistency = consistency_weight(w, progress)
         if consistency > 0:
             parts["normal_consistency"] = consistency * losses.top_k_normal_consistency(
                 r.weights, r.point_normal, r.point_grad_normal)
-        parts["mesh_normals"] = w.mesh_normals * mesh_normal_term(avatar, batch, second_order)
     return parts
-
-
-def mesh_normal_term(avatar: CoDyNeRFAvatar, batch: TrainingBatch, second_order: bool) -> torch.Tensor:
-    """Eq. 9 on a random subset of the frame's posed vertices (DistToMesh = 0 there)."""
-    geo = batch.geometry
-    n = avatar.loss_weights.mesh_normal_vertices
-    idx = torch.randint(len(geo.meshes.posed), (n,), generator=batch.generator).to(geo.meshes.posed.device)
-    pts = geo.meshes.posed[idx]
-    prior = deformation_prior(pts, geo.meshes, avatar.render_cfg.prior_falloff_m, geo.tree)
-    omega, _ = avatar.codes(batch.frame)
-    out = avatar.field.geometry(pts, prior, omega.expand(n, -1), create_graph=second_order)
-    return losses.mesh_normal_consistency(out.normal, geo.meshes.normals[idx])

@@ -1,0 +1,316 @@
+"""What a panel (or a script step) can do to the studio: actions, applied to the Session by the application.
+
+Actions that change only the Session apply themselves (and are tested without a window); commands need the
+application's machinery (threads, job processes, exports) and are carried out by it (app/studio/app.py)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.studio.session import AvatarFiles, Session, Sliders, View
+from app.turntable import INSPECT, TurntableConfig
+
+
+class Action:
+    """A change of the Session."""
+
+    def apply(self, s: Session) -> None:
+        raise NotImplementedError
+
+
+class Command:
+    """A request the application carries out (it may start threads or processes, and report back through
+    actions)."""
+
+
+def controls_moved(s: Session) -> None:
+    """A slider moved: the sliders' controls are shown again, and rendered anew."""
+    s.timeline_frame = -1
+    s.dirty = True
+
+
+# ---- the open avatar ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AvatarOpened(Action):
+    """An avatar folder was read: it replaces the open one; sliders neutral at the capture's identity."""
+
+    files: AvatarFiles
+
+    def apply(self, s: Session) -> None:
+        f = self.files
+        shape = f.capture.frames[0].controls.shape if f.capture and f.capture.frames else np.zeros(0)
+        s.files = f
+        s.sliders = Sliders(np.zeros(f.avatar.head_model.num_expression, np.float32), shape=np.asarray(shape))
+        s.timeline_frame = -1
+        s.dirty = True
+        s.opening = None
+
+
+@dataclass(frozen=True)
+class OpenFailed(Action):
+    message: str
+
+    def apply(self, s: Session) -> None:
+        s.opening = None
+        s.report(self.message)
+
+
+# ---- controls ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SetExpression(Action):
+    index: int
+    value: float
+
+    def apply(self, s: Session) -> None:
+        s.sliders.expression[self.index] = self.value
+        controls_moved(s)
+
+
+@dataclass(frozen=True)
+class ResetExpression(Action):
+    def apply(self, s: Session) -> None:
+        s.sliders.expression[:] = 0
+        controls_moved(s)
+
+
+@dataclass(frozen=True)
+class SetAngles(Action):
+    """Head or neck (yaw, pitch, roll), or an eye's gaze (yaw, pitch), in degrees."""
+
+    which: str  # head, neck, gaze_left, gaze_right
+    degrees: tuple[float, ...]
+
+    def apply(self, s: Session) -> None:
+        if self.which not in ("head", "neck", "gaze_left", "gaze_right"):
+            raise ValueError(f"no angles named {self.which!r}")
+        getattr(s.sliders, self.which)[:] = np.asarray(self.degrees, np.float32)
+        controls_moved(s)
+
+
+@dataclass(frozen=True)
+class SetJaw(Action):
+    degrees: float
+
+    def apply(self, s: Session) -> None:
+        s.sliders.jaw_open_deg = float(self.degrees)
+        controls_moved(s)
+
+
+@dataclass(frozen=True)
+class LinkGaze(Action):
+    linked: bool
+
+    def apply(self, s: Session) -> None:
+        s.sliders.gaze_linked = self.linked
+        controls_moved(s)
+
+
+@dataclass(frozen=True)
+class ResetPose(Action):
+    """Head and neck back to zero."""
+
+    def apply(self, s: Session) -> None:
+        s.sliders.head[:] = 0
+        s.sliders.neck[:] = 0
+        controls_moved(s)
+
+
+@dataclass(frozen=True)
+class ResetGaze(Action):
+    def apply(self, s: Session) -> None:
+        s.sliders.gaze_left[:] = 0
+        s.sliders.gaze_right[:] = 0
+        controls_moved(s)
+
+
+@dataclass(frozen=True)
+class ShowFrame(Action):
+    """The timeline: a capture frame's controls and codes (-1: the sliders)."""
+
+    frame: int
+
+    def apply(self, s: Session) -> None:
+        n = len(s.capture.frames) if s.capture is not None else 0
+        s.timeline_frame = int(self.frame) if 0 <= self.frame < n else -1
+        s.dirty = True
+
+
+@dataclass(frozen=True)
+class CopyFrameToSliders(Action):
+    """The timeline's frame becomes the sliders' controls."""
+
+    def apply(self, s: Session) -> None:
+        if s.capture is None or not 0 <= s.timeline_frame < len(s.capture.frames):
+            return
+        s.sliders = Sliders.of(s.capture.frames[s.timeline_frame].controls, s.avatar.head_model.num_expression)
+        controls_moved(s)
+
+
+# ---- camera ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SetView(Action):
+    """Orbit yaw and pitch, zoom, field of view (degrees); None leaves one as it is."""
+
+    yaw_deg: float | None = None
+    pitch_deg: float | None = None
+    zoom: float | None = None
+    fov_deg: float | None = None
+
+    def apply(self, s: Session) -> None:
+        for name in ("yaw_deg", "pitch_deg", "zoom", "fov_deg"):
+            value = getattr(self, name)
+            if value is not None:
+                setattr(s.view, name, float(value))
+        s.dirty = True
+
+
+@dataclass(frozen=True)
+class Orbit(Action):
+    """A mouse drag of (dx, dy) pixels."""
+
+    dx_px: float
+    dy_px: float = 0.0
+
+    def apply(self, s: Session) -> None:
+        s.view.orbit(self.dx_px, self.dy_px)
+        s.dirty = True
+
+
+@dataclass(frozen=True)
+class Pan(Action):
+    """A right-drag of (dx, dy) pixels over an image of size_px."""
+
+    dx_px: float
+    dy_px: float
+    size_px: int
+
+    def apply(self, s: Session) -> None:
+        if s.avatar is None:
+            return
+        cam = s.view.camera(s.avatar.head_model.template, self.size_px, self.size_px)
+        s.view.pan_by(self.dx_px, self.dy_px, cam)
+        s.dirty = True
+
+
+@dataclass(frozen=True)
+class Zoom(Action):
+    wheel: float
+
+    def apply(self, s: Session) -> None:
+        s.view.zoom_by(self.wheel)
+        s.dirty = True
+
+
+@dataclass(frozen=True)
+class ResetView(Action):
+    def apply(self, s: Session) -> None:
+        s.view = View()
+        s.dirty = True
+
+
+# ---- display -----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ShowBuffer(Action):
+    name: str
+
+    def apply(self, s: Session) -> None:
+        if self.name in INSPECT and s.display.buffer not in INSPECT:
+            s.dirty = True  # render again with the inspection buffers this one is made of
+        s.display.buffer = self.name
+
+
+@dataclass(frozen=True)
+class SetDisplay(Action):
+    """Guide pass, wireframe, landmarks, layout, overlay opacity: the guide and the layout, not the render."""
+
+    changes: dict[str, Any] = field(default_factory=dict)
+
+    def apply(self, s: Session) -> None:
+        for name, value in self.changes.items():
+            if name not in ("guide_pass", "wireframe", "landmarks", "layout", "overlay_alpha"):
+                raise ValueError(f"no display setting {name!r}")
+            setattr(s.display, name, value)
+
+
+@dataclass(frozen=True)
+class RefineTo(Action):
+    preset: str
+
+    def apply(self, s: Session) -> None:
+        s.display.refine_to = self.preset
+        s.dirty = True
+
+
+@dataclass(frozen=True)
+class Report(Action):
+    message: str
+
+    def apply(self, s: Session) -> None:
+        s.report(self.message)
+
+
+@dataclass(frozen=True)
+class ClearMessages(Action):
+    def apply(self, s: Session) -> None:
+        s.errors.clear()
+
+
+# ---- commands ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class OpenAvatar(Command):
+    folder: Path
+
+
+@dataclass(frozen=True)
+class StartTraining(Command):
+    dataset: str
+    out: str
+    model: str = "codynerf"
+    effects: str = "all"
+    minutes: float | None = None
+    steps: int | None = None
+
+
+@dataclass(frozen=True)
+class StartFromVideo(Command):
+    video: str
+    head: str
+    landmarker: str
+    out: str
+    effects: str = "all"
+    minutes: float | None = None
+    steps: int | None = None
+    size: int = 256
+    fps: float = 10.0
+
+
+@dataclass(frozen=True)
+class CancelJob(Command):
+    job_id: int | None = None
+    """None: every job."""
+
+
+@dataclass(frozen=True)
+class ResumeJob(Command):
+    job_id: int
+
+
+@dataclass(frozen=True)
+class ExportTurntable(Command):
+    """A turntable of the open avatar with the current controls (cfg.avatar is filled in by the application)."""
+
+    cfg: TurntableConfig
+
+
+@dataclass(frozen=True)
+class CancelExport(Command):
+    pass
+
+
+@dataclass(frozen=True)
+class SaveViewport(Command):
+    path: Path
