@@ -4,11 +4,15 @@ pictures). Steps:
 
   {"open": FOLDER}                        open an avatar (errors land in the window's messages)
   {"expression": NAME|INDEX, "value": W}  move an expression slider
-  {"jaw_open_deg": D} / {"head": [YAW, PITCH, ROLL]} / {"view": {"yaw_deg": ...}} / {"buffer": NAME}
+  {"jaw_open_deg": D}                     open the jaw, degrees
+  {"head": [YAW, PITCH, ROLL]}            turn the head, degrees
+  {"view": {"yaw_deg": ...}}              the orbit camera (yaw_deg, pitch_deg, zoom, fov_deg)
+  {"buffer": NAME}                        the neural buffer on screen
   {"timeline": FRAME}                     show a capture frame's controls (-1: the sliders)
   {"refine_to": PRESET}                   the pass the viewport refines to
   {"wait_render": PRESET}                 until the latest request's pass PRESET is on screen
-  {"save_neural": PNG} / {"screenshot": PNG}   the neural image as shown / the whole window
+  {"save_neural": PNG}                    the neural image as shown
+  {"screenshot": PNG}                     the whole window
   {"train": {"dataset": D, "out": O, "steps": N, "effects": E, "model": M}}  queue a training job
   {"from_video": {"video": V, "head": H, "landmarker": L, "out": O, "steps": N, "size": PX, "fps": F}}
                                           queue a new avatar from a video (track, then train)

@@ -16,7 +16,7 @@ from PIL import Image
 
 from tests.conftest import xvfb
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 pytestmark = pytest.mark.gl
 
 

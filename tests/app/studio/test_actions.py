@@ -1,0 +1,175 @@
+"""The studio's Session and its actions, without a window: what each action does to the one value the panels
+draw from, with hand-worked numbers; and the application's commands (opening, training, exporting) carried out
+by a Studio that never opens a window."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.studio import actions as a
+from app.studio.session import AvatarFiles, Session, read_avatar_folder
+from models.capture.dataset import load_split
+
+REPO = Path(__file__).resolve().parents[3]
+DEMO = REPO / "resources" / "demo_avatar"
+pytestmark = pytest.mark.gl
+
+
+@pytest.fixture(scope="module")
+def files(synth_capture) -> AvatarFiles:
+    """The shipped demo avatar (built-in head), with a small synthetic capture of the same head as its timeline."""
+    demo = read_avatar_folder(DEMO)
+    return dataclasses.replace(demo, capture=load_split(synth_capture("studio", 8, 16), "train"))
+
+
+@pytest.fixture
+def session(files) -> Session:
+    s = Session()
+    a.AvatarOpened(files).apply(s)
+    s.dirty = False
+    return s
+
+
+def test_opening_an_avatar_resets_the_sliders_at_the_capture_identity(files):
+    s = Session(timeline_frame=3, opening=DEMO, dirty=False)
+    a.AvatarOpened(files).apply(s)
+    assert s.avatar is files.avatar and s.opening is None and s.dirty and s.timeline_frame == -1
+    assert s.sliders.expression.shape == (files.avatar.head_model.num_expression,)
+    assert not s.sliders.expression.any()
+    np.testing.assert_array_equal(s.sliders.shape, files.capture.frames[0].controls.shape)
+    failed = Session(opening=Path("x"))
+    a.OpenFailed("x: not an avatar folder").apply(failed)
+    assert failed.opening is None and failed.errors == ["x: not an avatar folder"]
+
+
+def test_slider_actions_move_the_controls(session):
+    session.timeline_frame = 2
+    a.SetExpression(2, 0.7).apply(session)
+    assert session.timeline_frame == -1 and session.dirty  # a slider takes over from the timeline
+    c = session.controls()
+    assert c.expression[2] == pytest.approx(0.7) and np.count_nonzero(c.expression) == 1
+    a.SetAngles("head", (30.0, 0.0, 0.0)).apply(session)
+    np.testing.assert_allclose(session.controls().root, [0.0, math.radians(30), 0.0], atol=1e-6)  # yaw about +y
+    a.SetJaw(10.0).apply(session)
+    np.testing.assert_allclose(session.controls().jaw, [math.radians(10), 0.0, 0.0], atol=1e-7)
+    a.SetAngles("gaze_left", (20.0, 0.0)).apply(session)
+    np.testing.assert_allclose(session.controls().gaze_right, session.controls().gaze_left)  # linked: both eyes
+    a.LinkGaze(False).apply(session)
+    np.testing.assert_allclose(session.controls().gaze_right, 0.0)
+    a.ResetPose().apply(session)
+    a.ResetGaze().apply(session)
+    a.ResetExpression().apply(session)
+    c = session.controls()
+    assert not c.root.any() and not c.neck.any() and not c.gaze_left.any() and not c.expression.any()
+    with pytest.raises(ValueError, match="no angles"):
+        a.SetAngles("elbow", (1.0,)).apply(session)
+
+
+def test_timeline_shows_a_capture_frame_and_copies_it_to_the_sliders(session, files):
+    frame = files.capture.frames[2].controls
+    a.ShowFrame(2).apply(session)
+    assert session.timeline_frame == 2 and session.dirty and session.controls() is frame
+    a.CopyFrameToSliders().apply(session)
+    assert session.timeline_frame == -1
+    c = session.controls()
+    n = len(frame.expression)
+    np.testing.assert_allclose(c.expression[:n], frame.expression, atol=1e-6)
+    for joint in ("root", "neck", "gaze_left"):
+        np.testing.assert_allclose(getattr(c, joint), getattr(frame, joint), atol=1e-5)  # Euler round trip
+    a.ShowFrame(99).apply(session)  # past the capture: the sliders
+    assert session.timeline_frame == -1
+
+
+def test_camera_actions(session):
+    v = session.view
+    assert (v.yaw_deg, v.pitch_deg) == (20.0, 5.0)
+    a.Orbit(100.0, 0.0).apply(session)  # 0.4 degrees a pixel, dragging right turns the camera left
+    assert v.yaw_deg == pytest.approx(-20.0) and session.dirty
+    a.Orbit(-500.0).apply(session)  # -20 + 200 = 180, wrapped to [-180, 180)
+    assert v.yaw_deg == pytest.approx(-180.0)
+    a.Orbit(0.0, 1000.0).apply(session)
+    assert v.pitch_deg == 85.0  # clamped short of the pole
+    for _ in range(40):
+        a.Zoom(3.0).apply(session)
+    assert session.view.zoom == 8.0
+    a.ResetView().apply(session)
+    before = session.view.camera(session.avatar.head_model.template, 64, 64)
+    a.Pan(10.0, 0.0, 64).apply(session)
+    pan = session.view.pan
+    forward = -np.linalg.inv(before.view)[:3, 2]
+    assert np.linalg.norm(pan) > 0 and abs(float(pan @ forward)) < 1e-6  # in the image plane
+    a.SetView(fov_deg=30.0).apply(session)
+    assert session.view.fov_deg == 30.0 and session.view.yaw_deg == 20.0
+
+
+def test_inspection_buffers_render_again_only_when_first_asked_for(session):
+    a.ShowBuffer("normals").apply(session)
+    assert not session.dirty and session.display.buffer == "normals"
+    a.ShowBuffer("shading").apply(session)  # made of the render with normals to the viewer: a new render
+    assert session.dirty
+    session.dirty = False
+    a.ShowBuffer("rgb_light").apply(session)  # the request already asked for every inspection buffer
+    assert not session.dirty
+    a.SetDisplay({"layout": "over", "overlay_alpha": 0.25}).apply(session)
+    assert (session.display.layout, session.display.overlay_alpha, session.dirty) == ("over", 0.25, False)
+    with pytest.raises(ValueError, match="no display setting"):
+        a.SetDisplay({"neural_size": 4}).apply(session)
+    a.RefineTo("preview").apply(session)
+    assert session.display.refine_to == "preview" and session.dirty
+
+
+def test_messages_keep_the_last_eight(session):
+    for k in range(11):
+        a.Report(f"message {k}").apply(session)
+    assert session.errors == [f"message {k}" for k in range(3, 11)]
+    a.ClearMessages().apply(session)
+    assert session.errors == []
+
+
+def test_every_documented_script_step_is_in_the_table():
+    from app.studio import script
+
+    documented = set(re.findall(r'^  \{"(\w+)"', script.__doc__, re.M))
+    assert documented == set(script.STEPS), documented ^ set(script.STEPS)
+
+
+def test_commands_carried_out_by_the_application(tmp_path, files):
+    """Opening (a folder that is not an avatar, then the demo), training on a folder that is not a capture, a
+    turntable to a file that is not an mp4: each ends as the window would show it, with no window."""
+    from app.studio.app import Studio
+    from app.studio.config import StudioConfig
+    from app.turntable import TurntableConfig
+
+    studio = Studio(StudioConfig())
+    try:
+        def settle() -> None:
+            for _ in range(600):
+                studio.poll_opening()
+                if studio.opening is None:
+                    return
+                time.sleep(0.05)
+            raise AssertionError("the avatar never finished opening")
+
+        studio.act(a.OpenAvatar(tmp_path / "nothing"))
+        assert studio.session.opening == tmp_path / "nothing"
+        settle()
+        assert studio.session.avatar is None and str(tmp_path / "nothing") in studio.session.errors[-1]
+        studio.act(a.OpenAvatar(DEMO))
+        settle()
+        assert studio.session.folder == DEMO and studio.session.avatar.name == "codynerf"
+        studio.act(a.StartTraining(str(tmp_path), str(tmp_path / "out")))
+        assert str(tmp_path) in studio.session.errors[-1] and not studio.jobs.jobs
+        studio.act(a.ExportTurntable(TurntableConfig(DEMO, tmp_path / "turn.avi")))
+        assert studio.session.errors[-1].endswith("the turntable is written as an .mp4")
+        assert not studio.exporter.running
+        studio.act(a.SaveViewport(tmp_path / "v.png"))
+        assert studio.session.errors[-1] == "nothing rendered yet to save"
+    finally:
+        studio.close()
