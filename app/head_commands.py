@@ -11,7 +11,7 @@ import numpy as np
 from PIL import Image
 
 from app.errors import UserInputError
-from models.files import atomic_write
+from models.files import atomic_write, atomic_write_bytes
 from models.head.controls import Controls, ControlsError, load_controls
 from models.head.head import Head, posed_mesh
 from models.head.model import HeadModel, portrait_vertices
@@ -132,11 +132,11 @@ def run_preview(cfg: PreviewConfig) -> int:
 
 
 def run_mesh(cfg: MeshConfig) -> int:
-    from models.head.meshio import write_mesh
+    from models.head.meshio import mesh_bytes
 
     _check_out(cfg.out, (".obj", ".ply"))
     head, verts, _ = load_posed(cfg)
-    write_mesh(cfg.out, verts, head.triangles)
+    atomic_write_bytes(cfg.out, mesh_bytes(cfg.out.suffix, verts, head.triangles))
     print(f"wrote {cfg.out} ({len(verts)} vertices, {len(head.triangles)} triangles)")
     return 0
 

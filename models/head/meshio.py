@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from models.files import atomic_write_bytes
 from models.head.model import HeadModelError
 
 
@@ -55,12 +54,12 @@ def read_npz(path: str | Path, required: tuple[str, ...], kind: str, missing_hin
         raise HeadModelError(f"{path}: not a readable npz ({type(e).__name__}: {e})") from None
 
 
-def write_mesh(path: str | Path, vertices: np.ndarray, triangles: np.ndarray) -> None:
-    """Write (V,3) vertices and (F,3) triangles as OBJ or PLY (by suffix), vertex order kept."""
-    path = Path(path)
+def mesh_bytes(suffix: str, vertices: np.ndarray, triangles: np.ndarray) -> bytes:
+    """(V,3) vertices and (F,3) triangles as the bytes of an OBJ or a binary PLY file (suffix ".obj" or ".ply"),
+    vertex order kept. The caller writes them (atomically: models/files.py)."""
     v = np.asarray(vertices, np.float64)
     f = np.asarray(triangles, np.int64)
-    suffix = path.suffix.lower()
+    suffix = suffix.lower()
     if suffix == ".obj":
         body = "".join(f"v {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in v)
         body += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f)
@@ -74,5 +73,5 @@ def write_mesh(path: str | Path, vertices: np.ndarray, triangles: np.ndarray) ->
         face_rec["idx"] = f
         data = header.encode() + v.astype("<f4").tobytes() + face_rec.tobytes()
     else:
-        raise ValueError(f"{path}: mesh output must end in .obj or .ply")
-    atomic_write_bytes(path, data)
+        raise ValueError(f"mesh output must end in .obj or .ply, not {suffix!r}")
+    return data

@@ -80,7 +80,8 @@ def test_every_setting_is_finite_and_near_the_reference(tiny_avatar, capture, gl
     raster = Rasterizer(gl)
 
     def render(q: Quality) -> dict:
-        size = q.apply(avatar, cam.width_px)
+        avatar.set_quality(q)
+        size = q.size(cam.width_px)
         c = type(cam)(cam.view, cam.fov_y_deg, size, size, cam.near_m, cam.far_m)
         return avatar.render_image(f.controls, c, raster)
 
