@@ -16,7 +16,7 @@ import os
 import platform
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import cv2
@@ -129,7 +129,7 @@ class TestFrames:
         for f in self.frames:
             cam = camera_of(split, f.camera_to_world)
             scale = size / cam.width_px
-            self.cameras.append(replace(cam, width_px=size, height_px=round(cam.height_px * scale)))
+            self.cameras.append(cam.resized(size, round(cam.height_px * scale)))
             truth = load_rgb(f.image_path, background)
             hw = (self.cameras[-1].height_px, size)
             self.truth.append(upsample(truth, hw))
@@ -145,7 +145,7 @@ def measure(avatar: Avatar, quality: Quality, frames: TestFrames, raster: Raster
     for i, (f, cam) in enumerate(zip(frames.frames, frames.cameras, strict=True)):
         avatar.set_quality(quality)
         size = quality.size(cam.width_px)
-        c = replace(cam, width_px=size, height_px=max(8, round(cam.height_px * size / cam.width_px)))
+        c = cam.resized(size, max(8, round(cam.height_px * size / cam.width_px)))
         if i == 0:
             avatar.render_image(f.controls, c, raster)
         t0 = time.perf_counter()

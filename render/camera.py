@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -25,10 +25,31 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] 
 
 
 def perspective(fov_y_deg: float, aspect: float, near_m: float, far_m: float) -> np.ndarray:
-    """OpenGL clip-from-camera projection; depth maps [near, far] to NDC [-1, 1]."""
+    """OpenGL clip-from-camera projection, centred; depth maps [near, far] to NDC [-1, 1]."""
     t = 1.0 / math.tan(math.radians(fov_y_deg) / 2)
     p = np.zeros((4, 4))
     p[0, 0], p[1, 1] = t / aspect, t
+    p[2, 2] = (far_m + near_m) / (near_m - far_m)
+    p[2, 3] = 2 * far_m * near_m / (near_m - far_m)
+    p[3, 2] = -1.0
+    return p
+
+
+def pinhole_projection(fx_px: float, fy_px: float, cx_px: float, cy_px: float, width_px: int, height_px: int,
+                       near_m: float, far_m: float) -> np.ndarray:
+    """OpenGL clip-from-camera projection of a pinhole camera with pixel intrinsics (image x right, rows down,
+    the principal point (cx, cy) measured from the top-left corner): a camera-space point (X, Y, Z), Z < 0,
+    lands on pixel u = cx + fx X / -Z, v = cy - fy Y / -Z. Centred (cx = W/2, cy = H/2) it is `perspective`.
+
+    >>> p = pinhole_projection(100.0, 100.0, 30.0, 20.0, 64, 48, 0.1, 10.0)
+    >>> clip = p @ [0.1, 0.05, -1.0, 1.0]  # 10 cm right, 5 cm up, 1 m ahead
+    >>> u, v = (clip[0] / clip[3] + 1) * 32, (1 - clip[1] / clip[3]) * 24
+    >>> round(float(u), 6), round(float(v), 6)  # u = 30 + 100 * 0.1, v = 20 - 100 * 0.05
+    (40.0, 15.0)
+    """
+    p = np.zeros((4, 4))
+    p[0, 0], p[0, 2] = 2 * fx_px / width_px, 1 - 2 * cx_px / width_px
+    p[1, 1], p[1, 2] = 2 * fy_px / height_px, 2 * cy_px / height_px - 1
     p[2, 2] = (far_m + near_m) / (near_m - far_m)
     p[2, 3] = 2 * far_m * near_m / (near_m - far_m)
     p[3, 2] = -1.0
@@ -51,7 +72,9 @@ def linear_depth_from_ndc(depth01: np.ndarray, near_m: float, far_m: float) -> n
 
 @dataclass(frozen=True)
 class Camera:
-    """A perspective camera: world-to-camera view matrix and a vertical field of view."""
+    """A pinhole camera: world-to-camera view matrix, a vertical field of view, and where they differ from a
+    centred camera with square pixels, the principal point and the horizontal focal length (a crop of a larger
+    frame, a tracked video's camera)."""
 
     view: np.ndarray  # (4,4) world-to-camera
     fov_y_deg: float
@@ -59,10 +82,38 @@ class Camera:
     height_px: int
     near_m: float = 0.05
     far_m: float = 5.0
+    cx_px: float | None = None
+    """Principal point from the left edge, pixels (None: the centre)."""
+    cy_px: float | None = None
+    """Principal point from the top edge, pixels (None: the centre)."""
+    fx_px: float | None = None
+    """Horizontal focal length, pixels (None: the vertical one, square pixels)."""
+
+    @staticmethod
+    def from_intrinsics(view: np.ndarray, fx_px: float, fy_px: float, cx_px: float, cy_px: float, width_px: int,
+                        height_px: int, near_m: float = 0.05, far_m: float = 5.0) -> Camera:
+        """A camera from pixel intrinsics (fx, fy, cx, cy)."""
+        fov = math.degrees(2 * math.atan(0.5 * height_px / fy_px))
+        return Camera(view, fov, width_px, height_px, near_m, far_m, float(cx_px), float(cy_px), float(fx_px))
+
+    @property
+    def intrinsics(self) -> tuple[float, float, float, float]:
+        """fx, fy, cx, cy in pixels."""
+        fy = self.focal_px()
+        return (fy if self.fx_px is None else self.fx_px, fy,
+                0.5 * self.width_px if self.cx_px is None else self.cx_px,
+                0.5 * self.height_px if self.cy_px is None else self.cy_px)
+
+    @property
+    def centred(self) -> bool:
+        """Principal point at the centre and square pixels (every camera but a crop's or a tracked one's)."""
+        return self.cx_px is None and self.cy_px is None and self.fx_px is None
 
     @property
     def projection(self) -> np.ndarray:
-        return perspective(self.fov_y_deg, self.width_px / self.height_px, self.near_m, self.far_m)
+        if self.centred:
+            return perspective(self.fov_y_deg, self.width_px / self.height_px, self.near_m, self.far_m)
+        return pinhole_projection(*self.intrinsics, self.width_px, self.height_px, self.near_m, self.far_m)
 
     @property
     def position(self) -> np.ndarray:
@@ -71,6 +122,21 @@ class Camera:
     def focal_px(self) -> float:
         """Focal length in pixels (vertical)."""
         return 0.5 * self.height_px / math.tan(math.radians(self.fov_y_deg) / 2)
+
+    def resized(self, width_px: int, height_px: int) -> Camera:
+        """The same view on an image of another size (the intrinsics scaled with it)."""
+        if self.centred:
+            return replace(self, width_px=width_px, height_px=height_px)
+        fx, fy, cx, cy = self.intrinsics
+        sx, sy = width_px / self.width_px, height_px / self.height_px
+        return Camera.from_intrinsics(self.view, fx * sx, fy * sy, cx * sx, cy * sy, width_px, height_px,
+                                      self.near_m, self.far_m)
+
+    def cropped(self, left_px: int, top_px: int, width_px: int, height_px: int) -> Camera:
+        """The camera of a crop of this camera's image: the same rays through the pixels they share."""
+        fx, fy, cx, cy = self.intrinsics
+        return Camera.from_intrinsics(self.view, fx, fy, cx - left_px, cy - top_px, width_px, height_px,
+                                      self.near_m, self.far_m)
 
 
 def orbit_camera(yaw_deg: float = 0.0, pitch_deg: float = 0.0, distance_m: float = 0.6,

@@ -19,6 +19,10 @@ class Raster:
     triangle: np.ndarray  # (H,W) int, -1 where the pixel sees no surface
     depth: np.ndarray  # (H,W) metres along the view axis, inf where no surface
     bary: np.ndarray  # (H,W,3) barycentric coordinates of the visible point (0 where no surface)
+    distance: np.ndarray | None = None
+    """(H,W) metres along each pixel's unit ray to the visible point, inf where no surface: the ray met with its
+    triangle's plane in float64, so that a crop of a camera, whose rays are the same, gets the same distances
+    (the GL depth differs between the two in its last bits). None: derive it from the depth."""
 
     @property
     def hit(self) -> np.ndarray:
@@ -48,12 +52,21 @@ class Rays:
         return Rays(self.origins.to(device), self.directions.to(device), self.surface_t.to(device))
 
 
+def camera_directions(camera: Camera) -> np.ndarray:
+    """(H,W,3) directions through pixel centres in camera space (OpenGL axes: -z ahead, +y up), not normalised,
+    z = -1: ((u - cx) / fx, -(v - cy) / fy, -1) for pixel centres (u, v), rows top first."""
+    h, w = camera.height_px, camera.width_px
+    j, i = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    if camera.centred:  # the centred camera's form, so that its rays stay bit for bit what they were
+        t = np.tan(np.radians(camera.fov_y_deg) / 2)
+        return np.stack([(2 * j / w - 1) * t * w / h, (1 - 2 * i / h) * t, -np.ones_like(j)], -1)
+    fx, fy, cx, cy = camera.intrinsics
+    return np.stack([(j - cx) / fx, -(i - cy) / fy, -np.ones_like(j)], -1)
+
+
 def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     """World origin (3,) and unit directions (H,W,3) through pixel centres, rows top first."""
-    h, w = camera.height_px, camera.width_px
-    t = np.tan(np.radians(camera.fov_y_deg) / 2)
-    j, i = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-    d_cam = np.stack([(2 * j / w - 1) * t * w / h, (1 - 2 * i / h) * t, -np.ones_like(j)], -1)
+    d_cam = camera_directions(camera)
     c2w = np.linalg.inv(camera.view)
     d = d_cam @ c2w[:3, :3].T
     return c2w[:3, 3], d / np.linalg.norm(d, axis=-1, keepdims=True)
@@ -66,13 +79,16 @@ def image_rays(camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def surface_distance(raster: Raster, cos_view: np.ndarray) -> np.ndarray:
-    """(H,W) distance along each pixel's unit ray to the visible surface, inf where it misses: the view
-    depth over the cosine between the ray and the view axis (cos_view, (H,W)).
+    """(H,W) distance along each pixel's unit ray to the visible surface, inf where it misses: the raster's
+    exact distance where it has one, else the view depth over the cosine between the ray and the view axis
+    (cos_view, (H,W)).
 
     >>> r = Raster(np.array([[0, -1]]), np.array([[2.0, np.inf]]), np.zeros((1, 2, 3)))
     >>> surface_distance(r, np.array([[0.5, 1.0]])).tolist()  # 2 m deep at 60 degrees off axis: 4 m along the ray
     [[4.0, inf]]
     """
+    if raster.distance is not None:
+        return raster.distance.astype(np.float32)
     return np.where(raster.hit, raster.depth / np.maximum(cos_view, 1e-6), np.inf).astype(np.float32)
 
 
@@ -85,6 +101,19 @@ def camera_surface_distance(raster: Raster, camera: Camera, directions: np.ndarr
 def ray_triangle_barycentric(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Barycentric coordinates (N,3) where rays (origin, (N,3) dirs) meet the planes of (N,3,3) triangles
     (Moller-Trumbore without the inside test: the rasterizer already chose the triangle)."""
+    return ray_triangle_hit(origin, dirs, tri)[0]
+
+
+def ray_triangle_hit(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Barycentric coordinates (N,3) and distance t (N,) along the rays (in units of |dirs|) where rays
+    (origin, (N,3) dirs) meet the planes of (N,3,3) triangles (Moller-Trumbore without the inside test: the
+    rasterizer already chose the triangle); t is nan where a ray runs along its triangle's plane.
+
+    >>> bary, t = ray_triangle_hit(np.zeros(3), np.array([[0.0, 0.0, -1.0]]),
+    ...                            np.array([[[-1.0, -1.0, -2.0], [1.0, -1.0, -2.0], [0.0, 1.0, -2.0]]]))
+    >>> t.tolist(), bary.round(3).tolist()  # the plane z = -2, 2 m ahead; (0, 0) = 1/4 v0 + 1/4 v1 + 1/2 v2
+    ([2.0], [[0.25, 0.25, 0.5]])
+    """
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     p = np.cross(dirs, e2)
     det = np.einsum("ij,ij->i", e1, p)
@@ -93,7 +122,9 @@ def ray_triangle_barycentric(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarr
     u = np.einsum("ij,ij->i", s, p) / det
     q = np.cross(s, e1)
     v = np.einsum("ij,ij->i", dirs, q) / det
-    return np.clip(np.stack([1 - u - v, u, v], -1), 0.0, 1.0)
+    t = np.einsum("ij,ij->i", e2, q) / det
+    t = np.where(np.abs(det) > 1e-18, t, np.nan)
+    return np.clip(np.stack([1 - u - v, u, v], -1), 0.0, 1.0), t
 
 
 def rays_to_images(parts: dict[str, list[torch.Tensor]], height: int, width: int, idx: np.ndarray,

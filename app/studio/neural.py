@@ -47,8 +47,7 @@ class PresetFigures:
 
 
 def scaled(camera: Camera, scale: float) -> Camera:
-    w, h = max(8, round(camera.width_px * scale)), max(8, round(camera.height_px * scale))
-    return Camera(camera.view, camera.fov_y_deg, w, h, camera.near_m, camera.far_m)
+    return camera.resized(max(8, round(camera.width_px * scale)), max(8, round(camera.height_px * scale)))
 
 
 class NeuralWorker:

@@ -8,24 +8,19 @@ import numpy as np
 from PIL import Image
 from scipy.ndimage import distance_transform_edt
 
-from models.capture.dataset import CaptureSplit, DatasetError
+from models.capture.dataset import CaptureSplit
 from render.camera import Camera
 
 
 def camera_of(split: CaptureSplit, c2w: np.ndarray) -> Camera:
-    _, fy, cx, cy = split.intrinsics
-    if abs(cx - split.width / 2) > 0.5 or abs(cy - split.height / 2) > 0.5:
-        raise DatasetError(f"{split.folder}: principal point ({cx}, {cy}) off the image centre is not supported yet")
-    fov = math.degrees(2 * math.atan(0.5 * split.height / fy))
-    return Camera(np.linalg.inv(c2w), fov, split.width, split.height, near_m=0.05, far_m=10.0)
-
-
-def camera_directions(split: CaptureSplit) -> np.ndarray:
-    """(H,W,3) camera-space ray directions (unit), OpenGL axes."""
+    """A frame's camera: any pinhole (principal point anywhere, fx and fy apart); centred cameras with square
+    pixels (within 1e-6 px) keep the centred form."""
     fx, fy, cx, cy = split.intrinsics
-    j, i = np.meshgrid(np.arange(split.width) + 0.5, np.arange(split.height) + 0.5)
-    d = np.stack([(j - cx) / fx, -(i - cy) / fy, -np.ones_like(j)], -1)
-    return (d / np.linalg.norm(d, axis=-1, keepdims=True)).astype(np.float32)
+    view = np.linalg.inv(c2w)
+    if max(abs(cx - split.width / 2), abs(cy - split.height / 2), abs(fx - fy)) < 1e-6:
+        fov = math.degrees(2 * math.atan(0.5 * split.height / fy))
+        return Camera(view, fov, split.width, split.height, near_m=0.05, far_m=10.0)
+    return Camera.from_intrinsics(view, fx, fy, cx, cy, split.width, split.height, near_m=0.05, far_m=10.0)
 
 
 def load_rgb(path, background: np.ndarray | None = None) -> np.ndarray:

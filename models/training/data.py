@@ -12,10 +12,10 @@ import torch
 
 from models.avatars.base import Avatar
 from models.capture.dataset import CaptureSplit
-from models.capture.frames import camera_directions, camera_of, foreground_reach_m, load_mask, load_rgb
+from models.capture.frames import camera_of, foreground_reach_m, load_mask, load_rgb
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
-from render.rays import surface_distance
+from render.rays import camera_directions, surface_distance
 
 
 @dataclass
@@ -51,7 +51,8 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet
     training draws rays."""
     bg = avatar.background.numpy()
     images, masks, origins, dirs, surf, geos, rasters, cameras, reach = [], [], [], [], [], [], [], [], []
-    dirs_cam = camera_directions(split)
+    d = camera_directions(camera_of(split, np.eye(4)))  # every frame of a split has the same intrinsics
+    dirs_cam = (d / np.linalg.norm(d, axis=-1, keepdims=True)).astype(np.float32)
     raster = Rasterizer(gl)
     for f in split.frames:
         images.append(load_rgb(f.image_path, bg))

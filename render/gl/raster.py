@@ -9,7 +9,7 @@ import numpy as np
 
 from render.camera import Camera
 from render.gl.context import GLContext
-from render.rays import Raster, pixel_rays, ray_triangle_barycentric
+from render.rays import Raster, pixel_rays, ray_triangle_hit
 
 
 class Rasterizer:
@@ -25,11 +25,15 @@ class Rasterizer:
                                 camera.height_px)
         hit = tri >= 0
         bary = np.zeros((*tri.shape, 3), np.float32)
+        distance = np.full(tri.shape, np.inf)
         if hit.any():
             origin, dirs = pixel_rays(camera)
             corners = np.asarray(vertices, np.float64)[np.asarray(triangles)[tri[hit]]]
-            bary[hit] = ray_triangle_barycentric(origin, dirs[hit], corners)
-        return Raster(tri, np.where(hit, depth, np.inf), bary)
+            bary[hit], t = ray_triangle_hit(origin, dirs[hit], corners)
+            # Where the plane is edge-on to the ray (or behind it), the GL depth along the ray instead.
+            from_depth = depth[hit] / np.maximum(dirs[hit] @ -np.linalg.inv(camera.view)[:3, 2], 1e-6)
+            distance[hit] = np.where(np.isfinite(t) & (t > 0), t, from_depth)
+        return Raster(tri, np.where(hit, depth, np.inf), bary, distance)
 
     def depth_map(self, vertices: np.ndarray, triangles: np.ndarray, view: np.ndarray, projection: np.ndarray,
                   px: int) -> np.ndarray:

@@ -82,7 +82,7 @@ def test_every_setting_is_finite_and_near_the_reference(tiny_avatar, capture, gl
     def render(q: Quality) -> dict:
         avatar.set_quality(q)
         size = q.size(cam.width_px)
-        c = type(cam)(cam.view, cam.fov_y_deg, size, size, cam.near_m, cam.far_m)
+        c = cam.resized(size, size)
         return avatar.render_image(f.controls, c, raster)
 
     reference = render(REFERENCE)["rgb"]

@@ -44,3 +44,35 @@ def test_framing_keeps_every_vertex_in_view():
     clip = (cam.projection @ cam.view @ np.c_[v, np.ones(len(v))].T).T
     ndc = clip[:, :3] / clip[:, 3:]
     assert np.abs(ndc).max() < 1.0
+
+
+def test_pinhole_projection_and_pixel_rays_agree_off_centre():
+    """A camera with the principal point off the centre and fx != fy: each pixel centre's ray, projected back,
+    lands on that pixel centre; a crop of a camera sees the same rays through the pixels the two share; a
+    resized camera scales its intrinsics."""
+    from render.camera import Camera
+    from render.rays import camera_directions, pixel_rays
+
+    view = look_at(np.array([0.3, 0.1, 1.5]), np.array([0.0, 0.05, 0.0]))
+    cam = Camera.from_intrinsics(view, fx_px=70.0, fy_px=55.0, cx_px=21.3, cy_px=30.8, width_px=40, height_px=36)
+    assert not cam.centred and cam.intrinsics == (70.0, 55.0, 21.3, 30.8)
+    origin, dirs = pixel_rays(cam)
+    pts = origin + dirs.reshape(-1, 3) * 0.9
+    clip = (cam.projection @ cam.view @ np.c_[pts, np.ones(len(pts))].T).T
+    u = (clip[:, 0] / clip[:, 3] + 1) * 0.5 * cam.width_px
+    v = (1 - clip[:, 1] / clip[:, 3]) * 0.5 * cam.height_px
+    j, i = np.meshgrid(np.arange(40) + 0.5, np.arange(36) + 0.5)
+    np.testing.assert_allclose(u, j.ravel(), atol=1e-9)
+    np.testing.assert_allclose(v, i.ravel(), atol=1e-9)
+    # Hand-worked: the pixel whose centre is the principal point's column looks straight along x = 0.
+    d = camera_directions(cam)
+    assert d[0, 21, 0] == np.float64((21.5 - 21.3) / 70.0) and d[5, 0, 1] == -(5.5 - 30.8) / 55.0
+    crop = cam.cropped(7, 4, 25, 20)
+    _, crop_dirs = pixel_rays(crop)
+    np.testing.assert_allclose(crop_dirs, dirs[4:24, 7:32], atol=1e-12)
+    half = cam.resized(20, 18)
+    np.testing.assert_allclose(half.intrinsics, (35.0, 27.5, 10.65, 15.4), atol=1e-12)
+    # A centred camera keeps its centred projection.
+    centred = Camera(view, 40.0, 32, 24)
+    np.testing.assert_allclose(centred.projection, perspective(40.0, 32 / 24, 0.05, 5.0))
+    np.testing.assert_allclose(centred.cropped(0, 0, 32, 24).projection, centred.projection, atol=1e-12)

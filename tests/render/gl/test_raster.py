@@ -53,3 +53,20 @@ def test_depth_agrees_with_the_preview(gl, builtin_model):
     # GL decides coverage in float32 with its own edge rules; on triangles seen edge-on a pixel centre can
     # fall a hair outside the chosen triangle, where the clipped barycentrics land on the nearest edge.
     assert np.quantile(err, 0.99) < 2e-4 and err.max() < 5e-3
+
+
+def test_off_centre_crop_rasterizes_the_same_pixels(gl, builtin_model):
+    """The head through a camera and through an off-centre crop of it (principal point moved, fx != fy): the
+    same triangle ids and depths on the pixels they share (edges may differ in a pixel or two by rounding)."""
+    base = framing_camera(builtin_model.template, 25, 5, width_px=64, height_px=56)
+    fx, fy, cx, cy = base.intrinsics
+    wide = Camera.from_intrinsics(base.view, fx * 1.2, fy, cx, cy, 64, 56, base.near_m, base.far_m)
+    crop = wide.cropped(13, 9, 40, 38)
+    r = Rasterizer(gl)
+    full, part = r.rasterize(builtin_model.template, builtin_model.triangles, wide), \
+        r.rasterize(builtin_model.template, builtin_model.triangles, crop)
+    same = full.triangle[9:47, 13:53] == part.triangle
+    assert same.mean() > 0.995 and part.hit.sum() > 300, same.mean()
+    both = same & part.hit
+    np.testing.assert_allclose(part.depth[both], full.depth[9:47, 13:53][both], atol=1e-5)
+    r.release()
