@@ -35,8 +35,8 @@ class Job:
     landmarker: Path | None = None
     track_size: int = 256
     """Image size of the tracked dataset, pixels."""
-    track_fps: float = 10.0
-    """Frames a second taken from the video."""
+    track_fps: float | None = None
+    """Frames a second taken from the video (None: every frame)."""
     stage: Literal["track", "train"] = "train"
     opened: bool = False
     """The studio opened the result (video jobs open theirs when done)."""
@@ -53,8 +53,8 @@ class Job:
     def command(self) -> list[str]:
         if self.stage == "track":
             cmd = [sys.executable, "-m", "app.cli", "track", str(self.video), "--out", str(self.dataset),
-                   "--head", self.head, "--size", str(self.track_size),
-                   "--fps", str(self.track_fps)]
+                   "--head", self.head, "--size", str(self.track_size)]
+            cmd += ["--fps", str(self.track_fps)] if self.track_fps else []
             return cmd + (["--landmarker", str(self.landmarker)] if self.landmarker else [])
         cmd = [sys.executable, "-m", "app.cli", "train", str(self.dataset), "--out", str(self.out),
                "--model", self.model, "--effects", self.effects]

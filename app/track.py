@@ -52,8 +52,8 @@ class TrackConfig:
     landmarker: Path | None = None
     """MediaPipe's face landmarker bundle (face_landmarker_v2_with_blendshapes.task, from MediaPipe's model
     page); default: $AVATAR_STUDIO_LANDMARKER."""
-    fps: float = 10.0
-    """Frames a second taken from the video."""
+    fps: float | None = None
+    """Frames a second taken from the video (default: every frame; fewer frames track and train faster)."""
     size: int = 256
     """Width and height of the dataset's images, pixels."""
     fov_deg: float = 40.0
@@ -88,7 +88,8 @@ def detect_faces(cfg: TrackConfig, bundle: Path, progress) -> tuple[list[dict], 
     """Landmarks of the one face in each sampled frame; frames without a face are dropped (with the reason).
     Several faces in more than a tenth of the frames is an error: track needs a video of one person."""
     info = video_info(cfg.video)
-    expected = max(1, round(info.frames * min(cfg.fps / info.fps, 1.0))) if info.frames > 0 else None
+    share = min(cfg.fps / info.fps, 1.0) if cfg.fps else 1.0
+    expected = max(1, round(info.frames * share)) if info.frames > 0 else None
     kept, dropped, several, read = [], [], 0, 0
     with Landmarker(bundle, max_faces=2) as landmarker:
         for index, t, rgb in sampled_frames(cfg.video, cfg.fps):
@@ -119,6 +120,14 @@ def sharpness(rgb: np.ndarray, landmarks_px: np.ndarray) -> float:
     hi = landmarks_px.max(0).astype(int)
     grey = cv2.cvtColor(rgb[lo[1]:hi[1], lo[0]:hi[0]], cv2.COLOR_RGB2GRAY)
     return float(cv2.Laplacian(grey, cv2.CV_64F).var()) if grey.size else 0.0
+
+
+def face_width_px(faces: list[Face], crop) -> dict:
+    """How wide the face is in the dataset's images (the extent of MediaPipe's 468 face landmarks across, crop
+    pixels): median, least and most over the frames."""
+    widths = np.array([np.ptp(crop.points(f.landmarks_px[:468])[:, 0]) for f in faces])
+    return {"median": round(float(np.median(widths)), 1), "min": round(float(widths.min()), 1),
+            "max": round(float(widths.max()), 1)}
 
 
 def split_of(k: int, n: int, n_test: int) -> str:
@@ -213,7 +222,7 @@ def run_track(cfg: TrackConfig) -> int:
     header = {"camera_angle_x": 2 * math.atan(0.5 * cfg.size / k.fx), "intrinsics": [k.fx, k.fy, k.cx, k.cy],
               "width": cfg.size, "height": cfg.size, "head_model": absolute_head_spec(cfg.head),
               "shape": result.shape.tolist(), "background": background.tolist(),
-              "source": {"video": str(cfg.video.resolve()), "fps": cfg.fps, "fov_deg": cfg.fov_deg,
+              "source": {"video": str(cfg.video.resolve()), "fps": cfg.fps or info.fps, "fov_deg": cfg.fov_deg,
                          "crop": {"x0": crop.x0, "y0": crop.y0, "side": crop.side}}}
     splits: dict[str, list[dict]] = {"train": [], "val": [], "test": []}
     per_frame = []
@@ -243,13 +252,16 @@ def run_track(cfg: TrackConfig) -> int:
     if cfg.overlay:
         overlay_path = partial / "tracking" / "overlay.mp4"
         write_video((overlay(img, pixels[j], model, targets[j], pixels[j][corr.vertex_ids])
-                     for j, img in enumerate(crops)), overlay_path, fps=cfg.fps)
+                     for j, img in enumerate(crops)), overlay_path, fps=cfg.fps or info.fps)
     total = time.perf_counter() - t_start
     report = {
         "video": str(cfg.video), "head_model": absolute_head_spec(cfg.head), "frames_read": read,
         "frames_kept": len(kept),
         "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
         "landmarks_used": len(corr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
+        "face_width_px": face_width_px(faces, crop),
+        "crop": {"x0": round(crop.x0, 1), "y0": round(crop.y0, 1), "side": round(crop.side, 1),
+                 "whole_frame": crop.side >= min(info.width, info.height) - 0.5},
         "fov_deg": cfg.fov_deg,
         "landmark_error_px": {"median": round(float(np.median(errors)), 3),
                               "p95": round(float(np.percentile(errors, 95)), 3),
@@ -263,7 +275,8 @@ def run_track(cfg: TrackConfig) -> int:
     le = report["landmark_error_px"]
     print(f"wrote {cfg.out}: {report['splits']['train']} train, {report['splits']['val']} val, "
           f"{report['splits']['test']} test frames; landmark error median {le['median']:.2f} px, "
-          f"95th percentile {le['p95']:.2f} px ({cfg.size} px images); {total:.1f} s "
+          f"95th percentile {le['p95']:.2f} px ({cfg.size} px images, the face {report['face_width_px']['median']:.0f} "
+          f"px wide); {total:.1f} s "
           f"({report['seconds_per_frame']:.3f} s a frame)"
           + (f"; overlay {cfg.out / 'tracking' / 'overlay.mp4'}" if overlay_path else ""))
     return 0

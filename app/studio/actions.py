@@ -285,7 +285,7 @@ class StartFromVideo(Command):
     minutes: float | None = None
     steps: int | None = None
     size: int = 256
-    fps: float = 10.0
+    fps: float | None = None
 
 
 @dataclass(frozen=True)

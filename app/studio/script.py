@@ -230,7 +230,7 @@ def _train(sc: Script, st: Driven, s: dict) -> bool:
 def _from_video(sc: Script, st: Driven, s: dict) -> bool:
     v = s["from_video"]
     st.act(a.StartFromVideo(v["video"], v.get("head", "builtin"), v["landmarker"], v["out"], v.get("effects", "none"),
-                            v.get("minutes"), v.get("steps"), int(v.get("size", 256)), float(v.get("fps", 10.0))))
+                            v.get("minutes"), v.get("steps"), int(v.get("size", 256)), v.get("fps")))
     return True
 
 
