@@ -138,16 +138,82 @@ def split_of(k: int, n: int, n_test: int) -> str:
 
 def run_track(cfg: TrackConfig) -> int:
     t_start = time.perf_counter()
+    check_config(cfg)
+    bundle = landmarker_path(cfg)
+    model = load_head(cfg.head)
+    canonical, _ = canonical_face_mesh(bundle)
+    corr = correspond(model, canonical)
+    info = video_info(cfg.video)
+    kept, dropped, read = sharp_faces(cfg, bundle)
+    t_landmarks = time.perf_counter() - t_start
+    print(f"{cfg.video}: {len(kept)} of {read} frames kept ({len(dropped)} dropped) in {t_landmarks:.1f} s",
+          flush=True)
+    crop = face_crop([f["face"].landmarks_px for f in kept], cfg.size, (info.width, info.height))
+    f_full = 0.5 * info.width / math.tan(math.radians(cfg.fov_deg) / 2)
+    cx, cy = crop.points(np.array([info.width / 2, info.height / 2], np.float32))
+    k = Intrinsics(f_full * crop.scale, f_full * crop.scale, float(cx), float(cy))
+    faces: list[Face] = [f["face"] for f in kept]
+    targets = np.stack([crop.points(f.landmarks_px[corr.mp_ids]) for f in faces])
+    result = fit_frames(cfg, model, corr.vertex_ids, faces, targets, k)
+    # The error that counts: the full head model's forward pass with the fitted controls, projected.
+    with torch.inference_mode():
+        verts = Head(model).pose(result.controls)[0]
+    pixels = project(verts, k).numpy()
+    errors = np.linalg.norm(pixels[:, corr.vertex_ids] - targets, axis=-1)
+
+    partial = cfg.out.with_name(cfg.out.name + ".partial")
+    if partial.exists():
+        shutil.rmtree(partial)
+    (partial / "tracking").mkdir(parents=True)
+    print("cutting masks...", flush=True)
+    t_masks = time.perf_counter()
+    crops = [crop.image(f["rgb"]) for f in kept]
+    masks = [foreground_mask(img, crop.points(face.landmarks_px[:468])) for img, face in zip(crops, faces, strict=True)]
+    t_masks = time.perf_counter() - t_masks
+    splits, per_frame = write_frames(cfg, partial, kept, crops, masks, crop, k, result, errors, info.fps)
+    if cfg.overlay:
+        write_video((overlay(img, pixels[j], model, targets[j], pixels[j][corr.vertex_ids])
+                     for j, img in enumerate(crops)), partial / "tracking" / "overlay.mp4", fps=cfg.fps or info.fps)
+    total = time.perf_counter() - t_start
+    report = {
+        "video": str(cfg.video), "head_model": absolute_head_spec(cfg.head), "frames_read": read,
+        "frames_kept": len(kept),
+        "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
+        "landmarks_used": len(corr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
+        "face_width_px": face_width_px(faces, crop),
+        "crop": {"x0": round(crop.x0, 1), "y0": round(crop.y0, 1), "side": round(crop.side, 1),
+                 "whole_frame": crop.side >= min(info.width, info.height) - 0.5},
+        "fov_deg": cfg.fov_deg,
+        "landmark_error_px": {"median": round(float(np.median(errors)), 3),
+                              "p95": round(float(np.percentile(errors, 95)), 3),
+                              "worst_frame_median": round(float(max(p["median_px"] for p in per_frame)), 3)},
+        "seconds": {"landmarks": round(t_landmarks, 2), "fit": round(result.seconds, 2), "masks": round(t_masks, 2),
+                    "total": round(total, 2)},
+        "seconds_per_frame": round(total / read, 4), "per_frame": per_frame,
+    }
+    (partial / "tracking" / "report.json").write_text(json.dumps(report, indent=1) + "\n")
+    partial.rename(cfg.out)
+    le = report["landmark_error_px"]
+    print(f"wrote {cfg.out}: {report['splits']['train']} train, {report['splits']['val']} val, "
+          f"{report['splits']['test']} test frames; landmark error median {le['median']:.2f} px, "
+          f"95th percentile {le['p95']:.2f} px ({cfg.size} px images, the face {report['face_width_px']['median']:.0f} "
+          f"px wide); {total:.1f} s ({report['seconds_per_frame']:.3f} s a frame)"
+          + (f"; overlay {cfg.out / 'tracking' / 'overlay.mp4'}" if cfg.overlay else ""))
+    return 0
+
+
+def check_config(cfg: TrackConfig) -> None:
     if cfg.out.exists():
         raise UserInputError(f"{cfg.out}: already exists; choose a new dataset folder")
     if not 32 <= cfg.size <= 2048:
         raise UserInputError(f"--size {cfg.size}: must be 32..2048 pixels")
     if not 0 < cfg.fov_deg < 170:
         raise UserInputError(f"--fov-deg {cfg.fov_deg}: must be between 0 and 170 degrees")
-    bundle = landmarker_path(cfg)
-    model = load_head(cfg.head)
-    canonical, _ = canonical_face_mesh(bundle)
-    corr = correspond(model, canonical)
+
+
+def sharp_faces(cfg: TrackConfig, bundle: Path) -> tuple[list[dict], list[dict], int]:
+    """The frames with one face, sharp enough (the face's sharpness against the video's median), with progress:
+    a bar on a terminal, a line every 25 frames in a log (the studio's job list shows its last line)."""
     tty = sys.stderr.isatty()
     bar = tqdm(desc="landmarks", unit="frame", disable=not tty)
 
@@ -156,14 +222,11 @@ def run_track(cfg: TrackConfig) -> int:
             bar.total = total
             bar.n = done
             bar.refresh()
-        elif done % 25 == 0:  # a log (the studio's job list shows its last line)
+        elif done % 25 == 0:
             print(f"landmarks: {done}" + (f" of about {total}" if total else "") + " frames", flush=True)
 
-    info = video_info(cfg.video)
     kept, dropped, read = detect_faces(cfg, bundle, progress)
     bar.close()
-    t_landmarks = time.perf_counter() - t_start
-    # Blur: the face's sharpness against the video's median.
     sharp = np.array([sharpness(f["rgb"], f["face"].landmarks_px) for f in kept])
     limit = cfg.blur * float(np.median(sharp))
     for f, s in zip(list(kept), sharp, strict=True):
@@ -173,56 +236,42 @@ def run_track(cfg: TrackConfig) -> int:
                             "reason": f"blurred (sharpness {s:.0f} < {limit:.0f})"})
     if len(kept) < 10:
         raise UserInputError(f"{cfg.video}: only {len(kept)} sharp frames with a face (at least 10 are needed)")
-    print(f"{cfg.video}: {len(kept)} of {read} frames kept ({len(dropped)} dropped) in {t_landmarks:.1f} s",
-          flush=True)
+    return kept, dropped, read
 
-    crop = face_crop([f["face"].landmarks_px for f in kept], cfg.size, (info.width, info.height))
-    f_full = 0.5 * info.width / math.tan(math.radians(cfg.fov_deg) / 2)
-    cx, cy = crop.points(np.array([info.width / 2, info.height / 2], np.float32))
-    k = Intrinsics(f_full * crop.scale, f_full * crop.scale, float(cx), float(cy))
-    faces: list[Face] = [f["face"] for f in kept]
-    targets = np.stack([crop.points(f.landmarks_px[corr.mp_ids]) for f in faces])
+
+def fit_frames(cfg: TrackConfig, model, vertex_ids: np.ndarray, faces: list[Face], targets: np.ndarray,
+               k: Intrinsics):
+    """The head model fitted to every frame's landmarks (targets (N,L,2), crop pixels), started from the
+    blendshape scores."""
     init_expr = np.stack([expression_from_scores(model, f.blendshapes) for f in faces])
     init_jaw = np.stack([jaw_from_scores(f.blendshapes) for f in faces])
     gaze = np.stack([gaze_from_scores(f.blendshapes) for f in faces])
-    print(f"fitting {model.name} to {len(kept)} frames...", flush=True)
+    print(f"fitting {model.name} to {len(faces)} frames...", flush=True)
     base = FitConfig()
     fit_cfg = replace(base, iterations=cfg.iterations, shape_components=cfg.shape_components,
                       smooth_rotation=base.smooth_rotation * cfg.smooth,
                       smooth_translation=base.smooth_translation * cfg.smooth,
                       smooth_expression=base.smooth_expression * cfg.smooth)
-    result = fit(model, corr.vertex_ids, targets, k, init_expr, init_jaw, gaze, fit_cfg)
-    print(f"fitted {model.name} to {len(kept)} frames ({len(corr.mp_ids)} landmarks) in {result.seconds:.1f} s",
+    result = fit(model, vertex_ids, targets, k, init_expr, init_jaw, gaze, fit_cfg)
+    print(f"fitted {model.name} to {len(faces)} frames ({targets.shape[1]} landmarks) in {result.seconds:.1f} s",
           flush=True)
+    return result
 
-    # The error that counts: the full head model's forward pass with the fitted controls, projected.
-    head = Head(model)
-    with torch.inference_mode():
-        verts = head.pose(result.controls)[0]
-    pixels = project(verts, k).numpy()
-    errors = np.linalg.norm(pixels[:, corr.vertex_ids] - targets, axis=-1)
 
-    partial = cfg.out.with_name(cfg.out.name + ".partial")
-    if partial.exists():
-        shutil.rmtree(partial)
-    (partial / "images").mkdir(parents=True)
+def write_frames(cfg: TrackConfig, partial: Path, kept: list[dict], crops: list[np.ndarray], masks: list[np.ndarray],
+                 crop, k: Intrinsics, result, errors: np.ndarray, video_fps: float
+                 ) -> tuple[dict[str, list[dict]], list[dict]]:
+    """Images over the background colour measured outside the masks, masks, and the three splits' transforms;
+    returns the splits and each frame's landmark error."""
+    (partial / "images").mkdir()
     (partial / "masks").mkdir()
-    (partial / "tracking").mkdir()
-    print("cutting masks...", flush=True)
-    t_masks = time.perf_counter()
-    crops, masks = [], []
-    for f, face in zip(kept, faces, strict=True):
-        img = crop.image(f["rgb"])
-        crops.append(img)
-        masks.append(foreground_mask(img, crop.points(face.landmarks_px[:468])))
-    t_masks = time.perf_counter() - t_masks
     fg_pixels = np.concatenate([c[m < 0.5] for c, m in zip(crops, masks, strict=True)])
     background = (np.median(fg_pixels, 0) / 255.0 if len(fg_pixels) else np.full(3, 0.5)).astype(np.float32)
     n_test = max(1, math.ceil(cfg.test_fraction * len(kept)))
     header = {"camera_angle_x": 2 * math.atan(0.5 * cfg.size / k.fx), "intrinsics": [k.fx, k.fy, k.cx, k.cy],
               "width": cfg.size, "height": cfg.size, "head_model": absolute_head_spec(cfg.head),
               "shape": result.shape.tolist(), "background": background.tolist(),
-              "source": {"video": str(cfg.video.resolve()), "fps": cfg.fps or info.fps, "fov_deg": cfg.fov_deg,
+              "source": {"video": str(cfg.video.resolve()), "fps": cfg.fps or video_fps, "fov_deg": cfg.fov_deg,
                          "crop": {"x0": crop.x0, "y0": crop.y0, "side": crop.side}}}
     splits: dict[str, list[dict]] = {"train": [], "val": [], "test": []}
     per_frame = []
@@ -248,38 +297,7 @@ def run_track(cfg: TrackConfig) -> int:
                           "p95_px": round(float(np.percentile(e, 95)), 3)})
     for split, frames in splits.items():
         write_split(partial, split, header, frames)
-    overlay_path = None
-    if cfg.overlay:
-        overlay_path = partial / "tracking" / "overlay.mp4"
-        write_video((overlay(img, pixels[j], model, targets[j], pixels[j][corr.vertex_ids])
-                     for j, img in enumerate(crops)), overlay_path, fps=cfg.fps or info.fps)
-    total = time.perf_counter() - t_start
-    report = {
-        "video": str(cfg.video), "head_model": absolute_head_spec(cfg.head), "frames_read": read,
-        "frames_kept": len(kept),
-        "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
-        "landmarks_used": len(corr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
-        "face_width_px": face_width_px(faces, crop),
-        "crop": {"x0": round(crop.x0, 1), "y0": round(crop.y0, 1), "side": round(crop.side, 1),
-                 "whole_frame": crop.side >= min(info.width, info.height) - 0.5},
-        "fov_deg": cfg.fov_deg,
-        "landmark_error_px": {"median": round(float(np.median(errors)), 3),
-                              "p95": round(float(np.percentile(errors, 95)), 3),
-                              "worst_frame_median": round(float(max(p["median_px"] for p in per_frame)), 3)},
-        "seconds": {"landmarks": round(t_landmarks, 2), "fit": round(result.seconds, 2), "masks": round(t_masks, 2),
-                    "total": round(total, 2)},
-        "seconds_per_frame": round(total / read, 4), "per_frame": per_frame,
-    }
-    (partial / "tracking" / "report.json").write_text(json.dumps(report, indent=1) + "\n")
-    partial.rename(cfg.out)
-    le = report["landmark_error_px"]
-    print(f"wrote {cfg.out}: {report['splits']['train']} train, {report['splits']['val']} val, "
-          f"{report['splits']['test']} test frames; landmark error median {le['median']:.2f} px, "
-          f"95th percentile {le['p95']:.2f} px ({cfg.size} px images, the face {report['face_width_px']['median']:.0f} "
-          f"px wide); {total:.1f} s "
-          f"({report['seconds_per_frame']:.3f} s a frame)"
-          + (f"; overlay {cfg.out / 'tracking' / 'overlay.mp4'}" if overlay_path else ""))
-    return 0
+    return splits, per_frame
 
 
 _EDGES: dict[int, np.ndarray] = {}
