@@ -301,7 +301,7 @@ class ResumeJob(Command):
 
 @dataclass(frozen=True)
 class ExportTurntable(Command):
-    """A turntable of the open avatar with the current controls (cfg.avatar is filled in by the application)."""
+    """A turntable (cfg.avatar: the open avatar's folder) with the controls shown now."""
 
     cfg: TurntableConfig
 

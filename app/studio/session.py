@@ -1,5 +1,6 @@
-"""What the studio shows, apart from widgets: the open avatar, the controls as sliders hold them, the
-orbit camera, the capture's frames for the timeline. Plain state and conversions, no GL, no imgui."""
+"""What the studio shows, as one value (Session) apart from widgets: the open avatar's files and its capture, the
+controls as the sliders hold them, the orbit camera, the display settings, the timeline, the messages. Plain
+state and conversions, no GL, no imgui; panels change it only through app/studio/actions.py."""
 
 from __future__ import annotations
 
