@@ -53,7 +53,8 @@ def add_config_arguments(parser: argparse.ArgumentParser, cls: type, positional:
         help_text = docs.get(f.name, "")
         if not required and default not in (None, (), False):
             help_text += f" (default: {' '.join(map(str, default)) if isinstance(default, tuple) else default})"
-        kw: dict = {"help": help_text, "dest": f.name}
+        # Help texts are the fields' docstrings, not format strings: a "10%" must not reach argparse's % formatting.
+        kw: dict = {"help": help_text.replace("%", "%%"), "dest": f.name}
         origin = typing.get_origin(tp)
         if tp is bool:
             kw.update(action=argparse.BooleanOptionalAction, default=default)

@@ -153,3 +153,18 @@ def test_help_comes_from_the_config_docstrings():
     r = run_cli("preview", "--help")
     assert r.returncode == 0
     assert "Camera orbit about the vertical axis, degrees" in r.stdout
+
+
+def test_every_subcommand_has_a_help_that_formats(capsys):
+    """A docstring with a "%" (synth's "about 10%") once broke argparse's help formatting: every command's --help
+    exits 0 and shows its options' docstrings."""
+    from app.commands import COMMANDS
+
+    for command in COMMANDS:
+        with pytest.raises(SystemExit) as e:
+            main([command.name, "--help"])
+        assert e.value.code == 0, command.name
+        capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["synth", "--help"])
+    assert "(about 10%)" in " ".join(capsys.readouterr().out.split())  # the docstring's own words, % and all
