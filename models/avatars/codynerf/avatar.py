@@ -215,13 +215,13 @@ class CoDyNeRFAvatar(Avatar):
         assert omega.shape[0] == 1 and phi.shape[0] == 1, "one code per batch of rays (a frame's, or the mean)"
         samples = samples if samples is not None else render.sample_rays(rays, geo.box_min, geo.box_max, settings,
                                                                           generator)
-        d, sigma, weights, remaining = self._densities(rays, geo, omega, samples, settings)
+        pts, d, sigma, weights, remaining = self._densities(rays, geo, omega, samples, settings)
         if settings.fine > 0:
             samples = render.with_fine_pass(samples, weights, settings.fine, generator)
-            d, sigma, weights, remaining = self._densities(rays, geo, omega, samples, replace(settings, stop_below=0))
+            pts, d, sigma, weights, remaining = self._densities(rays, geo, omega, samples,
+                                                                replace(settings, stop_below=0))
         shown = render.shown_samples(d, weights, rays.directions, settings.min_weight)
-        mesh_vis = geo.light.visibility(render.sample_points(rays, samples)[shown.keep]) \
-            if self.field_cfg.shadow_factor else None
+        mesh_vis = geo.light.visibility(pts[shown.keep]) if self.field_cfg.shadow_factor else None
         lit, factor, visibility = self.field.appearance_terms(shown.field, shown.prior, shown.view, phi,
                                                               geo.landmarks, mesh_vis)
         R, S = weights.shape
@@ -241,7 +241,8 @@ class CoDyNeRFAvatar(Avatar):
 
     def _densities(self, rays: Rays, geo: FrameGeometry, omega: torch.Tensor, samples: render.RaySamples,
                    settings: render.RaySettings):
-        """The field at the samples (all, or with the early stop), and the compositing weights."""
+        """The samples' points (R*S,3), the field there (all, or with the early stop), sigma (R,S), the compositing
+        weights (R,S) and the light left (R,)."""
         pts = render.sample_points(rays, samples)
         S = samples.t_starts.shape[1]
         valid = samples.valid.repeat_interleave(S)
@@ -260,7 +261,7 @@ class CoDyNeRFAvatar(Avatar):
             return render.Densities(keep, prior_in, out, support[inside])
 
         d = render.densities_early_stop(evaluate, samples, settings.stop_below)
-        return (d, *render.weights_of(d, samples))
+        return (pts, d, *render.weights_of(d, samples))
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
         """The losses of Eq. 9-14 (and the shadow factor's) on one frame's rays, weighted."""
@@ -309,8 +310,8 @@ class CoDyNeRFAvatar(Avatar):
             elif name == "rgb_no_shadows":  # no factor: the neutral head's shadow inputs, no expression or pose
                 zero = torch.zeros_like(r.shown.prior.offset)
                 neutral = replace(r.shown.prior, expression_offset=zero, pose_offset=zero)
-                landmarks = self.geometry(Controls(shape=geometry.shape)).landmarks.to(zero.device)
-                result[name] = composite(r.weights, self._colour(r, r.shown.field, neutral, landmarks),
+                result[name] = composite(r.weights, self._colour(r, r.shown.field, neutral,
+                                                                 geometry.neutral_landmarks),
                                          r.remaining, self.background)
             elif name == "rgb_light":  # the key light's visibility (1: no cast shadow), grey
                 light = composite(r.weights, r.to_rays(r.visibility), r.remaining, r.visibility.new_ones(1))

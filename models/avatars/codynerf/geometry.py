@@ -28,7 +28,7 @@ class FrameGeometry:
     landmarks: torch.Tensor  # (1, 3L) relative to the landmarks' centre
     box_min: torch.Tensor  # (3,)
     box_max: torch.Tensor  # (3,)
-    shape: np.ndarray  # (S,) the identity coefficients (the neutral head of inspection buffers)
+    neutral_landmarks: torch.Tensor  # (1, 3L) the same for the neutral head (no expression, no pose): inspection
     light: LightDepthMap | None = None  # the posed mesh seen from the key light, where the shadow factor reads it
 
     @property
@@ -41,7 +41,7 @@ class FrameGeometry:
         m = self.meshes
         return FrameGeometry(PriorMeshes(*(t.to(device) for t in (m.canonical, m.expressed, m.posed, m.normals))),
                              self.tree, self.landmarks.to(device), self.box_min.to(device), self.box_max.to(device),
-                             self.shape, None if self.light is None else self.light.to(device))
+                             self.neutral_landmarks.to(device), None if self.light is None else self.light.to(device))
 
 
 @torch.no_grad()
@@ -52,10 +52,9 @@ def frame_geometry(head: Head, controls: Controls, box_margin_m: float) -> Frame
     v, _, lm = head.pose([neutral, unposed, controls])
     posed = v[2]
     normals = torch.as_tensor(vertex_normals(posed.cpu().numpy(), head.model.triangles)).to(posed.device)
-    lm_rel = lm[2] - lm[2].mean(0) if lm.shape[1] else torch.zeros(1, 3, device=posed.device)
-    return FrameGeometry(PriorMeshes(v[0], v[1], posed, normals), vertex_tree(posed), lm_rel.reshape(1, -1),
-                         posed.min(0).values - box_margin_m, posed.max(0).values + box_margin_m,
-                         np.asarray(controls.shape, np.float32))
+    centred = lambda p: (p - p.mean(0) if lm.shape[1] else torch.zeros(1, 3, device=posed.device)).reshape(1, -1)
+    return FrameGeometry(PriorMeshes(v[0], v[1], posed, normals), vertex_tree(posed), centred(lm[2]),
+                         posed.min(0).values - box_margin_m, posed.max(0).values + box_margin_m, centred(lm[0]))
 
 
 def with_light_depth(geo: FrameGeometry, triangles: np.ndarray, light_dir: tuple[float, float, float],
