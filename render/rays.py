@@ -1,6 +1,6 @@
 """Rays through a camera's pixels and what a rasterized mesh tells them: pure numpy/torch, no GL. The GL
-rasterizer (render/gl/raster.py) fills a Raster; these functions turn it into distances along rays, and
-per-ray results back into images."""
+rasterizer (render/gl/raster.py) fills a Raster (triangle, depth, barycentrics and each ray's distance to the
+surface, met with the triangle's plane here); per-ray results go back into images."""
 
 from __future__ import annotations
 
@@ -19,10 +19,16 @@ class Raster:
     triangle: np.ndarray  # (H,W) int, -1 where the pixel sees no surface
     depth: np.ndarray  # (H,W) metres along the view axis, inf where no surface
     bary: np.ndarray  # (H,W,3) barycentric coordinates of the visible point (0 where no surface)
-    distance: np.ndarray | None = None
+    distance: np.ndarray
     """(H,W) metres along each pixel's unit ray to the visible point, inf where no surface: the ray met with its
     triangle's plane in float64, so that a crop of a camera, whose rays are the same, gets the same distances
-    (the GL depth differs between the two in its last bits). None: derive it from the depth."""
+    (the GL depth differs between the two in its last bits)."""
+
+    @staticmethod
+    def empty(height_px: int, width_px: int) -> Raster:
+        """A camera's view of no mesh at all."""
+        shape = (height_px, width_px)
+        return Raster(np.full(shape, -1), np.full(shape, np.inf), np.zeros((*shape, 3)), np.full(shape, np.inf))
 
     @property
     def hit(self) -> np.ndarray:
@@ -76,32 +82,6 @@ def image_rays(camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
     """The camera's origin (1,3) and its pixels' unit ray directions (H*W,3), float32, rows top first."""
     origin, dirs = pixel_rays(camera)
     return torch.as_tensor(origin, dtype=torch.float32)[None], torch.as_tensor(dirs.reshape(-1, 3), dtype=torch.float32)
-
-
-def surface_distance(raster: Raster, cos_view: np.ndarray) -> np.ndarray:
-    """(H,W) distance along each pixel's unit ray to the visible surface, inf where it misses: the raster's
-    exact distance where it has one, else the view depth over the cosine between the ray and the view axis
-    (cos_view, (H,W)).
-
-    >>> r = Raster(np.array([[0, -1]]), np.array([[2.0, np.inf]]), np.zeros((1, 2, 3)))
-    >>> surface_distance(r, np.array([[0.5, 1.0]])).tolist()  # 2 m deep at 60 degrees off axis: 4 m along the ray
-    [[4.0, inf]]
-    """
-    if raster.distance is not None:
-        return raster.distance.astype(np.float32)
-    return np.where(raster.hit, raster.depth / np.maximum(cos_view, 1e-6), np.inf).astype(np.float32)
-
-
-def camera_surface_distance(raster: Raster, camera: Camera, directions: np.ndarray) -> np.ndarray:
-    """(H,W) surface distance along the camera's pixel rays (directions (H*W,3) or (H,W,3), world, unit)."""
-    cos_view = (np.asarray(directions).reshape(-1, 3) @ -np.linalg.inv(camera.view)[:3, 2]).reshape(raster.hit.shape)
-    return surface_distance(raster, cos_view)
-
-
-def ray_triangle_barycentric(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates (N,3) where rays (origin, (N,3) dirs) meet the planes of (N,3,3) triangles
-    (Moller-Trumbore without the inside test: the rasterizer already chose the triangle)."""
-    return ray_triangle_hit(origin, dirs, tri)[0]
 
 
 def ray_triangle_hit(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -28,7 +28,7 @@ from models.head.head import Head
 from models.head.model import HeadModel
 from render.camera import Camera
 from render.gl.raster import Rasterizer
-from render.rays import Raster, Rays, camera_surface_distance, image_rays, rays_to_images
+from render.rays import Raster, Rays, image_rays, rays_to_images
 
 BACKGROUND = "background"
 """The fill of colour buffers outside the rendered pixels: the avatar's background colour."""
@@ -80,7 +80,6 @@ class Avatar(nn.Module, ABC):
         super().__init__()
         self.head_model = head_model
         self.head = Head(head_model)
-        self.n_frames = n_frames
         self.register_buffer("background", torch.as_tensor(np.asarray(background, np.float32)))
         self.presets: dict[str, Preset] = {k: Preset(q) for k, q in BUILTIN_PRESETS.items()}
         """draft/preview/final: those `bench` measured on this avatar (presets.json), else the built-in ones."""
@@ -190,14 +189,11 @@ class Avatar(nn.Module, ABC):
     def image_rays(self, geometry: Any, camera: Camera, rasterizer: Rasterizer | None) -> tuple[Rays, np.ndarray]:
         """The rays of the pixels this avatar renders, and their flat pixel indices."""
         origin, dirs = image_rays(camera)
-        if rasterizer is None:
-            raster = Raster(np.full((camera.height_px, camera.width_px), -1), np.full(
-                (camera.height_px, camera.width_px), np.inf), np.zeros((camera.height_px, camera.width_px, 3)))
-        else:
-            raster = rasterizer.rasterize(geometry.posed.cpu().numpy(), self.head_model.triangles, camera)
-        surface_t = camera_surface_distance(raster, camera, dirs.numpy())
+        raster = Raster.empty(camera.height_px, camera.width_px) if rasterizer is None else \
+            rasterizer.rasterize(geometry.posed.cpu().numpy(), self.head_model.triangles, camera)
         idx = np.nonzero(self.image_pixels(camera, raster).ravel())[0]
-        return Rays(origin.expand(len(idx), 3), dirs[idx], torch.as_tensor(surface_t.ravel()[idx])), idx
+        surface_t = torch.as_tensor(raster.distance.ravel()[idx], dtype=torch.float32)
+        return Rays(origin.expand(len(idx), 3), dirs[idx], surface_t), idx
 
     def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer | None, frame: int | None = None,
                      should_stop: Callable[[], bool] | None = None, inspect: bool = False) -> dict[str, np.ndarray]:

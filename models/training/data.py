@@ -15,7 +15,7 @@ from models.capture.dataset import CaptureSplit
 from models.capture.frames import camera_of, foreground_reach_m, load_mask, load_rgb
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
-from render.rays import camera_directions, surface_distance
+from render.rays import camera_directions
 
 
 @dataclass
@@ -62,7 +62,7 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet
         if "mask_path" in f.extra:
             masks.append(load_mask(f.extra["mask_path"]))
             reach.append(foreground_reach_m(r.hit, r.depth, masks[-1], cam.focal_px()))
-        surf.append(surface_distance(r, -dirs_cam[..., 2]))  # -z: the view-axis part of each unit direction
+        surf.append(r.distance.astype(np.float32))
         origins.append(f.camera_to_world[:3, 3])
         dirs.append(dirs_cam @ f.camera_to_world[:3, :3].T)
         geos.append(geo)

@@ -91,7 +91,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
     resumed = load_checkpoint(cfg.out, with_train_state=True) if cfg.resume else None
     if resumed is not None:  # the checkpoint's own model and sizes (an older one: no shadow factor)
         cls = avatar_class(resumed.meta.get("model", DEFAULT_MODEL))
-        avatar = cls.from_meta(head, {**resumed.meta, "frames": len(split.frames), "background": bg.tolist()})
+        avatar = cls.from_meta(head, resumed.meta)
     else:
         avatar = avatar_class(cfg.model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects),
                                                      split.lighting, model_config)

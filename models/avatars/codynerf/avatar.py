@@ -31,6 +31,7 @@ from models.head.model import HeadModel
 from render.camera import Camera
 from render.gl.raster import Rasterizer
 from render.rays import Raster, Rays
+from render.sampling import fine_samples
 from render.volume import composite, expected_depth
 
 
@@ -118,7 +119,7 @@ class CoDyNeRFAvatar(Avatar):
     def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
                     lighting: dict | None, config: LossWeights | None = None) -> CoDyNeRFAvatar:
         field_cfg = FieldConfig(effects=effects, light_dir=key_light_dir(lighting) if "shadows" in effects else None)
-        return cls(head_model, field_cfg, n_frames, background, RenderConfig(), config or LossWeights())
+        return cls(head_model, field_cfg, n_frames, background, RenderConfig(), config)
 
     @classmethod
     def from_meta(cls, head_model: HeadModel, meta: dict) -> CoDyNeRFAvatar:
@@ -208,28 +209,26 @@ class CoDyNeRFAvatar(Avatar):
         return self.trace(rays, geometry, omega, phi, self.settings(training, create_graph), generator)
 
     def trace(self, rays: Rays, geo: FrameGeometry, omega: torch.Tensor, phi: torch.Tensor,
-              settings: render.RaySettings, generator: torch.Generator | None = None,
-              samples: render.RaySamples | None = None) -> RayOutput:
+              settings: render.RaySettings, generator: torch.Generator | None = None) -> RayOutput:
         """render_rays with given codes (1,C) and settings: sample, evaluate the density, (a fine pass),
         colour the samples that show, composite."""
         assert omega.shape[0] == 1 and phi.shape[0] == 1, "one code per batch of rays (a frame's, or the mean)"
-        samples = samples if samples is not None else render.sample_rays(rays, geo.box_min, geo.box_max, settings,
-                                                                          generator)
+        samples = render.sample_rays(rays, geo.box_min, geo.box_max, settings, generator)
         pts, d, sigma, weights, remaining = self._densities(rays, geo, omega, samples, settings)
         if settings.fine > 0:
-            samples = render.with_fine_pass(samples, weights, settings.fine, generator)
+            samples = fine_samples(samples, weights.detach(), settings.fine, generator)
             pts, d, sigma, weights, remaining = self._densities(rays, geo, omega, samples,
                                                                 replace(settings, stop_below=0))
         shown = render.shown_samples(d, weights, rays.directions, settings.min_weight)
         mesh_vis = geo.light.visibility(pts[shown.keep]) if self.field_cfg.shadow_factor else None
         lit, factor, visibility = self.field.appearance_terms(shown.field, shown.prior, shown.view, phi,
                                                               geo.landmarks, mesh_vis)
+        lit = shown.to_rays(lit)
+        factor = None if factor is None else shown.to_rays(factor)
+        internals = render.CoDyNeRFRays(samples, d, sigma, weights, remaining, shown, phi, mesh_vis, lit, factor,
+                                        visibility)
+        colour = lit * (1.0 if factor is None else factor)
         R, S = weights.shape
-        internals = render.CoDyNeRFRays(samples, d, sigma, weights, remaining, shown, phi, mesh_vis, None, None,
-                                 visibility)
-        internals.lit = internals.to_rays(lit)
-        internals.factor = None if factor is None else internals.to_rays(factor)
-        colour = internals.lit * (1.0 if internals.factor is None else internals.factor)
         buffers = {"rgb": composite(weights, colour, remaining, self.background), "opacity": weights.sum(-1),
                    "depth": expected_depth(weights, samples.t_mid)}
         if d.field.normal is not None:
@@ -314,7 +313,7 @@ class CoDyNeRFAvatar(Avatar):
                                                                  geometry.neutral_landmarks),
                                          r.remaining, self.background)
             elif name == "rgb_light":  # the key light's visibility (1: no cast shadow), grey
-                light = composite(r.weights, r.to_rays(r.visibility), r.remaining, r.visibility.new_ones(1))
+                light = composite(r.weights, r.shown.to_rays(r.visibility), r.remaining, r.visibility.new_ones(1))
                 result[name] = light.expand(len(r.weights), 3)
             elif name == "rgb_flat":  # every surface facing the viewer: the shading's contribution is what changes
                 flat = replace(r.shown.field, normal=r.shown.view)
@@ -324,7 +323,8 @@ class CoDyNeRFAvatar(Avatar):
 
     def _colour(self, r: render.CoDyNeRFRays, field_out, prior, landmarks: torch.Tensor) -> torch.Tensor:
         """(R,S,3) the colour of the shown samples under other appearance inputs."""
-        return r.to_rays(self.field.appearance(field_out, prior, r.shown.view, r.phi, landmarks, r.mesh_visibility))
+        colour = self.field.appearance(field_out, prior, r.shown.view, r.phi, landmarks, r.mesh_visibility)
+        return r.shown.to_rays(colour)
 
     def layout(self) -> dict[str, tuple[int, float | str]]:
         return super().layout() | {"normals": (3, 0.0), "grad_normals": (3, 0.0), "rgb_no_shadows": (3, BACKGROUND),

@@ -13,7 +13,7 @@ import torch
 from models.avatars.codynerf.field import FieldOutput
 from models.avatars.codynerf.prior import PriorSamples
 from render.rays import Rays
-from render.sampling import RaySamples, fine_samples, shell_or_box_samples
+from render.sampling import RaySamples, shell_or_box_samples
 from render.volume import weights_from_density
 
 
@@ -116,13 +116,15 @@ class Shown:
     prior: PriorSamples
     keep: torch.Tensor  # (M,) flat sample indices
     view: torch.Tensor  # (M,3) unit, towards the camera
+    evaluated: torch.Tensor  # (N,) the Densities' flat sample indices
+    rays_shape: tuple[int, int]  # (R,S)
 
-    def to_rays(self, values: torch.Tensor, n_evaluated: int, all_keep: torch.Tensor, R: int, S: int
-                ) -> torch.Tensor:
+    def to_rays(self, values: torch.Tensor) -> torch.Tensor:
         """Values (M,C) of the shown samples -> (R,S,C), zero at the others."""
+        R, S = self.rays_shape
         if self.which is not None:
-            values = scatter(values, self.which, n_evaluated)
-        return scatter(values, all_keep, R * S).reshape(R, S, -1)
+            values = scatter(values, self.which, len(self.evaluated))
+        return scatter(values, self.evaluated, R * S).reshape(R, S, -1)
 
 
 def shown_samples(d: Densities, weights: torch.Tensor, directions: torch.Tensor, min_weight: float) -> Shown:
@@ -130,12 +132,12 @@ def shown_samples(d: Densities, weights: torch.Tensor, directions: torch.Tensor,
     R, S = weights.shape
     view = (-directions[:, None]).expand(R, S, 3).reshape(-1, 3)[d.keep]
     if min_weight <= 0:  # every sample (training): no subset copies
-        return Shown(None, d.field, d.prior, d.keep, view)
+        return Shown(None, d.field, d.prior, d.keep, view, d.keep, (R, S))
     which = torch.nonzero(weights.reshape(-1)[d.keep] > min_weight).squeeze(1)
     g = d.field
     field_shown = FieldOutput(g.sigma[which], g.rgb[which], g.x_canonical[which],
                               None if g.normal is None else g.normal[which])
-    return Shown(which, field_shown, d.prior.take(which), d.keep[which], view[which])
+    return Shown(which, field_shown, d.prior.take(which), d.keep[which], view[which], d.keep, (R, S))
 
 
 def weights_of(d: Densities, samples: RaySamples) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -144,12 +146,6 @@ def weights_of(d: Densities, samples: RaySamples) -> tuple[torch.Tensor, torch.T
     sigma = d.sigma(R, S)
     weights, remaining = weights_from_density(sigma, samples.deltas)
     return sigma, weights, remaining
-
-
-def with_fine_pass(samples: RaySamples, weights: torch.Tensor, n: int, generator: torch.Generator | None
-                   ) -> RaySamples:
-    """The samples of the second pass: the first pass's and n more where its weights lie."""
-    return fine_samples(samples, weights.detach(), n, generator)
 
 
 @dataclass
@@ -169,8 +165,3 @@ class CoDyNeRFRays:
     visibility: torch.Tensor | None  # (M,1) the key light's visibility S at the shown samples
     point_normal: torch.Tensor | None = None  # (R,S,3)
     point_grad_normal: torch.Tensor | None = None  # (R,S,3)
-
-    def to_rays(self, values: torch.Tensor) -> torch.Tensor:
-        """Values (M,C) of the shown samples -> (R,S,C)."""
-        R, S = self.weights.shape
-        return self.shown.to_rays(values, len(self.densities.keep), self.densities.keep, R, S)

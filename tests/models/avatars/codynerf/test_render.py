@@ -122,8 +122,8 @@ def test_exact_compositing_gradients_by_gradcheck():
     def image(sigma: torch.Tensor, rgb: torch.Tensor) -> torch.Tensor:
         d = render.Densities(keep, prior, FieldOutput(sigma, rgb, rgb), torch.ones_like(sigma))
         _, weights, remaining = render.weights_of(d, samples)
-        shown = render.Shown(None, d.field, prior, keep, rgb)
-        colour = shown.to_rays(torch.sigmoid(rgb), len(keep), keep, R, S)
+        shown = render.Shown(None, d.field, prior, keep, rgb, keep, (R, S))
+        colour = shown.to_rays(torch.sigmoid(rgb))
         return composite(weights, colour, remaining, torch.tensor([1.0, 0.5, 0.0], dtype=torch.float64))
 
     g = torch.Generator().manual_seed(0)
