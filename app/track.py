@@ -36,7 +36,7 @@ from models.tracking.canonical import canonical_face_mesh
 from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
 from models.tracking.landmarker import Face, Landmarker
-from models.tracking.masks import foreground_mask
+from models.tracking.masks import background_plate, foreground_mask
 from models.tracking.video import face_crop, sampled_frames, video_info
 from render.video import write_video
 
@@ -170,7 +170,7 @@ def run_track(cfg: TrackConfig) -> int:
     crops = [crop.image(f["rgb"]) for f in kept]
     masks = [foreground_mask(img, crop.points(face.landmarks_px[:468])) for img, face in zip(crops, faces, strict=True)]
     t_masks = time.perf_counter() - t_masks
-    splits, per_frame = write_frames(cfg, partial, kept, crops, masks, crop, k, result, errors, info.fps)
+    splits, per_frame, plate_report = write_frames(cfg, partial, kept, crops, masks, crop, k, result, errors, info.fps)
     if cfg.overlay:
         write_video((overlay(img, pixels[j], model, targets[j], pixels[j][corr.vertex_ids])
                      for j, img in enumerate(crops)), partial / "tracking" / "overlay.mp4", fps=cfg.fps or info.fps)
@@ -183,7 +183,7 @@ def run_track(cfg: TrackConfig) -> int:
         "face_width_px": face_width_px(faces, crop),
         "crop": {"x0": round(crop.x0, 1), "y0": round(crop.y0, 1), "side": round(crop.side, 1),
                  "whole_frame": crop.side >= min(info.width, info.height) - 0.5},
-        "fov_deg": cfg.fov_deg,
+        "fov_deg": cfg.fov_deg, "background_plate": plate_report,
         "landmark_error_px": {"median": round(float(np.median(errors)), 3),
                               "p95": round(float(np.percentile(errors, 95)), 3),
                               "worst_frame_median": round(float(max(p["median_px"] for p in per_frame)), 3)},
@@ -260,25 +260,29 @@ def fit_frames(cfg: TrackConfig, model, vertex_ids: np.ndarray, faces: list[Face
 
 def write_frames(cfg: TrackConfig, partial: Path, kept: list[dict], crops: list[np.ndarray], masks: list[np.ndarray],
                  crop, k: Intrinsics, result, errors: np.ndarray, video_fps: float
-                 ) -> tuple[dict[str, list[dict]], list[dict]]:
-    """Images over the background colour measured outside the masks, masks, and the three splits' transforms;
-    returns the splits and each frame's landmark error."""
+                 ) -> tuple[dict[str, list[dict]], list[dict], dict]:
+    """The frames as the camera saw them, their masks, the background plate (from the training frames: nothing
+    of the held-out ones) and the three splits' transforms; returns the splits, each frame's landmark error and
+    the plate's report."""
     (partial / "images").mkdir()
     (partial / "masks").mkdir()
-    fg_pixels = np.concatenate([c[m < 0.5] for c, m in zip(crops, masks, strict=True)])
-    background = (np.median(fg_pixels, 0) / 255.0 if len(fg_pixels) else np.full(3, 0.5)).astype(np.float32)
     n_test = max(1, math.ceil(cfg.test_fraction * len(kept)))
+    train = [j for j in range(len(kept)) if split_of(j, len(kept), n_test) == "train"]
+    plate, inpainted = background_plate([crops[j] for j in train], [masks[j] for j in train],
+                                        grow_px=max(2, round(0.03 * cfg.size)))
+    write_png8(partial / "background.png", plate / 255.0)
+    plate_report = {"file": "background.png", "inpainted_share": round(inpainted, 4),
+                    "frames": len(train)}
     header = {"camera_angle_x": 2 * math.atan(0.5 * cfg.size / k.fx), "intrinsics": [k.fx, k.fy, k.cx, k.cy],
               "width": cfg.size, "height": cfg.size, "head_model": absolute_head_spec(cfg.head),
-              "shape": result.shape.tolist(), "background": background.tolist(),
+              "shape": result.shape.tolist(), "background": "background.png",
               "source": {"video": str(cfg.video.resolve()), "fps": cfg.fps or video_fps, "fov_deg": cfg.fov_deg,
                          "crop": {"x0": crop.x0, "y0": crop.y0, "side": crop.side}}}
     splits: dict[str, list[dict]] = {"train": [], "val": [], "test": []}
     per_frame = []
     for j, (f, img, mask, c) in enumerate(zip(kept, crops, masks, result.controls, strict=True)):
         name = f"{j:04d}.png"
-        composite = img / 255.0 * mask[..., None] + background * (1 - mask[..., None])
-        write_png8(partial / "images" / name, composite)
+        write_png8(partial / "images" / name, img / 255.0)
         write_png8(partial / "masks" / name, mask)
         lm = crop.points(f["face"].landmarks_px[:468])
         lo, hi = lm.min(0), lm.max(0)
@@ -297,7 +301,7 @@ def write_frames(cfg: TrackConfig, partial: Path, kept: list[dict], crops: list[
                           "p95_px": round(float(np.percentile(e, 95)), 3)})
     for split, frames in splits.items():
         write_split(partial, split, header, frames)
-    return splits, per_frame
+    return splits, per_frame, plate_report
 
 
 _EDGES: dict[int, np.ndarray] = {}

@@ -37,25 +37,32 @@ class Raster:
 
 @dataclass(frozen=True)
 class Rays:
-    """R rays: where they start, where they go, and how far along each the guide mesh's surface lies."""
+    """R rays: where they start, where they go, how far along each the guide mesh's surface lies, and (where the
+    scene has a background plate) what each sees behind the avatar."""
 
     origins: torch.Tensor  # (R,3) world, metres
     directions: torch.Tensor  # (R,3) unit
     surface_t: torch.Tensor  # (R,) distance to the rasterized surface, inf where the ray misses it
+    background: torch.Tensor | None = None
+    """(R,3) the colour behind the avatar along each ray (a capture's background plate); None: the avatar's
+    background colour."""
 
     def __post_init__(self):
         R = len(self.origins)
         assert self.origins.shape == (R, 3) and self.directions.shape == (R, 3) and self.surface_t.shape == (R,), \
             (tuple(self.origins.shape), tuple(self.directions.shape), tuple(self.surface_t.shape))
+        assert self.background is None or self.background.shape == (R, 3), tuple(self.background.shape)
 
     def __len__(self) -> int:
         return len(self.origins)
 
     def __getitem__(self, idx: slice | torch.Tensor) -> Rays:
-        return Rays(self.origins[idx], self.directions[idx], self.surface_t[idx])
+        return Rays(self.origins[idx], self.directions[idx], self.surface_t[idx],
+                    None if self.background is None else self.background[idx])
 
     def to(self, device: torch.device | str) -> Rays:
-        return Rays(self.origins.to(device), self.directions.to(device), self.surface_t.to(device))
+        return Rays(self.origins.to(device), self.directions.to(device), self.surface_t.to(device),
+                    None if self.background is None else self.background.to(device))
 
 
 def camera_directions(camera: Camera) -> np.ndarray:

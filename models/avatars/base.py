@@ -15,7 +15,7 @@ from __future__ import annotations
 import contextlib
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -84,6 +84,32 @@ class Avatar(nn.Module, ABC):
         self.presets: dict[str, Preset] = {k: Preset(q) for k, q in BUILTIN_PRESETS.items()}
         """draft/preview/final: those `bench` measured on this avatar (presets.json), else the built-in ones."""
         self.presets_measured: dict = {}
+
+    # ---- the background plate --------------------------------------------------------------------------
+    def set_plate(self, image: np.ndarray, camera: Camera) -> None:
+        """The capture's background plate (H,W,3): what its fixed camera sees behind the person (a tracked video's
+        room). Rays of that camera composite over it, as NerFACE's fixed background; every other camera (an orbit,
+        a turntable) over the background colour. Saved with the weights."""
+        self.register_buffer("plate", torch.as_tensor(np.asarray(image, np.float32), device=self.background.device))
+        self.register_buffer("plate_camera", torch.as_tensor(camera_key(camera), device=self.background.device))
+
+    def plate_for(self, camera: Camera) -> torch.Tensor | None:
+        """(H*W,3) the plate where `camera` is the capture's (the same size, intrinsics and view), else None."""
+        key = getattr(self, "plate_camera", None)
+        if key is None or not np.allclose(camera_key(camera), key.cpu().numpy(), rtol=1e-6, atol=1e-4):
+            return None
+        return self.plate.reshape(-1, 3)
+
+    def ray_background(self, rays: Rays) -> torch.Tensor:
+        """What each ray sees behind the avatar: the plate's pixel where the rays carry one, else the colour."""
+        return self.background if rays.background is None else rays.background
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        """Weights with a plate give the avatar its plate buffers (of their size) before they are read."""
+        for name in ("plate", "plate_camera"):
+            if prefix + name in state_dict:
+                self.register_buffer(name, torch.empty_like(state_dict[prefix + name]))
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     # ---- making and describing -------------------------------------------------------------------------
     @classmethod
@@ -203,6 +229,9 @@ class Avatar(nn.Module, ABC):
         device = self.background.device
         geo = self.frame_geometry(controls, rasterizer).to(device)
         rays, idx = self.image_rays(geo, camera, rasterizer)
+        plate = self.plate_for(camera)
+        if plate is not None:
+            rays = replace(rays, background=plate[torch.as_tensor(idx, device=plate.device)].cpu())
         rays = rays.to(device)
         names = self.inspection_buffers() if inspect else ()
         parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *self.default_buffers(), *names)}
@@ -216,7 +245,7 @@ class Avatar(nn.Module, ABC):
                                                torch.full_like(buffers["depth"], np.inf))
                 for k, v in buffers.items():
                     parts[k].append(v.detach())
-        background = self.background.cpu().numpy()
+        background = (self.background if plate is None else plate).cpu().numpy()
         layout = {k: (c, background if fill == BACKGROUND else fill) for k, (c, fill) in self.layout().items()}
         return rays_to_images(parts, camera.height_px, camera.width_px, idx, layout)
 
@@ -228,3 +257,9 @@ class Avatar(nn.Module, ABC):
     def chunk_rays(self) -> int:
         """Rays per batch when rendering an image (memory)."""
         return 4096
+
+
+def camera_key(camera: Camera) -> np.ndarray:
+    """(22,) float64: a camera's image size, pixel intrinsics and view matrix (which camera a plate belongs to)."""
+    return np.concatenate([[camera.width_px, camera.height_px], camera.intrinsics, np.asarray(camera.view).ravel()]
+                          ).astype(np.float64)

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from PIL import Image
 from scipy.ndimage import distance_transform_edt
 
-from models.capture.dataset import CaptureSplit
+from models.capture.dataset import CaptureSplit, DatasetError
 from render.camera import Camera
 
 
@@ -30,6 +31,25 @@ def load_rgb(path, background: np.ndarray | None = None) -> np.ndarray:
         bg = np.ones(3, np.float32) if background is None else background
         a = a[..., :3] * a[..., 3:] + bg * (1 - a[..., 3:])
     return a
+
+
+def background_plate(split: CaptureSplit) -> tuple[np.ndarray, Camera] | None:
+    """The capture's background plate (H,W,3) and the one camera it belongs to, where its "background" names an
+    image (a tracked video's room); None where the background is a colour."""
+    if not isinstance(split.background, Path):
+        return None
+    try:
+        plate = load_rgb(split.background)
+    except (OSError, ValueError) as e:
+        raise DatasetError(f"{split.background}: the background plate cannot be read ({e})") from None
+    if plate.shape[:2] != (split.height, split.width):
+        raise DatasetError(f"{split.background}: the background plate is {plate.shape[1]}x{plate.shape[0]} pixels; "
+                           f"the capture's images are {split.width}x{split.height}")
+    c2w = [f.camera_to_world for f in split.frames]
+    if c2w and not all(np.allclose(m, c2w[0], atol=1e-6) for m in c2w):
+        raise DatasetError(f"{split.background}: a background plate needs one fixed camera, and the frames of "
+                           f"{split.folder / f'transforms_{split.split}.json'} have several")
+    return plate, camera_of(split, c2w[0] if c2w else np.eye(4))
 
 
 def load_mask(path) -> np.ndarray:

@@ -1,12 +1,14 @@
 """A foreground (head and shoulders) mask per frame, offline: OpenCV's GrabCut, seeded by the tracked face.
 
-The face's landmark hull is certain foreground; a band around it and the region below the chin (neck,
-shoulders) probable foreground; the crop's border rows and columns away from the neck probable background.
+The face's landmark hull is certain foreground; a wide band around it and the region below the chin (neck,
+shoulders) probable foreground; the upper corners beside the head certain background.
 GrabCut's colour models then split the rest. (MediaPipe's selfie segmenter would do as well, but its model
 is another download; this needs nothing but the landmarks.)
 """
 
 from __future__ import annotations
+
+import warnings
 
 import cv2
 import numpy as np
@@ -19,14 +21,16 @@ def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int =
     hull = cv2.convexHull(landmarks_px.astype(np.float32)).astype(np.int32)
     lo, hi = landmarks_px.min(0), landmarks_px.max(0)
     face_w, face_h = hi - lo
-    # Probable foreground: the face hull grown (hair, ears), and a trapezoid below the chin (neck, shoulders).
+    # Probable foreground: the face hull grown by half the face's width (hair, ears), and below the chin a
+    # trapezoid widening to the shoulders (neck, collar). Wide on purpose: what lies outside it teaches GrabCut
+    # the background's colours, and hair left there would teach it that hair is background.
     grown = np.zeros((h, w), np.uint8)
     cv2.fillConvexPoly(grown, hull, 1)
-    k = max(3, int(0.35 * face_w)) | 1
+    k = max(3, int(0.6 * face_w)) | 1
     grown = cv2.dilate(grown, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
     cx = 0.5 * (lo[0] + hi[0])
-    neck = np.array([[cx - 0.35 * face_w, hi[1] - 0.1 * face_h], [cx + 0.35 * face_w, hi[1] - 0.1 * face_h],
-                     [cx + 0.9 * face_w, h], [cx - 0.9 * face_w, h]], np.int32)
+    neck = np.array([[cx - 0.45 * face_w, hi[1] - 0.1 * face_h], [cx + 0.45 * face_w, hi[1] - 0.1 * face_h],
+                     [cx + 1.2 * face_w, h], [cx - 1.2 * face_w, h]], np.int32)
     cv2.fillConvexPoly(grown, neck, 1)
     mask[grown > 0] = cv2.GC_PR_FGD
     # Certain foreground: the face hull shrunk a little.
@@ -34,11 +38,12 @@ def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int =
     cv2.fillConvexPoly(core, hull, 1)
     core = cv2.erode(core, np.ones((5, 5), np.uint8))
     mask[core > 0] = cv2.GC_FGD
-    # Certain background: the top rows and the side columns' upper half.
-    b = max(2, h // 40)
-    mask[:b] = cv2.GC_BGD
-    mask[: int(lo[1]), :b] = cv2.GC_BGD
-    mask[: int(lo[1]), -b:] = cv2.GC_BGD
+    # Certain background: the upper corners, beside the head and above the shoulders (hair may reach the top row
+    # above the head itself).
+    side = int(0.9 * face_w)
+    top = int(hi[1])
+    mask[:top, : max(0, int(lo[0]) - side)] = cv2.GC_BGD
+    mask[:top, min(w, int(hi[0]) + side):] = cv2.GC_BGD
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     cv2.grabCut(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), mask, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
     fg = ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.uint8)
@@ -50,3 +55,31 @@ def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int =
         fg = (labels == keep).astype(np.uint8) if keep else fg
     fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
     return fg.astype(np.float32)
+
+
+def background_plate(frames: list[np.ndarray], masks: list[np.ndarray], grow_px: int, min_share: float = 0.5
+                     ) -> tuple[np.ndarray, float]:
+    """The room behind the person as a fixed camera saw it (the background NerFACE composites over): per pixel
+    the median of the frames (H,W,3 uint8) in which the person's mask (H,W), grown by grow_px, leaves it free;
+    pixels free in fewer than min_share of the frames (behind the person, or a mask that missed hair, most of the
+    time) are inpainted from
+    their surroundings. Returns the plate (H,W,3) uint8 and the share of its pixels inpainted."""
+    h, w = frames[0].shape[:2]
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow_px + 1, 2 * grow_px + 1))
+    free = np.stack([cv2.dilate((m > 0.5).astype(np.uint8), kernel) == 0 for m in masks])  # (N,H,W)
+    plate = np.zeros((h, w, 3), np.uint8)
+    need = max(3, int(np.ceil(min_share * len(frames))))
+    rows = max(1, (1 << 22) // (len(frames) * w * 3))  # a few million values at a time
+    for r0 in range(0, h, rows):
+        block = np.stack([f[r0:r0 + rows] for f in frames]).astype(np.float32)  # (N,h',W,3)
+        block[~free[:, r0:r0 + rows]] = np.nan
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pixels: inpainted below
+            med = np.nanmedian(block, axis=0)
+        plate[r0:r0 + rows] = np.nan_to_num(med).round().clip(0, 255).astype(np.uint8)
+    hole = (free.sum(0) < need).astype(np.uint8)
+    if hole.all():
+        return np.zeros_like(plate) + np.median(np.stack(frames).reshape(-1, 3), 0).astype(np.uint8), 1.0
+    if hole.any():
+        plate = cv2.inpaint(plate, hole, 5, cv2.INPAINT_TELEA)
+    return plate, float(hole.mean())

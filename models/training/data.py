@@ -31,6 +31,7 @@ class FrameSet:
     active: torch.Tensor  # (N,H,W) bool: where training draws rays (the avatar's training_pixels)
     geometry: list[Any]  # the avatar's frame_geometry of each frame
     active_index: list[torch.Tensor]  # per frame, the flat indices of its active pixels (training draws rays here)
+    plate: torch.Tensor | None = None  # (H*W,3) the background plate behind every frame's rays, if the capture has one
 
     def __len__(self) -> int:
         return len(self.images)
@@ -74,8 +75,9 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet
     active = [avatar.training_pixels(cam, r) for r, cam in zip(rasters, cameras, strict=True)]
     t = lambda a, dt=torch.float32: torch.as_tensor(np.stack(a), dtype=dt)
     active_t = t(active, torch.bool)
+    plate = avatar.plate_for(cameras[0]) if cameras else None
     return FrameSet(split, t(images), t(masks) if has_masks else None, t(origins), t(dirs), t(surf), active_t, geos,
-                    [torch.nonzero(a.ravel()).squeeze(1) for a in active_t])
+                    [torch.nonzero(a.ravel()).squeeze(1) for a in active_t], None if plate is None else plate.cpu())
 
 
 def validation_frame(split: CaptureSplit, background: np.ndarray) -> ValidationFrame:

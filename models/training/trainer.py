@@ -11,7 +11,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
 import torch
 
 from models.avatars.base import Avatar, TrainingBatch
@@ -19,6 +18,7 @@ from models.avatars.checkpoint import Checkpoint, load_checkpoint, save_checkpoi
 from models.avatars.effects import parse_effects
 from models.avatars.registry import DEFAULT_MODEL, ModelName, avatar_class
 from models.capture.dataset import DatasetError, load_split
+from models.capture.frames import background_plate
 from models.device import device_of
 from models.head.sources import load_head
 from models.training.data import FrameSet, ValidationFrame, build_frames, validation_frame
@@ -86,7 +86,8 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
         raise DatasetError(f"{cfg.dataset}: the capture has no head model tracked on its frames; "
                            "every avatar here reads the head's pose and expression from it")
     head = load_head(split.head_model)
-    bg = split.background if isinstance(split.background, np.ndarray) else np.ones(3)
+    plate = background_plate(split)
+    bg = split.background if plate is None else plate[0].reshape(-1, 3).mean(0)
     torch.manual_seed(cfg.seed)
     resumed = load_checkpoint(cfg.out, with_train_state=True) if cfg.resume else None
     if resumed is not None:  # the checkpoint's own model and sizes (an older one: no shadow factor)
@@ -95,6 +96,8 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
     else:
         avatar = avatar_class(cfg.model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects),
                                                      split.lighting, model_config)
+        if plate is not None:
+            avatar.set_plate(*plate)
     frames = build_frames(split, avatar, gl)
     validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
     return Trainer(cfg, avatar, frames, validation, resumed)
@@ -166,7 +169,8 @@ class Trainer:
                 continue
             pick = self.avatar.draw_training_pixels(fs.active_index[fid], fs.images[fid][..., 0].numel(), per_frame, g)
             rays = Rays(fs.origins[fid].expand(len(pick), 3), fs.directions[fid].reshape(-1, 3)[pick],
-                        fs.surface_t[fid].reshape(-1)[pick]).to(self.device)
+                        fs.surface_t[fid].reshape(-1)[pick], None if fs.plate is None else fs.plate[pick]
+                        ).to(self.device)
             target = fs.images[fid].reshape(-1, 3)[pick].to(self.device)
             parts = self.avatar.loss_terms(TrainingBatch(fid, rays, target, fs.geometry[fid], progress, g))
             for k, v in parts.items():

@@ -73,6 +73,11 @@ class RenderConfig:
     pixel's ray, with no shortcut (0: the shell sampler)."""
 
 
+MAX_REACH_M = 0.10
+"""The farthest beyond the guide mesh an avatar models (hair, collar): the field's support and its sampling cost
+grow with it."""
+
+
 def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -> int:
     """Pixels around the mesh's silhouette to render: how far the capture's foreground reaches beyond the
     mesh (cfg.silhouette_m; else the shell, as density lives within shell_m of the mesh) at the nearest
@@ -153,12 +158,26 @@ class CoDyNeRFAvatar(Avatar):
         return active_pixels(self.render_cfg, camera, raster)
 
     def fit_to_capture(self, foreground_reach_m: np.ndarray | None) -> None:
-        """Render only as far beyond the mesh as the capture's foreground goes (99.9% of its pixels, + 2 mm):
-        none of the shell's width where the capture shows nothing there."""
+        """Model everything the capture's masks show of the person: the field's shell (its support about the
+        mesh), the head's box and the rendered pixels reach as far beyond the mesh as the foreground goes (99.9% of
+        its pixels, + 2 mm: hair, collar), between the default shell and MAX_REACH_M, with samples added to keep
+        their spacing; and no farther where the capture shows nothing there."""
         if foreground_reach_m is None:
             return
-        reach = float(np.quantile(foreground_reach_m, 0.999)) if len(foreground_reach_m) else 0.0
-        self.render_cfg = replace(self.render_cfg, silhouette_m=reach + 0.002)
+        reach = float(np.quantile(foreground_reach_m, 0.999)) + 0.002 if len(foreground_reach_m) else 0.0
+        rc, base = self.render_cfg, RenderConfig()
+        shell = float(np.clip(reach, base.shell_m, MAX_REACH_M))
+        self.render_cfg = replace(rc, silhouette_m=reach, shell_m=shell, box_margin_m=max(rc.box_margin_m, shell),
+                                  samples_per_ray=self.samples_for(rc.samples_per_ray, shell))
+        template = torch.as_tensor(self.head_model.template, dtype=torch.float32)
+        margin = shell + 0.02
+        self.occupancy = OccupancyGrid(template.min(0).values - margin, template.max(0).values + margin).to(
+            self.background.device)
+
+    @staticmethod
+    def samples_for(samples: int, shell_m: float) -> int:
+        """Samples a ray in a shell of half-thickness shell_m at the spacing `samples` give the default shell."""
+        return max(samples, round(samples * shell_m / RenderConfig().shell_m))
 
     # ---- the field -------------------------------------------------------------------------------------
     def support(self, distance: torch.Tensor) -> torch.Tensor:
@@ -225,11 +244,12 @@ class CoDyNeRFAvatar(Avatar):
                                                               geo.landmarks, mesh_vis)
         lit = shown.to_rays(lit)
         factor = None if factor is None else shown.to_rays(factor)
+        background = self.ray_background(rays)
         internals = render.CoDyNeRFRays(samples, d, sigma, weights, remaining, shown, phi, mesh_vis, lit, factor,
-                                        visibility)
+                                        visibility, background)
         colour = lit * (1.0 if factor is None else factor)
         R, S = weights.shape
-        buffers = {"rgb": composite(weights, colour, remaining, self.background), "opacity": weights.sum(-1),
+        buffers = {"rgb": composite(weights, colour, remaining, background), "opacity": weights.sum(-1),
                    "depth": expected_depth(weights, samples.t_mid)}
         if d.field.normal is not None:
             pn = render.scatter(d.field.normal, d.keep, R * S).reshape(R, S, 3)
@@ -305,20 +325,20 @@ class CoDyNeRFAvatar(Avatar):
         result = {}
         for name in names:
             if name == "rgb_no_shadows" and r.factor is not None:  # the shadow factor at 1: lit everywhere
-                result[name] = composite(r.weights, r.lit, r.remaining, self.background)
+                result[name] = composite(r.weights, r.lit, r.remaining, r.background)
             elif name == "rgb_no_shadows":  # no factor: the neutral head's shadow inputs, no expression or pose
                 zero = torch.zeros_like(r.shown.prior.offset)
                 neutral = replace(r.shown.prior, expression_offset=zero, pose_offset=zero)
                 result[name] = composite(r.weights, self._colour(r, r.shown.field, neutral,
                                                                  geometry.neutral_landmarks),
-                                         r.remaining, self.background)
+                                         r.remaining, r.background)
             elif name == "rgb_light":  # the key light's visibility (1: no cast shadow), grey
                 light = composite(r.weights, r.shown.to_rays(r.visibility), r.remaining, r.visibility.new_ones(1))
                 result[name] = light.expand(len(r.weights), 3)
             elif name == "rgb_flat":  # every surface facing the viewer: the shading's contribution is what changes
                 flat = replace(r.shown.field, normal=r.shown.view)
                 result[name] = composite(r.weights, self._colour(r, flat, r.shown.prior, geometry.landmarks),
-                                         r.remaining, self.background)
+                                         r.remaining, r.background)
         return result
 
     def _colour(self, r: render.CoDyNeRFRays, field_out, prior, landmarks: torch.Tensor) -> torch.Tensor:
@@ -347,8 +367,9 @@ class CoDyNeRFAvatar(Avatar):
 
     # ---- settings and lifecycle ------------------------------------------------------------------------
     def set_quality(self, quality: Quality) -> None:
-        self.render_cfg = replace(self.render_cfg, samples_per_ray=quality.samples, fine_samples=quality.fine,
-                                  bf16=quality.bf16)
+        self.render_cfg = replace(self.render_cfg, samples_per_ray=self.samples_for(quality.samples,
+                                                                                     self.render_cfg.shell_m),
+                                  fine_samples=quality.fine, bf16=quality.bf16)
 
     def before_save(self, geometry: FrameGeometry) -> None:
         """The display's occupancy grid follows the density: rebuilt with every checkpoint."""

@@ -163,5 +163,6 @@ class CoDyNeRFRays:
     lit: torch.Tensor  # (R,S,3) colour without cast shadows
     factor: torch.Tensor | None  # (R,S,1) share of the lit colour the cast shadows leave
     visibility: torch.Tensor | None  # (M,1) the key light's visibility S at the shown samples
+    background: torch.Tensor  # (3,) or (R,3) what the rays see behind the avatar
     point_normal: torch.Tensor | None = None  # (R,S,3)
     point_grad_normal: torch.Tensor | None = None  # (R,S,3)

@@ -247,7 +247,7 @@ class NerfaceAvatar(Avatar):
 
         t0, t1 = stratified(near, far, c.coarse_samples, generator)
         w_c, rem_c, rgb_c, _, _ = run(self.coarse, t0, t1)
-        coarse_rgb = composite(w_c, rgb_c, rem_c, self.background)
+        coarse_rgb = composite(w_c, rgb_c, rem_c, self.ray_background(rays))
         edges = torch.cat([t0, t1[:, -1:]], 1)
         t_fine = sample_pdf(edges, w_c.detach(), c.fine_samples, generator)
         t_all = torch.sort(torch.cat([0.5 * (t0 + t1), t_fine.detach()], 1), dim=1).values
@@ -256,7 +256,7 @@ class NerfaceAvatar(Avatar):
         f0 = torch.cat([near[:, None], mids], 1)
         f1 = torch.cat([mids, far[:, None]], 1)
         w, rem, rgb, sigma, t_mid = run(self.fine, f0, f1)
-        buffers = {"rgb": composite(w, rgb, rem, self.background), "opacity": w.sum(-1),
+        buffers = {"rgb": composite(w, rgb, rem, self.ray_background(rays)), "opacity": w.sum(-1),
                    "depth": expected_depth(w, t_mid)}
         return RayOutput(buffers, NerfaceRays(coarse_rgb, w, sigma, RaySamples(f0, f1, hits)))
 

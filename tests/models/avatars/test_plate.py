@@ -1,0 +1,83 @@
+"""A tracked video's background plate: estimated from the frames where the person leaves the room free,
+composited behind the avatar along the capture camera's rays only, and saved with the avatar."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from models.avatars.checkpoint import save_checkpoint
+from models.avatars.registry import load_avatar
+from models.head.controls import Controls
+from models.tracking.masks import background_plate
+from render.camera import framing_camera
+from render.gl.raster import Rasterizer
+
+DEMO = Path(__file__).resolve().parents[3] / "resources" / "demo_avatar"
+
+
+def test_plate_is_the_room_where_the_person_leaves_it_free():
+    """A 20x24 room of random colours; a 6x6 'person' walks along row 4..10 from x = 0 to x = 14, over 8 frames.
+    Pixels it covers in fewer than half the frames get the room exactly (the median of identical values);
+    the pixels it covers in more than half (none here but a band) are inpainted, and their share reported."""
+    rng = np.random.default_rng(0)
+    room = rng.integers(0, 256, (20, 24, 3), dtype=np.uint8)
+    frames, masks = [], []
+    for k in range(8):
+        x0 = 2 * k
+        frame, mask = room.copy(), np.zeros((20, 24), np.float32)
+        frame[4:10, x0:x0 + 6] = 255 - room[4:10, x0:x0 + 6]  # the person's colours differ from the room
+        mask[4:10, x0:x0 + 6] = 1.0
+        frames.append(frame)
+        masks.append(mask)
+    plate, inpainted = background_plate(frames, masks, grow_px=0, min_share=0.5)
+    covered = np.stack(masks).sum(0)  # frames in which each pixel is behind the person
+    free_enough = (8 - covered) >= 4
+    np.testing.assert_array_equal(plate[free_enough], room[free_enough])
+    # Column x is covered in the frames k with 2k <= x < 2k + 6: three frames for x in 4..13, so every pixel is
+    # free in at least five of eight; nothing is inpainted.
+    assert inpainted == 0.0 and free_enough.all()
+    # A person that stands still over half the frames leaves those pixels to inpainting: 36 of 480 pixels.
+    plate2, inpainted2 = background_plate(frames[:1] * 5 + frames[5:], masks[:1] * 5 + masks[5:], grow_px=0,
+                                          min_share=0.5)
+    assert inpainted2 == pytest.approx(36 / 480)
+    assert 60 < plate2[4:10, 0:6].mean() < 200  # filled from the room around (random colours, mean 127.5), not 0
+
+
+@pytest.mark.gl
+def test_plate_composites_behind_the_capture_camera_only(gl):
+    """The same avatar with and without a plate: along the plate's camera, every pixel differs by exactly the light
+    that passes the avatar times (plate - background colour); any other camera sees the background colour."""
+    avatar, _ = load_avatar(DEMO)
+    cam = framing_camera(avatar.head_model.template, 10.0, 0.0, fov_y_deg=18.0, width_px=40, height_px=36)
+    r = Rasterizer(gl)
+    controls = Controls(jaw=np.array([0.15, 0.0, 0.0], np.float32))
+    bare = avatar.render_image(controls, cam, r)
+    plate = np.random.default_rng(1).random((36, 40, 3)).astype(np.float32)
+    avatar.set_plate(plate, cam)
+    with_plate = avatar.render_image(controls, cam, r)
+    bg = avatar.background.numpy()
+    expected = bare["rgb"] + (1 - bare["opacity"])[..., None] * (plate - bg)
+    np.testing.assert_allclose(with_plate["rgb"], expected, atol=2e-5)
+    assert (bare["opacity"] < 1e-3).mean() > 0.3  # much of the frame is the room
+    np.testing.assert_array_equal(with_plate["opacity"], bare["opacity"])
+    other = avatar.render_image(controls, cam.resized(20, 18), r)  # another camera: no plate
+    corner = other["rgb"][0, 0]
+    np.testing.assert_allclose(corner, bg, atol=1e-6)
+    r.release()
+
+
+def test_plate_is_saved_with_the_avatar(tmp_path):
+    avatar, meta = load_avatar(DEMO)
+    cam = framing_camera(avatar.head_model.template, 0.0, 0.0, width_px=12, height_px=10)
+    plate = np.random.default_rng(2).random((10, 12, 3)).astype(np.float32)
+    avatar.set_plate(plate, cam)
+    save_checkpoint(tmp_path / "av", json.loads(json.dumps(meta)), avatar.state_dict(), 1)
+    again, _ = load_avatar(tmp_path / "av")
+    np.testing.assert_array_equal(again.plate.numpy(), plate)
+    assert again.plate_for(cam) is not None and again.plate_for(cam.resized(24, 20)) is None
+    # An avatar without a plate (the shipped demo) still loads, and has none.
+    assert load_avatar(DEMO)[0].plate_for(cam) is None
