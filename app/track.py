@@ -3,8 +3,10 @@
 Frames are decoded at a chosen rate; MediaPipe's face landmarker finds 478 landmarks, blendshape scores and
 a head pose in each; one face-centred square crop serves every frame (fixed intrinsics); the head model is
 fitted (identity once, then per frame head pose, jaw and expression, from landmark reprojection with temporal
-smoothness; gaze from the blendshape scores); GrabCut cuts a foreground mask per frame; the last part of the
-video is held out as the test split. A report says how well it went before anyone spends time training:
+smoothness; gaze from the blendshape scores); GrabCut cuts a foreground mask per frame, and the room behind the
+person becomes a background plate (models/tracking/masks.py) that avatars composite over; the frames are
+written as the camera saw them; the last part of the video is held out as the test split. A report says how
+well it went before anyone spends time training:
 landmark reprojection error per frame, frames dropped and why, and an overlay video of the fitted mesh.
 
 Everything is written to OUT.partial and renamed to OUT only when complete.

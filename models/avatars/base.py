@@ -165,6 +165,14 @@ class Avatar(nn.Module, ABC):
         """Adapt the render settings to the capture: how far (metres, per foreground pixel of the masks) the
         capture's foreground reaches beyond the mesh's silhouette; None where it has no masks."""
 
+    def correct_poses(self) -> None:
+        """Learn, with the avatar, a small correction of each training frame's head pose (a tracked video, whose
+        poses carry the tracker's error); models that cannot leave this out."""
+
+    def parameter_groups(self) -> list[dict]:
+        """The trained parameters in groups, each with its learning rate's scale (`lr_scale`)."""
+        return [{"params": list(self.parameters()), "lr_scale": 1.0}]
+
     # ---- rays ------------------------------------------------------------------------------------------
     @abstractmethod
     def render_rays(self, rays: Rays, geometry: Any, frame: int | None, generator: torch.Generator | None = None,

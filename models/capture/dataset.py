@@ -54,6 +54,8 @@ class CaptureSplit:
     lighting: dict | None
     frames: list[Frame]
     depth_scale_m: float = 1e-4
+    tracked: bool = False
+    """Tracked from a video (`avatar-studio track`): the head poses carry the tracker's error."""
 
     @property
     def trains_codynerf(self) -> bool:
@@ -188,7 +190,8 @@ def _load_ours(folder: Path, split: str, path: Path, data: dict) -> CaptureSplit
             extra=extra,
         ))
     return CaptureSplit(folder, split, "avatar-studio", w, h, tuple(intr), head_model, shape, bg,
-                        data.get("lighting"), frames, float(data.get("depth_scale_m", 1e-4)))
+                        data.get("lighting"), frames, float(data.get("depth_scale_m", 1e-4)),
+                        isinstance(data.get("source"), dict) and "video" in data["source"])
 
 
 def _bbox(path: Path, where: str, value: object) -> tuple[float, float, float, float] | None:

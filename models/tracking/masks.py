@@ -62,8 +62,8 @@ def background_plate(frames: list[np.ndarray], masks: list[np.ndarray], grow_px:
     """The room behind the person as a fixed camera saw it (the background NerFACE composites over): per pixel
     the median of the frames (H,W,3 uint8) in which the person's mask (H,W), grown by grow_px, leaves it free;
     pixels free in fewer than min_share of the frames (behind the person, or a mask that missed hair, most of the
-    time) are inpainted from
-    their surroundings. Returns the plate (H,W,3) uint8 and the share of its pixels inpainted."""
+    time) are inpainted from their surroundings. Returns the plate (H,W,3) uint8 and the share of its pixels
+    inpainted."""
     h, w = frames[0].shape[:2]
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow_px + 1, 2 * grow_px + 1))
     free = np.stack([cv2.dilate((m > 0.5).astype(np.uint8), kernel) == 0 for m in masks])  # (N,H,W)

@@ -98,6 +98,8 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
                                                      split.lighting, model_config)
         if plate is not None:
             avatar.set_plate(*plate)
+        if split.tracked:
+            avatar.correct_poses()
     frames = build_frames(split, avatar, gl)
     validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
     return Trainer(cfg, avatar, frames, validation, resumed)
@@ -120,7 +122,7 @@ class Trainer:
         self.device = device_of(cfg.device)
         self.avatar.to(self.device)
         self.frames.geometry = [geo.to(self.device) for geo in self.frames.geometry]
-        self.opt = torch.optim.Adam(self.avatar.parameters(), lr=cfg.lr)
+        self.opt = torch.optim.Adam(self.avatar.parameter_groups(), lr=cfg.lr)
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.step = 0
         self.elapsed = 0.0
@@ -159,7 +161,7 @@ class Trainer:
     def train_step(self, progress: float) -> dict[str, float]:
         fs, g, cfg = self.frames, self.generator, self.cfg
         for group in self.opt.param_groups:
-            group["lr"] = self.lr_at(progress)
+            group["lr"] = self.lr_at(progress) * group["lr_scale"]
         frame_ids = torch.randint(len(fs), (cfg.frames_per_step,), generator=g)
         terms: dict[str, torch.Tensor] = {}
         total = torch.zeros((), device=self.device)

@@ -27,6 +27,7 @@ from models.avatars.codynerf.training import LossWeights, consistency_weight, ra
 from models.avatars.components import losses
 from models.avatars.quality import Quality
 from models.head.controls import Controls
+from models.head.lbs import rotation_matrix_from_axis_angle
 from models.head.model import HeadModel
 from render.camera import Camera
 from render.gl.raster import Rasterizer
@@ -73,6 +74,8 @@ class RenderConfig:
     pixel's ray, with no shortcut (0: the shell sampler)."""
 
 
+POSE_LR_SCALE = 0.02
+"""The pose corrections' learning rate against the networks' (Adam moves each by about its rate a step)."""
 MAX_REACH_M = 0.10
 """The farthest beyond the guide mesh an avatar models (hair, collar): the field's support and its sampling cost
 grow with it."""
@@ -118,6 +121,9 @@ class CoDyNeRFAvatar(Avatar):
         template = torch.as_tensor(head_model.template, dtype=torch.float32)
         margin = render_cfg.shell_m + 0.02
         self.occupancy = OccupancyGrid(template.min(0).values - margin, template.max(0).values + margin)
+        self.pose_corrections: nn.Parameter | None = None
+        """(N,6) per training frame: a rotation (axis-angle, about the head's centre) and a translation (metres) of
+        the tracked head (correct_poses); None: the poses as given."""
 
     # ---- making and describing -------------------------------------------------------------------------
     @classmethod
@@ -128,12 +134,49 @@ class CoDyNeRFAvatar(Avatar):
 
     @classmethod
     def from_meta(cls, head_model: HeadModel, meta: dict) -> CoDyNeRFAvatar:
-        return cls(head_model, field_config(meta), int(meta["frames"]), np.asarray(meta["background"], np.float32),
-                   RenderConfig(**meta["render"]))
+        avatar = cls(head_model, field_config(meta), int(meta["frames"]), np.asarray(meta["background"], np.float32),
+                     RenderConfig(**meta["render"]))
+        if meta.get("pose_corrections", False):
+            avatar.correct_poses()
+        return avatar
 
     def meta(self) -> dict:
         return {"model": self.name, "effects": list(self.field_cfg.effects), "field": asdict(self.field_cfg),
-                "render": asdict(self.render_cfg)}
+                "render": asdict(self.render_cfg), "pose_corrections": self.pose_corrections is not None}
+
+    # ---- the tracked poses, corrected ------------------------------------------------------------------
+    def correct_poses(self) -> None:
+        if self.pose_corrections is None:
+            self.pose_corrections = nn.Parameter(torch.zeros(self.omega.num_embeddings, 6,
+                                                             device=self.omega.weight.device))
+
+    def parameter_groups(self) -> list[dict]:
+        """The corrections learn at POSE_LR_SCALE of the rate of the networks: a step of the networks' rate (5e-3)
+        would turn the head by 0.3 degrees and move it 5 mm at once."""
+        if self.pose_corrections is None:
+            return super().parameter_groups()
+        rest = [p for p in self.parameters() if p is not self.pose_corrections]
+        return [{"params": rest, "lr_scale": 1.0}, {"params": [self.pose_corrections], "lr_scale": POSE_LR_SCALE}]
+
+    def pose_correction(self, frame: int) -> torch.Tensor:
+        """(6,) a training frame's correction less the mean of all frames' (so that on average the avatar keeps
+        the tracker's poses, which held-out frames and new controls use as they are)."""
+        return self.pose_corrections[frame] - self.pose_corrections.mean(0)
+
+    def corrected_rays(self, rays: Rays, geo: FrameGeometry, frame: int) -> Rays:
+        """The rays in the tracked head's frame where the head truly stood at `frame`: the head turned by r about
+        its centre c and moved by t maps a world point p to R^T (p - c - t) + c. The surface distances along the
+        rays are kept (corrections are millimetres; the shell spans centimetres)."""
+        c = self.pose_correction(frame)
+        rot = rotation_matrix_from_axis_angle(c[:3])
+        centre = 0.5 * (geo.box_min + geo.box_max)
+        origins = (rays.origins - centre - c[3:]) @ rot + centre  # row vectors: p @ R = R^T p
+        return replace(rays, origins=origins, directions=rays.directions @ rot)
+
+    def pose_correction_term(self, frame: int) -> torch.Tensor:
+        """The corrections' prior: squared, in units of 0.01 rad and 2 mm."""
+        c = self.pose_correction(frame)
+        return (c[:3] / 0.01).square().sum() + (c[3:] / 0.002).square().sum()
 
     @property
     def effects(self) -> tuple[str, ...]:
@@ -225,6 +268,8 @@ class CoDyNeRFAvatar(Avatar):
         omega, phi = self.codes(frame)
         if not training:
             omega, phi = omega.detach(), phi.detach()
+        if self.pose_corrections is not None and frame is not None:
+            rays = self.corrected_rays(rays, geometry, frame)
         return self.trace(rays, geometry, omega, phi, self.settings(training, create_graph), generator)
 
     def trace(self, rays: Rays, geo: FrameGeometry, omega: torch.Tensor, phi: torch.Tensor,
@@ -295,6 +340,8 @@ class CoDyNeRFAvatar(Avatar):
                           batch.progress, self.codes(batch.frame))
         if out.internals.point_normal is not None:
             parts["mesh_normals"] = w.mesh_normals * self.mesh_normal_term(batch, second_order)
+        if self.pose_corrections is not None:
+            parts["pose_corrections"] = w.pose_corrections * self.pose_correction_term(batch.frame)
         return parts
 
     def mesh_normal_term(self, batch: TrainingBatch, second_order: bool) -> torch.Tensor:
