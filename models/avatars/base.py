@@ -165,9 +165,9 @@ class Avatar(nn.Module, ABC):
         """Adapt the render settings to the capture: how far (metres, per foreground pixel of the masks) the
         capture's foreground reaches beyond the mesh's silhouette; None where it has no masks."""
 
-    def correct_poses(self) -> None:
-        """Learn, with the avatar, a small correction of each training frame's head pose (a tracked video, whose
-        poses carry the tracker's error); models that cannot leave this out."""
+    def fit_to_tracked_video(self) -> None:
+        """The capture was tracked from a video: its head poses carry the tracker's error, and its background is
+        a real room. Models adapt what they learn (the default: nothing)."""
 
     def parameter_groups(self) -> list[dict]:
         """The trained parameters in groups, each with its learning rate's scale (`lr_scale`)."""

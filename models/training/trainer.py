@@ -98,8 +98,8 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
                                                      split.lighting, model_config)
         if plate is not None:
             avatar.set_plate(*plate)
-        if split.tracked:
-            avatar.correct_poses()
+    if split.tracked:  # (a resumed avatar too: what it learns is not all in avatar.json)
+        avatar.fit_to_tracked_video()
     frames = build_frames(split, avatar, gl)
     validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
     return Trainer(cfg, avatar, frames, validation, resumed)

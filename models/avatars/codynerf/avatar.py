@@ -145,7 +145,17 @@ class CoDyNeRFAvatar(Avatar):
                 "render": asdict(self.render_cfg), "pose_corrections": self.pose_corrections is not None}
 
     # ---- the tracked poses, corrected ------------------------------------------------------------------
+    def fit_to_tracked_video(self) -> None:
+        """Learn a correction of each training frame's head pose with the avatar (correct_poses); and no Cauchy
+        sparsity (Eq. 14): on the tracked d3 video (25 minutes, `none`) it held the density to a fog that let 32%
+        of the light through the head (the room's plate would show through it when the head moves), against 1%
+        without, at the same held-out PSNR (16.60 and 16.54 dB) and 26% less render time (the early stop ends
+        rays at an opaque skin)."""
+        self.correct_poses()
+        self.loss_weights = replace(self.loss_weights, cauchy=0.0)
+
     def correct_poses(self) -> None:
+        """Give every training frame a pose correction, learned with the avatar."""
         if self.pose_corrections is None:
             self.pose_corrections = nn.Parameter(torch.zeros(self.omega.num_embeddings, 6,
                                                              device=self.omega.weight.device))
