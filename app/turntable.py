@@ -25,6 +25,9 @@ class TurntableConfig:
     out: Path = Path("out/turntable.mp4")
     """The mp4 to write (H.264); PNG frames go to a folder beside it unless --no-pngs."""
     frames: int = 120
+    sweep_deg: float = 0.0
+    """Swing the camera this many degrees to each side of the front (a video's avatar has seen the head
+    only from about the front); 0: a full turn."""
     elevation_deg: float = 5.0
     """Camera height above the head's centre, degrees."""
     zoom: float = 1.0
@@ -90,7 +93,8 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
     controls = controls or Controls()
     for k in range(cfg.frames):
         phase = 2 * math.pi * k / cfg.frames
-        cam = framing_camera(avatar.head_model.template, math.degrees(phase), cfg.elevation_deg, fov_y_deg=18.0,
+        yaw = cfg.sweep_deg * math.sin(phase) if cfg.sweep_deg else math.degrees(phase)
+        cam = framing_camera(avatar.head_model.template, yaw, cfg.elevation_deg, fov_y_deg=18.0,
                              width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
         yield buffer_image(avatar.render_image(c, cam, rasterizer, should_stop=should_stop), "rgb")

@@ -44,6 +44,8 @@ class PresetFigures:
 
     ms: dict[str, float] = field(default_factory=dict)
     psnr_vs_final: dict[str, float] = field(default_factory=dict)
+    size_px: int = 0
+    """The image size they were measured at: the avatar's capture's (at most 256 px), else 128."""
 
 
 def scaled(camera: Camera, scale: float) -> Camera:
@@ -149,10 +151,12 @@ class NeuralWorker:
                 self.result = Result(request_id, name, buffers, ms)
                 self.error = ""
 
-    def _measure_presets(self, avatar, raster: Rasterizer, request_id: int, size: int = 128) -> None:
-        """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`."""
+    def _measure_presets(self, avatar, raster: Rasterizer, request_id: int) -> None:
+        """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`, at the size of
+        the avatar's capture (a tracked video's 256 px costs four times a synthetic capture's 128)."""
+        size = min(avatar.capture_px or 128, 256)
         cam = framing_camera(avatar.head_model.template, 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
-        figures = PresetFigures()
+        figures = PresetFigures(size_px=size)
         images = {}
         for name in ("final", "preview", "draft"):
             avatar.apply_preset(name, size)

@@ -48,8 +48,8 @@ def draw(ctx: PanelContext) -> None:
             if benched and p.face_mse is not None and imgui.is_item_hovered():
                 imgui.set_tooltip(f"FaceMSE {p.face_mse:.5f} on the capture's held-out frames")
         imgui.end_table()
-    imgui.text_wrapped("ms now: measured on this avatar at 128 px when it opened (median of 3 renders, this "
-                       "machine).")
+    imgui.text_wrapped(f"ms now: measured on this avatar at {fig.size_px or '...'} px (its capture's size) when it "
+                       "opened (median of 3 renders, this machine).")
     measured = avatar.presets_measured
     if benched:
         where = f"{measured.get('image_px', '?')} px, {measured.get('machine', 'machine unknown')}"

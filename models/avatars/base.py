@@ -84,6 +84,8 @@ class Avatar(nn.Module, ABC):
         self.presets: dict[str, Preset] = {k: Preset(q) for k, q in BUILTIN_PRESETS.items()}
         """draft/preview/final: those `bench` measured on this avatar (presets.json), else the built-in ones."""
         self.presets_measured: dict = {}
+        self.capture_px: int | None = None
+        """The width of the capture's images it was trained on (avatar.json's "image_px"; None: not recorded)."""
 
     # ---- the background plate --------------------------------------------------------------------------
     def set_plate(self, image: np.ndarray, camera: Camera) -> None:

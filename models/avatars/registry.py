@@ -48,6 +48,8 @@ def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar, dict]:
     avatar.eval()
     # draft/preview/final, chosen and measured by `bench` (and where: machine, image size), else built in
     avatar.presets, avatar.presets_measured = load_presets(folder)
+    size = meta.get("image_px")
+    avatar.capture_px = int(size[0]) if isinstance(size, list) and size and isinstance(size[0], int) else None
     return avatar.to(device_of(device)), meta
 
 

@@ -134,6 +134,7 @@ class Trainer:
     # ---- state -----------------------------------------------------------------------------------------
     def meta(self) -> dict:
         return {**self.avatar.meta(), "head_model": self.split.head_model, "frames": len(self.split.frames),
+                "image_px": [self.split.width, self.split.height],
                 "background": self.avatar.background.tolist(),
                 "provenance": {"dataset": str(self.cfg.dataset),
                                "dataset_resolved": str(Path(self.cfg.dataset).resolve()), "steps": self.step,

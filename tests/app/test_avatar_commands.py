@@ -92,3 +92,24 @@ def test_shadow_buffers_and_metrics(synth_capture, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "rgb_light" in err and str(shading) in err and "shading" in err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_turntable_sweeps_about_the_front(tmp_path, capsys, gl):
+    """--sweep-deg 30: the camera swings to 30 degrees each side and back (frames 0 and 2 of 4 are the front view,
+    1 and 3 the two sides, mirror images of each other's yaw), instead of circling the head."""
+    from app.turntable import TurntableConfig, turntable_frames
+    from models.avatars.registry import load_avatar
+    from render.gl.raster import Rasterizer
+
+    demo = Path(__file__).resolve().parents[2] / "resources" / "demo_avatar"
+    avatar, _ = load_avatar(demo)
+    cfg = TurntableConfig(avatar=demo, frames=4, sweep_deg=30.0, size=32, preset="draft")
+    frames = list(turntable_frames(avatar, Rasterizer(gl), cfg))
+    full = list(turntable_frames(avatar, Rasterizer(gl), TurntableConfig(avatar=demo, frames=12, size=32,
+                                                                         preset="draft")))
+    assert np.abs(frames[0].astype(int) - frames[2]).max() <= 1  # sin(pi) = 1e-16: the front again
+    np.testing.assert_array_equal(frames[0], full[0])  # yaw 0 in both
+    np.testing.assert_array_equal(frames[1], full[1])  # 30 degrees: the full turn's second of 12 frames
+    assert np.abs(frames[1].astype(int) - frames[3]).mean() > 1  # the other side
+    assert main(["turntable", str(demo), "--sweep-deg", "200", "--out", str(tmp_path / "t.mp4")]) == 2
+    assert "--sweep-deg 200" in capsys.readouterr().err
