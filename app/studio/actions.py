@@ -129,13 +129,16 @@ class ResetGaze(Action):
 
 @dataclass(frozen=True)
 class ShowFrame(Action):
-    """The timeline: a capture frame's controls and codes (-1: the sliders)."""
+    """The timeline: a capture frame's controls and codes, with the sliders moved to its values (-1: the sliders
+    as they are)."""
 
     frame: int
 
     def apply(self, s: Session) -> None:
         n = len(s.capture.frames) if s.capture is not None else 0
         s.timeline_frame = int(self.frame) if 0 <= self.frame < n else -1
+        if s.timeline_frame >= 0:
+            s.sliders = Sliders.of(s.capture.frames[s.timeline_frame].controls, s.avatar.head_model.num_expression)
         s.dirty = True
 
 

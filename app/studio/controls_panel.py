@@ -40,8 +40,10 @@ def draw(ctx: PanelContext) -> None:
             act(a.ShowFrame(k))
         if s.timeline_frame >= 0 and imgui.button("Copy this frame to the sliders"):
             act(a.CopyFrameToSliders())
-    elif s.files.capture_note:
-        imgui.text_wrapped(s.files.capture_note)
+    elif s.files.capture_note:  # a note, not an error: an avatar travels without its capture
+        imgui.push_text_wrap_pos(0)
+        imgui.text_disabled(s.files.capture_note)
+        imgui.pop_text_wrap_pos()
     if s.timeline_frame >= 0:
         imgui.text_wrapped("Showing a capture frame: the sliders below take over when you move them.")
 

@@ -63,6 +63,16 @@ def start(jobs: JobQueue, c: StartTraining) -> str | None:
     return None
 
 
+def progress_text(job) -> str:
+    """The progress bar's words: the step, and while the job runs the time it has left."""
+    last = job.progress[-1] if job.progress else {}
+    text = f"step {last.get('step', 0)}"
+    eta = last.get("eta_s")
+    if job.state == "running" and eta is not None and eta >= 0:
+        return text + f", ETA {eta:.0f} s"
+    return text if job.state == "running" else f"{text}, {job.state}"
+
+
 FORM = JobForm()
 """The panel's form (widget state)."""
 
@@ -95,10 +105,7 @@ def draw(ctx: PanelContext) -> None:
         imgui.push_id(job.id)
         imgui.text(f"#{job.id} {job.out.name}: {job.model} {job.effects} - {jobs.status(job)}"
                    + (" (resumed)" if job.resume else ""))
-        last = job.progress[-1] if job.progress else {}
-        eta = last.get("eta_s")
-        imgui.progress_bar(job.fraction, imgui.ImVec2(-1, 0),
-                           f"step {last.get('step', 0)}" + (f", ETA {eta:.0f} s" if eta is not None else ""))
+        imgui.progress_bar(job.fraction, imgui.ImVec2(-1, 0), progress_text(job))
         if job.error:
             imgui.push_text_wrap_pos(0)
             imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.35, 1.0), job.error)
@@ -109,6 +116,8 @@ def draw(ctx: PanelContext) -> None:
             val = np.array([(p["step"], p["val_psnr"]) for p in job.progress if "val_psnr" in p], np.float64)
             # All setup first (implot's rule), then the lines.
             implot.setup_axes("step", "loss", implot.AxisFlags_.auto_fit, implot.AxisFlags_.auto_fit)
+            # The legend above the plot, not over the curves' first points.
+            implot.setup_legend(implot.Location_.north, implot.LegendFlags_.outside | implot.LegendFlags_.horizontal)
             implot.setup_axis_scale(implot.ImAxis_.y1, implot.Scale_.log10)
             if len(val):
                 right = implot.AxisFlags_.auto_fit | implot.AxisFlags_.opposite

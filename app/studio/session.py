@@ -142,8 +142,9 @@ def read_avatar_folder(folder: str | Path) -> AvatarFiles:
             files.capture = load_split(dataset, "train")
             files.capture_note = ""
             break
-        except DatasetError as e:
-            files.capture_note = f"capture not available: {e}"
+        except DatasetError:
+            files.capture_note = (f"No timeline: the capture it was trained on ({Path(dataset).name}) is not on this "
+                                  "machine.")
     return files
 
 

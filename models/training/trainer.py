@@ -216,8 +216,8 @@ class Trainer:
             finished = (self.step >= budget_steps or self.elapsed >= budget_s or self.stop_requested)
             if self.step % 50 == 0 or self.step == 1 or finished:  # the last step is always logged
                 rate = self.step / max(self.elapsed, 1e-9)
-                eta = min((budget_steps - self.step) / max(rate, 1e-9) if budget_steps != math.inf else math.inf,
-                          budget_s - self.elapsed)
+                eta = max(0.0, min((budget_steps - self.step) / max(rate, 1e-9) if budget_steps != math.inf
+                                   else math.inf, budget_s - self.elapsed))
                 record = {"step": self.step, **{k: round(v, 6) for k, v in terms.items()},
                           "elapsed_s": round(self.elapsed, 1), "eta_s": round(eta, 1)}
                 if self.validation is not None and (self.step % 250 == 0 or finished):

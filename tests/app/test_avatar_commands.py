@@ -26,6 +26,7 @@ def test_train_eval_render(capture, tmp_path, capsys):
                  "--rays-per-step", "128"]) == 0
     lines = (avatar / "progress.jsonl").read_text().splitlines()
     assert json.loads(lines[0])["step"] == 1 and "eta_s" in json.loads(lines[-1])
+    assert all(json.loads(line)["eta_s"] >= 0 for line in lines)  # the last step: 0 s left, not -1
     # Resuming with a larger budget continues from step 6.
     assert main(["train", str(capture), "--out", str(avatar), "--effects", "shading", "--steps", "8",
                  "--rays-per-step", "128", "--resume"]) == 0

@@ -72,10 +72,12 @@ def test_slider_actions_move_the_controls(session):
         a.SetAngles("elbow", (1.0,)).apply(session)
 
 
-def test_timeline_shows_a_capture_frame_and_copies_it_to_the_sliders(session, files):
+def test_timeline_shows_a_capture_frame_and_moves_the_sliders_to_it(session, files):
     frame = files.capture.frames[2].controls
     a.ShowFrame(2).apply(session)
     assert session.timeline_frame == 2 and session.dirty and session.controls() is frame
+    c = session.sliders.controls()  # the sliders show the frame's values
+    np.testing.assert_allclose(c.expression[:len(frame.expression)], frame.expression, atol=1e-6)
     a.CopyFrameToSliders().apply(session)
     assert session.timeline_frame == -1
     c = session.controls()
