@@ -94,6 +94,8 @@ class Studio:
         self.viewport = viewport.Viewport()
         self.script = Script.load(cfg.script) if cfg.script else None
         self.confirm_close = False
+        self.keep_jobs = False
+        """The user chose to keep training after the window closes (otherwise closing stops the jobs)."""
 
     # ---- actions -----------------------------------------------------------------------------------------
     def act(self, action: a.Action | a.Command) -> None:
@@ -274,8 +276,7 @@ class Studio:
         return True
 
     def _exit(self, keep_jobs: bool) -> None:
-        if not keep_jobs:
-            self.jobs.stop_all()
+        self.keep_jobs = keep_jobs
         hello_imgui.get_runner_params().app_shall_exit = True
 
     def read_window(self) -> np.ndarray:
@@ -301,8 +302,12 @@ class Studio:
                 "errors": list(self.session.errors)}
 
     def close(self) -> None:
+        """The window is gone, however it ended (closed, a script done or failed, an error): the renders stop,
+        and so do the training jobs (checkpointed) unless the user chose to keep them."""
         self.worker.close()
         self.exporter.cancel()
+        if not self.keep_jobs:
+            self.jobs.stop_all()
 
 
 def run_studio(cfg: StudioConfig) -> int:

@@ -3,6 +3,8 @@ head model, effect set, training provenance and measured metrics."""
 
 from __future__ import annotations
 
+import shutil
+import sys
 from pathlib import Path
 
 from imgui_bundle import imgui, portable_file_dialogs
@@ -15,6 +17,47 @@ from app.studio.session import recent_folders
 class PanelState:
     path = ""
     dialog = None
+    browsing: Path | None = None
+    """The folder the built-in browser shows (None: closed)."""
+
+
+DIALOG_PROGRAMS = ("zenity", "matedialog", "qarma", "kdialog")
+"""What the desktop's file dialog runs on Linux (portable-file-dialogs); other systems have theirs built in."""
+
+
+def system_dialog_available() -> bool:
+    return sys.platform != "linux" or any(shutil.which(p) for p in DIALOG_PROGRAMS)
+
+
+def subfolders(folder: Path) -> list[Path]:
+    """The folders in `folder`, sorted, hidden ones left out (an unreadable folder has none)."""
+    try:
+        return sorted((p for p in folder.iterdir() if p.is_dir() and not p.name.startswith(".")),
+                      key=lambda p: p.name.lower())
+    except OSError:
+        return []
+
+
+def draw_browser(act) -> None:
+    """The built-in folder browser (where the desktop has no file dialog): up, into a folder, open an avatar."""
+    here = PanelState.browsing
+    imgui.text_wrapped(str(here))
+    if imgui.button("Up") and here.parent != here:
+        PanelState.browsing = here.parent
+    imgui.same_line()
+    if imgui.button("Close"):
+        PanelState.browsing = None
+        return
+    if imgui.begin_child("folders", imgui.ImVec2(-1, 160), imgui.ChildFlags_.borders):
+        for folder in subfolders(here):
+            avatar = (folder / "avatar.json").is_file()
+            if imgui.selectable(f"{folder.name}  [avatar: open]" if avatar else f"{folder.name}/", False)[0]:
+                if avatar:
+                    PanelState.path, PanelState.browsing = str(folder), None
+                    act(OpenAvatar(folder))
+                else:
+                    PanelState.browsing = folder
+    imgui.end_child()
 
 
 def draw(ctx: PanelContext) -> None:
@@ -26,10 +69,18 @@ def draw(ctx: PanelContext) -> None:
         act(OpenAvatar(Path(PanelState.path.strip())))
     imgui.same_line()
     if imgui.button("Browse...") and PanelState.dialog is None:
-        try:
-            PanelState.dialog = portable_file_dialogs.select_folder("Open an avatar folder")
-        except Exception as e:  # no dialog program on this desktop: typing the path still works
-            act(Report(f"file dialog unavailable ({e}); type the folder instead"))
+        if not system_dialog_available():  # no dialog program on this desktop: the built-in browser
+            PanelState.browsing = Path(PanelState.path.strip() or ".").resolve()
+            if not PanelState.browsing.is_dir():
+                PanelState.browsing = Path.cwd()
+        else:
+            try:
+                PanelState.dialog = portable_file_dialogs.select_folder("Open an avatar folder")
+            except Exception as e:  # the dialog failed to start: the built-in browser, and why
+                act(Report(f"file dialog unavailable ({e}): using the studio's own folder browser"))
+                PanelState.browsing = Path.cwd()
+    if PanelState.browsing is not None:
+        draw_browser(act)
     if PanelState.dialog is not None and PanelState.dialog.ready():
         chosen = PanelState.dialog.result()
         PanelState.dialog = None

@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
+
+STUDIO_HOME = Path(os.environ.get("AVATAR_STUDIO_HOME") or Path.home() / "AvatarStudio").resolve()
+"""Where the studio's default output paths point (new avatars, turntables), whatever folder it was started in;
+AVATAR_STUDIO_HOME moves it."""
 
 
 @dataclass(frozen=True)

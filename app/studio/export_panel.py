@@ -3,12 +3,13 @@ and PNG frames, in a thread with progress and cancel; a screenshot of the viewpo
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from imgui_bundle import imgui
 
 from app.studio.actions import CancelExport, ExportTurntable, SaveViewport
+from app.studio.config import STUDIO_HOME
 from app.studio.context import PanelContext
 from app.turntable import TurntableConfig
 from models.avatars.quality import PRESET_NAMES
@@ -16,8 +17,9 @@ from models.avatars.quality import PRESET_NAMES
 
 @dataclass
 class ExportForm:
-    out: str = "out/turntable.mp4"
+    out: str = field(default_factory=lambda: str(STUDIO_HOME / "turntable.mp4"))
     frames: int = 120
+    sweep: float = 0.0
     elevation: float = 5.0
     zoom: float = 1.0
     size: int = 256
@@ -25,8 +27,10 @@ class ExportForm:
     animate: bool = False
 
     def config(self, avatar: Path) -> TurntableConfig:
-        return TurntableConfig(avatar, Path(self.out), max(1, self.frames), self.elevation, self.zoom,
-                               max(16, self.size - self.size % 2), list(PRESET_NAMES)[self.preset], self.animate)
+        return TurntableConfig(avatar, Path(self.out), frames=max(1, self.frames),
+                               sweep_deg=min(max(self.sweep, 0.0), 180.0), elevation_deg=self.elevation,
+                               zoom=self.zoom, size=max(16, self.size - self.size % 2),
+                               preset=list(PRESET_NAMES)[self.preset], animate=self.animate)
 
 
 FORM = ExportForm()
@@ -41,6 +45,11 @@ def draw(ctx: PanelContext) -> None:
     imgui.same_line()
     imgui.set_next_item_width(90)
     _, e.size = imgui.input_int("size", e.size, 32)
+    imgui.set_next_item_width(90)
+    _, e.sweep = imgui.slider_float("sweep", e.sweep, 0, 90, "+-%.0f deg")
+    if imgui.is_item_hovered():
+        imgui.set_tooltip("0: a full turn; else the camera swings this far to each side of the front")
+    imgui.same_line()
     imgui.set_next_item_width(90)
     _, e.elevation = imgui.slider_float("elevation", e.elevation, -45, 45, "%.0f deg")
     imgui.same_line()

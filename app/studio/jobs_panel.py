@@ -13,6 +13,7 @@ from imgui_bundle import imgui, implot
 
 from app.jobs import JobQueue
 from app.studio.actions import CancelJob, OpenAvatar, ResumeJob, StartFromVideo, StartTraining
+from app.studio.config import STUDIO_HOME
 from app.studio.context import PanelContext
 from models.avatars.registry import AVATARS
 from models.capture.dataset import DatasetError, load_split
@@ -24,7 +25,7 @@ EFFECTS = ("all", "none", "shading", "shading,specular", "shadows")
 @dataclass
 class JobForm:
     dataset: str = ""
-    out: str = "out/avatars/new"
+    out: str = field(default_factory=lambda: str(STUDIO_HOME / "avatars" / "new"))
     model: int = 0
     effects: int = 0
     minutes: float = 30.0

@@ -263,8 +263,9 @@ def _open_job(sc: Script, st: Driven, s: dict) -> bool:
 def _export(sc: Script, st: Driven, s: dict) -> bool:
     x = s["export"]
     size = int(x.get("size", 64))
-    cfg = TurntableConfig(st.session.folder, Path(x["out"]), max(1, int(x.get("frames", 12))), 5.0, 1.0,
-                          max(16, size - size % 2), x.get("preset", "draft"), bool(x.get("animate", False)))
+    cfg = TurntableConfig(st.session.folder, Path(x["out"]), frames=max(1, int(x.get("frames", 12))),
+                          sweep_deg=float(x.get("sweep_deg", 0.0)), size=max(16, size - size % 2),
+                          preset=x.get("preset", "draft"), animate=bool(x.get("animate", False)))
     st.act(a.ExportTurntable(cfg))
     return True
 

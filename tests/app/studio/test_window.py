@@ -124,6 +124,23 @@ def test_errors_training_job_and_turntable(display, avatar, capture, tmp_path):
     assert len(list((tmp_path / "turn").glob("frame_*.png"))) == 12
 
 
+def test_jobs_end_with_the_window(display, avatar, capture, tmp_path):
+    """A job the window started does not outlive it unless the user chose so: here the script fails (an error
+    that never comes) while a 10-minute job runs, the studio exits 1, and no trainer of that job is left."""
+    job_out = tmp_path / "long_job"
+    script = tmp_path / "script.json"
+    script.write_text(json.dumps({"steps": [
+        {"train": {"dataset": str(capture), "out": str(job_out), "minutes": 10, "effects": "none"}},
+        {"wait_frames": 30},
+        {"expect_error": "an error nobody reports"}]}))
+    env = {**os.environ, "DISPLAY": display, "HOME": str(tmp_path)}
+    r = subprocess.run([sys.executable, "-m", "app.cli", "studio", str(avatar), "--script", str(script)], cwd=REPO,
+                       env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 1 and "studio script failed" in r.stdout, r.stdout + r.stderr
+    left = subprocess.run(["pgrep", "-f", f"train .*{job_out}"], capture_output=True, text=True)
+    assert left.stdout.strip() == "", f"trainer still running: {left.stdout}"
+
+
 def test_new_avatar_from_video(display, avatar, tmp_path, face_video, landmarker, ict_npz):
     """"New avatar from video": one job tracks the real video, then trains on it; the tracker's report and the
     avatar are written and the studio opens the avatar when the job is done."""
