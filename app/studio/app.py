@@ -95,6 +95,7 @@ class Studio:
         self.script = Script.load(cfg.script) if cfg.script else None
         self.confirm_close = False
         self.keep_jobs = False
+        self.pending_viewport_shot: Path | None = None
         """The user chose to keep training after the window closes (otherwise closing stops the jobs)."""
 
     # ---- actions -----------------------------------------------------------------------------------------
@@ -168,13 +169,26 @@ class Studio:
         self.worker.set_avatar(o.files.avatar)
 
     def save_viewport(self, path: Path) -> None:
-        """The neural render as shown (its current buffer), as a PNG."""
-        img = self.viewport.neural_image
-        if img is None:
-            self.session.report("nothing rendered yet to save")
+        """The viewport as shown (the guide and the render, beside or over each other), as a PNG: read from the
+        window once this frame is drawn (take_viewport_shot)."""
+        if self.viewport.rect is None:
+            self.session.report("nothing shown yet to save")
             return
-        path.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(img).save(path)
+        self.pending_viewport_shot = path
+
+    def take_viewport_shot(self) -> None:
+        """Called with the frame drawn: save the pending viewport screenshot."""
+        path, self.pending_viewport_shot = self.pending_viewport_shot, None
+        if path is None or self.viewport.rect is None:
+            return
+        x, y, w, h = self.viewport.rect
+        img = self.read_window()[max(y, 0):y + h, max(x, 0):x + w]
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            Image.fromarray(np.ascontiguousarray(img)).save(path)
+        except (OSError, ValueError) as e:
+            self.session.report(f"{path}: cannot save the screenshot ({e})")
+            return
         self.exporter.message = f"saved {path}"
 
     # ---- per frame ---------------------------------------------------------------------------------------
@@ -299,7 +313,8 @@ class Studio:
                 "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 1),
                 "last_pass": None if r is None else {"pass": r.pass_name, "ms": round(r.ms, 1)},
                 "presets": {"ms": self.worker.figures.ms, "psnr_vs_final": self.worker.figures.psnr_vs_final},
-                "errors": list(self.session.errors)}
+                "errors": list(self.session.errors),
+                "steps_run": None if self.script is None else self.script.ran}
 
     def close(self) -> None:
         """The window is gone, however it ended (closed, a script done or failed, an error): the renders stop,
@@ -329,6 +344,7 @@ def run_studio(cfg: StudioConfig) -> int:
     def before_swap() -> None:
         if cfg.screenshot and hello_imgui.get_runner_params().app_shall_exit and not shots:
             shots.append(studio.read_window())
+        studio.take_viewport_shot()
         if studio.script is not None:
             studio.script.after_frame(studio)
         # The cap: no display sync here, so without it the interface would take a whole core. Counted from the

@@ -13,6 +13,7 @@ pictures). Steps:
   {"wait_render": PRESET}                 until the latest request's pass PRESET is on screen
   {"save_neural": PNG}                    the neural image as shown
   {"screenshot": PNG}                     the whole window
+  {"save_viewport": PNG}                  the viewport as shown (the Export panel's "Screenshot viewport")
   {"train": {"dataset": D, "out": O, "steps": N, "effects": E, "model": M}}  queue a training job
   {"from_video": {"video": V, "head": H, "landmarker": L, "out": O, "steps": N, "size": PX, "fps": F}}
                                           queue a new avatar from a video (track, then train)
@@ -20,7 +21,7 @@ pictures). Steps:
   {"expect_open": FOLDER}                 fail unless the open avatar is FOLDER
   {"open_job": true}                      open the last job's avatar
   {"cancel_jobs": true}                   cancel every job (running ones checkpoint first)
-  {"export": {"out": MP4, "frames": N, "size": PX, "preset": P, "animate": false}}
+  {"export": {"out": MP4, "frames": N, "size": PX, "preset": P, "animate": false, "sweep_deg": 0}}
   {"wait_export": true}
   {"wait_frames": N}                      let N frames pass (frame-rate measurements)
   {"orbit": DX}                           orbit the camera as a mouse drag of DX pixels does
@@ -89,6 +90,8 @@ class Script:
     waited_frames: int = 0
     wait_started: float = 0.0
     pending_screenshot: Path | None = None
+    ran: int = 0
+    """Steps completed (the report's steps_run: every step runs once)."""
     log: list[str] = field(default_factory=list)
 
     @staticmethod
@@ -103,6 +106,7 @@ class Script:
 
     def _done(self) -> None:
         self.index += 1
+        self.ran += 1
         self.waited_frames = 0
         self.wait_started = 0.0
 
@@ -209,6 +213,12 @@ def _save_neural(sc: Script, st: Driven, s: dict) -> bool:
     path = Path(s["save_neural"])
     path.parent.mkdir(parents=True, exist_ok=True)
     Image.fromarray(st.viewport.neural_image).save(path)
+    return True
+
+
+@step("save_viewport")
+def _save_viewport(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.SaveViewport(Path(s["save_viewport"])))  # written when this frame is drawn
     return True
 
 

@@ -57,6 +57,8 @@ class Viewport:
         self.neural_image: np.ndarray | None = None
         self.guide_image_size = (0, 0)
         self.shown = (-1, "", "")  # (request id, pass, buffer) on screen
+        self.rect: tuple[int, int, int, int] | None = None
+        """Where the guide and the render were drawn in the window last frame: x, y, width, height (pixels)."""
         self._guide_key: tuple = ()
 
     def init(self, gl: GLContext) -> None:
@@ -185,6 +187,8 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         if vp.neural_tex is None:
             imgui.dummy(imgui.ImVec2(size, size))
         _mouse(act, size)
+    end = imgui.get_item_rect_max()
+    vp.rect = (int(origin.x), int(origin.y), int(end.x - origin.x), int(end.y - origin.y))
 
 
 def _mouse(act, size: int) -> None:

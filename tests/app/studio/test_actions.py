@@ -172,6 +172,6 @@ def test_commands_carried_out_by_the_application(tmp_path, files):
         assert studio.session.errors[-1].endswith("the turntable is written as an .mp4")
         assert not studio.exporter.running
         studio.act(a.SaveViewport(tmp_path / "v.png"))
-        assert studio.session.errors[-1] == "nothing rendered yet to save"
+        assert studio.session.errors[-1] == "nothing shown yet to save"
     finally:
         studio.close()

@@ -61,10 +61,14 @@ def run_script(display: str, tmp_path: Path, avatar: Path, steps: list[dict]) ->
 def test_expression_slider_changes_the_face(display, avatar, tmp_path):
     a, b = tmp_path / "a.png", tmp_path / "b.png"
     wa, wb = tmp_path / "wa.png", tmp_path / "wb.png"
-    report = run_script(display, tmp_path, avatar, [
+    shot = tmp_path / "viewport.png"
+    steps = [
         {"refine_to": "preview"}, {"wait_render": "preview"}, {"save_neural": str(a)}, {"screenshot": str(wa)},
         {"expression": "mouthStretch", "value": 1.5}, {"jaw_open_deg": 25},
-        {"wait_render": "preview"}, {"save_neural": str(b)}, {"screenshot": str(wb)}])
+        {"wait_render": "preview"}, {"save_neural": str(b)}, {"screenshot": str(wb)}, {"save_viewport": str(shot)},
+        {"wait_frames": 2}]
+    report = run_script(display, tmp_path, avatar, steps)
+    assert report["steps_run"] == len(steps)  # none skipped (a screenshot once ended two steps)
     na, nb = (np.asarray(Image.open(p), np.int16) for p in (a, b))
     assert na.shape == nb.shape == (160, 160, 3)
     changed = (np.abs(na - nb).max(-1) > 10).mean()
@@ -75,6 +79,12 @@ def test_expression_slider_changes_the_face(display, avatar, tmp_path):
     assert (np.abs(sa - sb).max(-1) > 10).mean() > 0.002  # the guide mesh and the render, in the window
     assert report["errors"] == [] and report["fps_idle"] + report["fps_rendering"] > 0
     assert report["latency_ms"] is not None
+    # "Screenshot viewport": the guide and the render beside it, as the window shows them (not the render alone).
+    view = np.asarray(Image.open(shot), np.int16)
+    h, w = view.shape[:2]
+    assert h > 160 and 1.9 * h < w < 2.2 * h, view.shape
+    guide, neural = view[:, : w // 2 - 8], view[:, w // 2 + 8:]
+    assert guide.std() > 5 and neural.std() > 5
 
 
 def test_shadow_buffers_in_the_viewport(display, avatar, tmp_path):
