@@ -108,9 +108,9 @@ class Studio:
             case a.OpenAvatar(folder):
                 self.open_avatar(folder)
             case a.StartTraining():
-                self._report_if(jobs_panel.start(self.jobs, action))
+                self.session.job_message = jobs_panel.start(self.jobs, action) or ""
             case a.StartFromVideo():
-                self._report_if(jobs_panel.start_from_video(self.jobs, action))
+                self.session.job_message = jobs_panel.start_from_video(self.jobs, action) or ""
             case a.CancelJob(job_id):
                 for job in self.jobs.jobs:
                     if job_id is None or job.id == job_id:
@@ -130,10 +130,6 @@ class Studio:
                 self.save_viewport(path)
             case _:
                 raise TypeError(f"no such studio command: {action!r}")
-
-    def _report_if(self, message: str | None) -> None:
-        if message:
-            self.session.report(message)
 
     def open_avatar(self, folder: str | Path) -> None:
         """Start reading an avatar folder on a thread of its own; the window goes on drawing (with the open

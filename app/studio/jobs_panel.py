@@ -101,6 +101,10 @@ def draw(ctx: PanelContext) -> None:
                                max(f.minutes, 0.1)))
         imgui.same_line()
         imgui.text_disabled("(avatar folder, effects and minutes from above)")
+    if ctx.session.job_message:
+        imgui.push_text_wrap_pos(0)
+        imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.35, 1.0), ctx.session.job_message)
+        imgui.pop_text_wrap_pos()
     imgui.separator()
     for job in reversed(jobs.jobs):
         imgui.push_id(job.id)

@@ -299,6 +299,7 @@ def _wait_frames(sc: Script, st: Driven, s: dict) -> bool:
 
 @step("expect_error")
 def _expect_error(sc: Script, st: Driven, s: dict) -> bool:
-    if not any(s["expect_error"] in e for e in st.session.errors):
-        return sc.fail(f"no message containing {s['expect_error']!r} (messages: {st.session.errors})")
+    shown = [*st.session.errors, st.session.job_message]  # the Avatar panel's messages, the Jobs panel's
+    if not any(s["expect_error"] in e for e in shown):
+        return sc.fail(f"no message containing {s['expect_error']!r} (messages: {shown})")
     return True

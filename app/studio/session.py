@@ -165,6 +165,8 @@ class Session:
     opening: Path | None = None
     """A folder being read in the background."""
     errors: list[str] = field(default_factory=list)
+    job_message: str = ""
+    """Why the Jobs panel's last request was refused (shown there, beside the form); "" once one is queued."""
 
     @property
     def avatar(self) -> Avatar | None:
