@@ -11,10 +11,10 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from tqdm import tqdm
 
 from app.errors import UserInputError
 from app.head_commands import save_png
+from app.progress import Progress
 from app.turntable import INSPECT, TurntableConfig, buffer_image, turntable_frames
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
@@ -42,12 +42,18 @@ def run_train(cfg: TrainConfig) -> int:
     gl = GLContext.headless()
     trainer = prepare_training(cfg, gl)
     tty = sys.stderr.isatty()
+    last_line = [0.0]
 
     def show(r: dict) -> None:
+        """On a terminal a line redrawn at every log record; in a log a line every 30 s (and at validation)."""
+        text = (f"step {r['step']}  loss {r['loss']:.5f}  {r['elapsed_s']:.0f} s  eta {r['eta_s']:.0f} s"
+                + (f"  val PSNR {r['val_psnr']:.2f}" if "val_psnr" in r else ""))
         if tty:
-            sys.stderr.write(f"\rstep {r['step']}  loss {r['loss']:.5f}  {r['elapsed_s']:.0f} s  eta {r['eta_s']:.0f} s"
-                             + (f"  val PSNR {r['val_psnr']:.2f}" if "val_psnr" in r else "") + "   ")
-            sys.stderr.flush()
+            sys.stderr.write(f"\r{text}   ")
+        elif r["elapsed_s"] - last_line[0] >= 30 or r["step"] == 1:
+            last_line[0] = r["elapsed_s"]
+            sys.stderr.write(text + "\n")
+        sys.stderr.flush()
 
     def stop(signum, frame) -> None:  # SIGTERM (the studio's Cancel): finish the step, checkpoint, exit
         trainer.stop_requested = True
@@ -215,8 +221,8 @@ def run_turntable(cfg: TurntableConfig) -> int:
     gl = GLContext.headless()
     pngs = cfg.out.with_suffix("") if cfg.pngs else None
     t0 = time.perf_counter()
-    with tqdm(total=cfg.frames, desc="turntable", unit="frame", disable=not sys.stderr.isatty()) as bar:
-        n = write_video(turntable_frames(avatar, Rasterizer(gl), cfg, on_frame=lambda k: bar.update()), cfg.out,
-                        cfg.fps, pngs)
+    bar = Progress("turntable", cfg.frames)
+    n = write_video(turntable_frames(avatar, Rasterizer(gl), cfg, on_frame=lambda k: bar.update(k + 1)), cfg.out,
+                    cfg.fps, pngs)
     print(f"wrote {cfg.out} ({n} frames{f', PNGs in {pngs}' if pngs else ''}) in {time.perf_counter() - t0:.1f} s")
     return 0

@@ -2,27 +2,15 @@
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 from app.errors import UserInputError
+from app.progress import Progress
 from models.capture.dataset import SPLITS, load_split
 from models.capture.synthetic import SynthConfig, synthesize
 from models.head.sources import load_head
 from render.gl.context import GLContext
-
-
-def progress_bar(done: int, total: int) -> None:
-    """A one-line progress bar on a terminal; silent when output is not a terminal."""
-    if not sys.stderr.isatty():
-        return
-    width = 30
-    filled = int(width * done / total)
-    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} frames")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
 
 
 def run_synth(cfg: SynthConfig) -> int:
@@ -35,7 +23,14 @@ def run_synth(cfg: SynthConfig) -> int:
     if cfg.out.exists() and (not cfg.out.is_dir() or any(cfg.out.iterdir())):
         raise UserInputError(f"{cfg.out}: already exists and is not empty; choose a new folder")
     head = load_head(cfg.head)
-    summary = synthesize(cfg, head, GLContext.headless(), progress_bar)
+    bar: list[Progress] = []
+
+    def progress(done: int, total: int) -> None:
+        if not bar:
+            bar.append(Progress("synth", total))
+        bar[0].update(done)
+
+    summary = synthesize(cfg, head, GLContext.headless(), progress)
     n = summary["frames"]
     print(f"wrote {cfg.out}: {n['train']} train, {n['val']} val, {n['test']} test frames "
           f"({cfg.scene} scene, {cfg.size}x{cfg.size}) in {summary['seconds']:.1f} s")

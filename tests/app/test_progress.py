@@ -1,0 +1,27 @@
+"""Progress lines: redrawn on a terminal, a line every tenth of the way in a log."""
+
+from __future__ import annotations
+
+import io
+
+from app.progress import Progress
+
+
+def test_a_log_gets_a_line_every_tenth():
+    out = io.StringIO()
+    p = Progress("turntable", 24, stream=out, tty=False)
+    for k in range(1, 25):
+        p.update(k)
+    lines = out.getvalue().splitlines()
+    # 24 frames: the tenths fall at 2.4, 4.8, ... frames, so the lines come at frames 3, 5, 8, 10, 12, 15, 17, 20,
+    # 22 and 24 (the last one always).
+    assert [int(line.split()[1].split("/")[0]) for line in lines] == [3, 5, 8, 10, 12, 15, 17, 20, 22, 24]
+    assert lines[-1] == "turntable: 24/24 frames"
+
+
+def test_a_terminal_gets_one_line_redrawn():
+    out = io.StringIO()
+    p = Progress("synth", 3, stream=out, tty=True)
+    for k in (1, 2, 3):
+        p.update(k, "ok")
+    assert out.getvalue().count("\r") == 3 and out.getvalue().endswith("synth: 3/3 frames  ok   \n")
