@@ -22,6 +22,7 @@ from models.capture.dataset import load_split
 from models.capture.frames import camera_of, load_rgb
 from models.capture.synthetic import read_png16
 from models.device import device_of
+from models.files import FolderBusy, WriterLock
 from models.head.controls import Controls, load_controls
 from models.training.metrics import face_mse, luminance, normal_angle_deg, pearson, psnr, ssim
 from models.training.trainer import TrainConfig, prepare_training
@@ -37,6 +38,21 @@ def run_train(cfg: TrainConfig) -> int:
         parse_effects(cfg.effects)
     except ValueError as e:
         raise UserInputError(f"--effects {cfg.effects}: {e}") from None
+    lock = WriterLock(cfg.out, "avatar-studio train")
+    try:
+        lock.__enter__()
+    except FolderBusy as e:
+        raise UserInputError(str(e)) from None
+    except OSError as e:
+        raise UserInputError(f"{cfg.out}: cannot write the avatar there ({e.strerror})") from None
+    try:
+        return train_locked(cfg)
+    finally:
+        lock.__exit__()
+
+
+def train_locked(cfg: TrainConfig) -> int:
+    """run_train with the avatar folder's writer lock held."""
     if not cfg.resume and (cfg.out / "avatar.json").exists():
         raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
     gl = GLContext.headless()
@@ -55,10 +71,16 @@ def run_train(cfg: TrainConfig) -> int:
             sys.stderr.write(text + "\n")
         sys.stderr.flush()
 
-    def stop(signum, frame) -> None:  # SIGTERM (the studio's Cancel): finish the step, checkpoint, exit
+    def stop(signum, frame) -> None:
+        """SIGTERM (the studio's Cancel) and Ctrl-C: finish the step, checkpoint, exit; a second Ctrl-C aborts."""
+        if trainer.stop_requested and signum == signal.SIGINT:
+            raise KeyboardInterrupt
         trainer.stop_requested = True
+        if signum == signal.SIGINT:
+            sys.stderr.write("\nstopping after this step with a checkpoint (Ctrl-C again to abort)\n")
 
     signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
     last = trainer.run(gl, show)
     if trainer.stop_requested:
         print(f"stopped at step {trainer.step}; checkpoint in {cfg.out} (continue with --resume)")

@@ -33,6 +33,7 @@ from models.avatars.quality import PRESET_NAMES, Preset, Quality, pareto, save_p
 from models.avatars.registry import BASELINE_MODEL, load_avatar, untrained_avatar
 from models.capture.dataset import load_split
 from models.capture.frames import camera_of, load_rgb
+from models.files import atomic_write_bytes
 from models.head.sources import load_head
 from models.training.metrics import face_mse, psnr
 from models.training.trainer import TrainConfig, prepare_training
@@ -270,9 +271,7 @@ def run_bench(cfg: BenchConfig) -> int:
                "preset_rules_db": PRESET_RULES, "rows": rows, "nerface": nerface_row, "presets": chosen,
                "training_curves": curves, "train_seconds": seconds,
                "bench_seconds": round(time.perf_counter() - t_start, 1)}
-    tmp = out / "results.json.tmp"
-    tmp.write_text(json.dumps(results, indent=1) + "\n")
-    os.replace(tmp, out / "results.json")
+    atomic_write_bytes(out / "results.json", (json.dumps(results, indent=1) + "\n").encode())
     for p in draw_charts(results, out):
         print(f"wrote {p}")
     print(f"wrote {out / 'results.json'} in {results['bench_seconds']:.0f} s")

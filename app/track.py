@@ -9,14 +9,14 @@ written as the camera saw them; the last part of the video is held out as the te
 well it went before anyone spends time training:
 landmark reprojection error per frame, frames dropped and why, and an overlay video of the fitted mesh.
 
-Everything is written to OUT.partial and renamed to OUT only when complete.
+Everything is written to a folder of the program's own beside OUT (models/files.py: partial_folder) and renamed
+to OUT only when complete.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import shutil
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -30,6 +30,7 @@ from tqdm import tqdm
 from app.errors import UserInputError
 from models.capture.dataset import write_split
 from models.capture.synthetic import absolute_head_spec, write_png8
+from models.files import partial_folder
 from models.head.controls import controls_to_dict
 from models.head.head import Head
 from models.head.sources import load_head
@@ -163,38 +164,37 @@ def run_track(cfg: TrackConfig) -> int:
     pixels = project(verts, k).numpy()
     errors = np.linalg.norm(pixels[:, corr.vertex_ids] - targets, axis=-1)
 
-    partial = cfg.out.with_name(cfg.out.name + ".partial")
-    if partial.exists():
-        shutil.rmtree(partial)
-    (partial / "tracking").mkdir(parents=True)
-    print("cutting masks...", flush=True)
-    t_masks = time.perf_counter()
-    crops = [crop.image(f["rgb"]) for f in kept]
-    masks = [foreground_mask(img, crop.points(face.landmarks_px[:468])) for img, face in zip(crops, faces, strict=True)]
-    t_masks = time.perf_counter() - t_masks
-    splits, per_frame, plate_report = write_frames(cfg, partial, kept, crops, masks, crop, k, result, errors, info.fps)
-    if cfg.overlay:
-        write_video((overlay(img, pixels[j], model, targets[j], pixels[j][corr.vertex_ids])
-                     for j, img in enumerate(crops)), partial / "tracking" / "overlay.mp4", fps=cfg.fps or info.fps)
-    total = time.perf_counter() - t_start
-    report = {
-        "video": str(cfg.video), "head_model": absolute_head_spec(cfg.head), "frames_read": read,
-        "frames_kept": len(kept),
-        "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
-        "landmarks_used": len(corr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
-        "face_width_px": face_width_px(faces, crop),
-        "crop": {"x0": round(crop.x0, 1), "y0": round(crop.y0, 1), "side": round(crop.side, 1),
-                 "whole_frame": crop.side >= min(info.width, info.height) - 0.5},
-        "fov_deg": cfg.fov_deg, "background_plate": plate_report,
-        "landmark_error_px": {"median": round(float(np.median(errors)), 3),
-                              "p95": round(float(np.percentile(errors, 95)), 3),
-                              "worst_frame_median": round(float(max(p["median_px"] for p in per_frame)), 3)},
-        "seconds": {"landmarks": round(t_landmarks, 2), "fit": round(result.seconds, 2), "masks": round(t_masks, 2),
-                    "total": round(total, 2)},
-        "seconds_per_frame": round(total / read, 4), "per_frame": per_frame,
-    }
-    (partial / "tracking" / "report.json").write_text(json.dumps(report, indent=1) + "\n")
-    partial.rename(cfg.out)
+    with partial_folder(cfg.out) as partial:
+        (partial / "tracking").mkdir(parents=True)
+        print("cutting masks...", flush=True)
+        t_masks = time.perf_counter()
+        crops = [crop.image(f["rgb"]) for f in kept]
+        masks = [foreground_mask(img, crop.points(face.landmarks_px[:468]))
+                 for img, face in zip(crops, faces, strict=True)]
+        t_masks = time.perf_counter() - t_masks
+        splits, per_frame, plate_report = write_frames(cfg, partial, kept, crops, masks, crop, k, result, errors,
+                                                       info.fps)
+        if cfg.overlay:
+            write_video((overlay(img, pixels[j], model, targets[j], pixels[j][corr.vertex_ids])
+                         for j, img in enumerate(crops)), partial / "tracking" / "overlay.mp4", fps=cfg.fps or info.fps)
+        total = time.perf_counter() - t_start
+        report = {
+            "video": str(cfg.video), "head_model": absolute_head_spec(cfg.head), "frames_read": read,
+            "frames_kept": len(kept),
+            "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
+            "landmarks_used": len(corr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
+            "face_width_px": face_width_px(faces, crop),
+            "crop": {"x0": round(crop.x0, 1), "y0": round(crop.y0, 1), "side": round(crop.side, 1),
+                     "whole_frame": crop.side >= min(info.width, info.height) - 0.5},
+            "fov_deg": cfg.fov_deg, "background_plate": plate_report,
+            "landmark_error_px": {"median": round(float(np.median(errors)), 3),
+                                  "p95": round(float(np.percentile(errors, 95)), 3),
+                                  "worst_frame_median": round(float(max(p["median_px"] for p in per_frame)), 3)},
+            "seconds": {"landmarks": round(t_landmarks, 2), "fit": round(result.seconds, 2), "masks": round(t_masks, 2),
+                        "total": round(total, 2)},
+            "seconds_per_frame": round(total / read, 4), "per_frame": per_frame,
+        }
+        (partial / "tracking" / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     le = report["landmark_error_px"]
     print(f"wrote {cfg.out}: {report['splits']['train']} train, {report['splits']['val']} val, "
           f"{report['splits']['test']} test frames; landmark error median {le['median']:.2f} px, "

@@ -8,11 +8,11 @@ the built-in presets below (the studio measures those when it opens the avatar).
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from models.avatars.checkpoint import CheckpointError
+from models.files import atomic_write_bytes
 
 PRESET_NAMES = ("draft", "preview", "final")
 
@@ -77,10 +77,8 @@ def load_presets(folder: str | Path) -> tuple[dict[str, Preset], dict]:
 def save_presets(folder: str | Path, presets: dict[str, Preset], measured: dict) -> Path:
     """Write presets.json atomically (a reader never sees half a file)."""
     path = presets_path(folder)
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"presets": {k: asdict(p) for k, p in presets.items()}, "measured": measured},
-                              indent=1) + "\n")
-    os.replace(tmp, path)
+    atomic_write_bytes(path, (json.dumps({"presets": {k: asdict(p) for k, p in presets.items()},
+                                          "measured": measured}, indent=1) + "\n").encode())
     return path
 
 

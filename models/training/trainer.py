@@ -20,6 +20,7 @@ from models.avatars.registry import DEFAULT_MODEL, ModelName, avatar_class
 from models.capture.dataset import DatasetError, load_split
 from models.capture.frames import background_plate
 from models.device import device_of
+from models.files import atomic_write_bytes
 from models.head.sources import load_head
 from models.training.data import FrameSet, ValidationFrame, build_frames, validation_frame
 from models.training.metrics import psnr
@@ -103,6 +104,21 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
     frames = build_frames(split, avatar, gl)
     validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
     return Trainer(cfg, avatar, frames, validation, resumed)
+
+
+def trim_progress(log: Path, step: int) -> None:
+    """Drop the records after `step` (a run resumed from its checkpoint logs those steps again), and a last line
+    cut short by a kill."""
+    if not log.exists():
+        return
+    kept = []
+    for line in log.read_text().splitlines():
+        try:
+            if json.loads(line)["step"] <= step:
+                kept.append(line)
+        except (json.JSONDecodeError, KeyError, TypeError):
+            continue
+    atomic_write_bytes(log, "".join(x + "\n" for x in kept).encode())
 
 
 class Trainer:
@@ -205,6 +221,7 @@ class Trainer:
             budget_steps = 2000
         log = Path(cfg.out) / "progress.jsonl"
         Path(cfg.out).mkdir(parents=True, exist_ok=True)
+        trim_progress(log, self.step)
         last_ck = time.perf_counter()
         start_elapsed, t0 = self.elapsed, time.perf_counter()
         record: dict = {}

@@ -114,3 +114,42 @@ def test_turntable_sweeps_about_the_front(tmp_path, capsys, gl):
     assert np.abs(frames[1].astype(int) - frames[3]).mean() > 1  # the other side
     assert main(["turntable", str(demo), "--sweep-deg", "200", "--out", str(tmp_path / "t.mp4")]) == 2
     assert "--sweep-deg 200" in capsys.readouterr().err
+
+
+def test_ctrl_c_checkpoints_and_a_second_writer_is_refused(capture, tmp_path, capsys):
+    """A trainer holds its avatar folder: a second `train` into it ends at once with exit 2 naming the holder.
+    Ctrl-C (SIGINT) checkpoints and exits 0, like the studio's Cancel; resuming then logs no step twice."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "av"
+    repo = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen([sys.executable, "-m", "app.cli", "train", str(capture), "--out", str(out), "--effects",
+                             "none", "--steps", "100000", "--rays-per-step", "64", "--checkpoint-seconds", "1e9"],
+                            cwd=repo, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+    try:
+        deadline = time.monotonic() + 300
+        while not (out / "progress.jsonl").exists() or len((out / "progress.jsonl").read_text().splitlines()) < 2:
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stdout.read() if proc.poll() else ""
+            time.sleep(0.2)
+        assert main(["train", str(capture), "--out", str(out), "--effects", "none", "--steps", "5", "--resume"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"in use by avatar-studio train (pid {proc.pid})" in err[0], err
+        proc.send_signal(signal.SIGINT)
+        stdout, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0 and "stopped at step" in stdout, stdout
+    step = json.loads((out / "avatar.json").read_text())["step"]
+    assert step > 50
+    with open(out / "progress.jsonl", "a") as f:  # a record past the checkpoint, as a kill can leave
+        f.write(json.dumps({"step": step + 3, "loss": 1.0}) + "\n")
+    assert main(["train", str(capture), "--out", str(out), "--effects", "none", "--steps", str(step + 60),
+                 "--rays-per-step", "64", "--resume"]) == 0
+    steps = [json.loads(line)["step"] for line in (out / "progress.jsonl").read_text().splitlines()]
+    assert steps == sorted(set(steps)) and steps[-1] == step + 60
