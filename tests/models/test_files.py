@@ -36,9 +36,13 @@ def test_partial_folder_never_touches_the_users_files(tmp_path):
         (tmp / "x").write_text("1")
     assert (out / "x").read_text() == "1" and not dead.exists()
     assert (mine / "notes.txt").read_text() == "keep me"
-    with pytest.raises(RuntimeError), partial_folder(tmp_path / "other") as tmp:  # a failure leaves nothing
-        (tmp / "y").write_text("2")
-        raise RuntimeError("boom")
+    def fail() -> None:
+        with partial_folder(tmp_path / "other") as tmp:
+            (tmp / "y").write_text("2")
+            raise RuntimeError("boom")
+
+    with pytest.raises(RuntimeError):  # a failure leaves nothing
+        fail()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture", "capture.partial"]
     assert clean_partials(out) == []
 
