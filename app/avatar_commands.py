@@ -8,7 +8,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 
@@ -24,6 +24,7 @@ from models.capture.synthetic import read_png16
 from models.device import device_of
 from models.files import FolderBusy, WriterLock
 from models.head.controls import Controls, load_controls
+from models.ranges import Range
 from models.training.metrics import face_mse, luminance, normal_angle_deg, pearson, psnr, ssim
 from models.training.trainer import TrainConfig, prepare_training
 from render.camera import framing_camera
@@ -35,7 +36,7 @@ from render.video import write_video
 def run_train(cfg: TrainConfig) -> int:
     device_of(cfg.device)  # before any work: a clear error where there is no GPU
     try:
-        parse_effects(cfg.effects)
+        parse_effects(cfg.effects or "all")
     except ValueError as e:
         raise UserInputError(f"--effects {cfg.effects}: {e}") from None
     lock = WriterLock(cfg.out, "avatar-studio train")
@@ -100,9 +101,9 @@ class EvalConfig:
     split: Literal["train", "val", "test"] = "test"
     out: Path = Path("out/eval")
     """Folder for metrics.json and side-by-side images."""
-    max_frames: int = 0
+    max_frames: Annotated[int, Range(0)] = 0
     """Evaluate at most this many frames (0: all)."""
-    every: int = 1
+    every: Annotated[int, Range(1)] = 1
     """Evaluate every n-th frame of the split (a slow model on a long split)."""
     device: Literal["cpu", "cuda"] = "cpu"
     """Where the networks run."""
@@ -202,7 +203,7 @@ class RenderCommandConfig:
     with those effects."""
     preset: Literal["draft", "preview", "final"] = "preview"
     """Quality: draft (half size, 6 samples a ray), preview (8), final (16)."""
-    size: int = 128
+    size: Annotated[int, Range(8, 4096)] = 128
     """Image width and height in pixels at the preview and final presets."""
     device: Literal["cpu", "cuda"] = "cpu"
     """Where the networks run."""

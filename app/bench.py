@@ -18,6 +18,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Annotated
 
 import cv2
 import numpy as np
@@ -35,6 +36,7 @@ from models.capture.dataset import load_split
 from models.capture.frames import camera_of, load_rgb
 from models.files import atomic_write_bytes
 from models.head.sources import load_head
+from models.ranges import Range
 from models.training.metrics import face_mse, psnr
 from models.training.trainer import TrainConfig, prepare_training
 from render.gl.context import GLContext
@@ -75,12 +77,12 @@ class BenchConfig:
     nerface: Path | None = None
     """A trained NerFACE avatar of the capture (timed and measured); by default an untrained one of the
     published size is timed (its weights do not change the work)."""
-    train_seconds: float | None = None
+    train_seconds: Annotated[float, Range(0, above=True)] | None = None
     """Training seconds per effect set for the training curves (default 300; quick: 25; 0: no curves, measure
     the --avatars only)."""
-    size: int | None = None
+    size: Annotated[int, Range(8, 4096)] | None = None
     """Image width and height, pixels (default 128; quick: 64)."""
-    test_frames: int | None = None
+    test_frames: Annotated[int, Range(1)] | None = None
     """Held-out test frames measured per setting (default 6; quick: 3)."""
     store_presets: bool = True
     """Write the chosen presets into each measured avatar (presets.json)."""

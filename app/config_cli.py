@@ -14,6 +14,9 @@ import typing
 from functools import cache
 from pathlib import Path
 
+from app.errors import UserInputError
+from models.ranges import check_config
+
 
 @cache
 def field_docs(cls: type) -> dict[str, str]:
@@ -42,7 +45,7 @@ def _strip_optional(tp: object) -> tuple[object, bool]:
 
 def add_config_arguments(parser: argparse.ArgumentParser, cls: type, positional: tuple[str, ...] = ()) -> None:
     """Add an option per dataclass field; names in `positional` become positional arguments."""
-    hints = typing.get_type_hints(cls)
+    hints = typing.get_type_hints(cls)  # Annotated ranges stripped: the parser needs the plain types
     docs = field_docs(cls)
     for f in dataclasses.fields(cls):
         tp, optional = _strip_optional(hints[f.name])
@@ -81,9 +84,15 @@ def add_config_arguments(parser: argparse.ArgumentParser, cls: type, positional:
 
 
 def config_from_args(cls: type, args: argparse.Namespace):
-    """The dataclass instance from parsed arguments (tuples stay tuples)."""
+    """The dataclass instance from parsed arguments (tuples stay tuples), its fields checked against their declared
+    ranges (models/ranges.py): UserInputError naming the option."""
     values = {}
     for f in dataclasses.fields(cls):
         v = getattr(args, f.name)
         values[f.name] = tuple(v) if isinstance(v, list) else v
-    return cls(**values)
+    cfg = cls(**values)
+    try:
+        check_config(cfg)
+    except ValueError as e:
+        raise UserInputError(str(e)) from None
+    return cfg

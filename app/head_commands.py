@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from PIL import Image
@@ -16,6 +16,7 @@ from models.head.controls import Controls, ControlsError, load_controls
 from models.head.head import Head, posed_mesh
 from models.head.model import HeadModel, portrait_vertices
 from models.head.sources import load_head
+from models.ranges import Range
 from render.camera import framing_camera
 from render.gl.context import GLContext
 from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
@@ -39,7 +40,7 @@ class PreviewConfig(HeadPoseConfig):
     """Camera orbit about the vertical axis, degrees; positive moves the camera to the subject's left."""
     pitch_deg: float = 0.0
     """Camera elevation, degrees."""
-    size: tuple[int, int] = (512, 512)
+    size: tuple[Annotated[int, Range(8, 8192)], Annotated[int, Range(8, 8192)]] = (512, 512)
     """Image width and height in pixels."""
     pass_: Literal["shaded", "normals", "wireframe", "shadow"] = "shaded"
     """What to draw: lit mesh, normals as colours, mesh with edges, or the key light's shadow mask."""

@@ -21,6 +21,7 @@ import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Annotated
 
 import cv2
 import numpy as np
@@ -34,6 +35,7 @@ from models.files import partial_folder
 from models.head.controls import controls_to_dict
 from models.head.head import Head
 from models.head.sources import load_head
+from models.ranges import Range
 from models.tracking.blendshapes import expression_from_scores, gaze_from_scores, jaw_from_scores
 from models.tracking.canonical import canonical_face_mesh
 from models.tracking.correspond import correspond, skin_vertices
@@ -55,22 +57,22 @@ class TrackConfig:
     landmarker: Path | None = None
     """MediaPipe's face landmarker bundle (face_landmarker_v2_with_blendshapes.task, from MediaPipe's model
     page); default: $AVATAR_STUDIO_LANDMARKER."""
-    fps: float | None = None
+    fps: Annotated[float, Range(0, 1000, above=True)] | None = None
     """Frames a second taken from the video (default: every frame; fewer frames track and train faster)."""
-    size: int = 256
+    size: Annotated[int, Range(32, 2048)] = 256
     """Width and height of the dataset's images, pixels."""
-    fov_deg: float = 40.0
+    fov_deg: Annotated[float, Range(0, 170, above=True)] = 40.0
     """Horizontal field of view of the video's full frame, degrees (a guess unless you know your camera)."""
-    test_fraction: float = 0.1
+    test_fraction: Annotated[float, Range(0, 0.9, above=True)] = 0.1
     """The last part of the video held out as the test split."""
-    iterations: int = 400
+    iterations: Annotated[int, Range(1, 100000)] = 400
     """Fitting iterations (all frames at once)."""
-    shape_components: int = 20
+    shape_components: Annotated[int, Range(0)] = 20
     """Identity components fitted (0: the head model's mean shape)."""
-    smooth: float = 1.0
+    smooth: Annotated[float, Range(0, 1e6)] = 1.0
     """Scale of the frame-to-frame smoothness of pose and expression (0 for frames that are not a continuous
     motion, such as a set of photographs)."""
-    blur: float = 0.3
+    blur: Annotated[float, Range(0, 1)] = 0.3
     """Frames whose face is sharper than this fraction of the video's median sharpness are kept."""
     overlay: bool = True
     """Write tracking/overlay.mp4: the fitted mesh over the frames."""

@@ -8,12 +8,13 @@ import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 
 from models.avatars.base import Avatar
 from models.head.controls import Controls
+from models.ranges import Range
 from render.camera import framing_camera
 from render.gl.raster import Rasterizer
 
@@ -24,20 +25,20 @@ class TurntableConfig:
     """Avatar folder."""
     out: Path = Path("out/turntable.mp4")
     """The mp4 to write (H.264); PNG frames go to a folder beside it unless --no-pngs."""
-    frames: int = 120
-    sweep_deg: float = 0.0
+    frames: Annotated[int, Range(1, 100000)] = 120
+    sweep_deg: Annotated[float, Range(0, 180)] = 0.0
     """Swing the camera this many degrees to each side of the front (a video's avatar has seen the head
     only from about the front); 0: a full turn."""
-    elevation_deg: float = 5.0
+    elevation_deg: Annotated[float, Range(-89, 89)] = 5.0
     """Camera height above the head's centre, degrees."""
-    zoom: float = 1.0
+    zoom: Annotated[float, Range(0.05, 20)] = 1.0
     """Camera distance: 1 frames the head; 2 is twice as close."""
-    size: int = 256
+    size: Annotated[int, Range(8, 4096)] = 256
     """Frame width and height, pixels (at the preview and final presets; draft halves it)."""
     preset: Literal["draft", "preview", "final"] = "preview"
     animate: bool = False
     """Talk while turning: the jaw and a smile follow slow waves."""
-    fps: float = 30.0
+    fps: Annotated[float, Range(1, 240)] = 30.0
     pngs: bool = True
     """Also write the frames as PNGs."""
 

@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Annotated
 
 import cv2
 import numpy as np
@@ -20,6 +21,7 @@ from models.capture.script import FrameSpec, Rig, held_out_script, make_rig, tra
 from models.head.controls import Controls, controls_to_dict
 from models.head.head import Head
 from models.head.model import HeadModel, portrait_vertices
+from models.ranges import Range
 from render.camera import Camera, look_at
 from render.gl.capture import CaptureBuffers, CaptureMesh, CaptureRenderer
 from render.gl.context import GLContext
@@ -35,22 +37,22 @@ class SynthConfig:
     scene: SceneName = "sun"
     """ambient: spherical-harmonics light only; studio: plus a soft key light (diffuse shading);
     sun: a hard key light with diffuse shading, specular highlights and cast shadows."""
-    frames: int = 300
+    frames: Annotated[int, Range(10, 1000000)] = 300
     """Frames of the capture protocol, held-out test frames included (about 10%)."""
-    size: int = 256
+    size: Annotated[int, Range(16, 2048)] = 256
     """Image width and height in pixels."""
     seed: int = 0
     """Seed of the expression script and held-out frames; the same seed gives the same images."""
-    identity: int = 0
+    identity: Annotated[int, Range(0)] = 0
     """Identity: 0 is the model's mean head; K > 0 draws identity coefficients from seed K (ICT: principal
     components, built-in: its shape components), within +-2 standard deviations."""
     light_deg: tuple[float, float] | None = None
     """Key light azimuth and elevation in degrees (azimuth from the front towards the subject's left)."""
     out: Path = Path("out/capture")
     """Dataset folder to create (must not exist or be empty)."""
-    background: tuple[float, float, float] = (0.55, 0.58, 0.62)
+    background: tuple[float, float, float] = (0.55, 0.58, 0.62)  # finite: checked as every float
     """Background colour, linear RGB in [0, 1]."""
-    fov_y_deg: float = 18.0
+    fov_y_deg: Annotated[float, Range(1, 170)] = 18.0
     """Camera field of view, degrees (a portrait lens)."""
 
 

@@ -9,12 +9,12 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import torch
 
 from models.avatars.base import Avatar, TrainingBatch
-from models.avatars.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from models.avatars.effects import parse_effects
 from models.avatars.registry import DEFAULT_MODEL, ModelName, avatar_class
 from models.capture.dataset import DatasetError, load_split
@@ -22,6 +22,7 @@ from models.capture.frames import background_plate
 from models.device import device_of
 from models.files import atomic_write_bytes
 from models.head.sources import load_head
+from models.ranges import Range
 from models.training.data import FrameSet, ValidationFrame, build_frames, validation_frame
 from models.training.metrics import psnr
 from render.gl.context import GLContext
@@ -35,13 +36,14 @@ class TrainConfig:
     """Capture folder (transforms_{train,val,test}.json with a head model)."""
     out: Path = Path("out/avatar")
     """Avatar folder: avatar.json, weights, progress.jsonl."""
-    effects: str = "all"
-    """Lighting effects to model: none, all, or a comma list of shading, specular, shadows."""
+    effects: str | None = None
+    """Lighting effects to model: none, all, or a comma list of shading, specular, shadows (default: all; with
+    --resume the checkpoint's, and another set is an error)."""
     model: ModelName = DEFAULT_MODEL
     """The avatar model (models/avatars/registry.py): codynerf, or the NerFACE baseline."""
-    minutes: float | None = None
+    minutes: Annotated[float, Range(0, 1e6, above=True)] | None = None
     """Time budget; training stops when it is spent (checkpointed)."""
-    steps: int | None = None
+    steps: Annotated[int, Range(1)] | None = None
     """Step budget (instead of, or as well as, --minutes); with neither, 2000 steps."""
     resume: bool = False
     """Continue the checkpoint in --out exactly where it stopped."""
@@ -49,15 +51,15 @@ class TrainConfig:
     """Where the networks run."""
     seed: int = 0
     """Seed of initialisation and ray sampling."""
-    rays_per_step: int | None = None
+    rays_per_step: Annotated[int, Range(1, 1 << 20)] | None = None
     """Rays a step; default: the model's (1024 codynerf; 256 nerface, each of whose rays costs 128 samples of an
     8x256 MLP)."""
-    frames_per_step: int = 4
-    lr: float = 5e-3
+    frames_per_step: Annotated[int, Range(1, 1024)] = 4
+    lr: Annotated[float, Range(0, 1, above=True)] = 5e-3
     """Adam learning rate at the start; it decays tenfold over the run."""
-    checkpoint_seconds: float = 60.0
+    checkpoint_seconds: Annotated[float, Range(0, above=True)] = 60.0
     """How often to checkpoint."""
-    grad_clip: float = 1.0
+    grad_clip: Annotated[float, Range(0, above=True)] = 1.0
     """Largest gradient norm of a step."""
 
 
@@ -94,8 +96,11 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
     if resumed is not None:  # the checkpoint's own model and sizes (an older one: no shadow factor)
         cls = avatar_class(resumed.meta.get("model", DEFAULT_MODEL))
         avatar = cls.from_meta(head, resumed.meta)
+        if cfg.effects is not None and set(parse_effects(cfg.effects)) != set(avatar.effects):
+            raise CheckpointError(f"{cfg.out}: --effects {cfg.effects} with --resume, but the avatar was trained with "
+                                  f"{avatar.describe_effects()}; leave --effects out to continue it")
     else:
-        avatar = avatar_class(cfg.model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects),
+        avatar = avatar_class(cfg.model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects or "all"),
                                                      split.lighting, model_config)
         if plate is not None:
             avatar.set_plate(*plate)

@@ -31,6 +31,9 @@ def test_train_eval_render(capture, tmp_path, capsys):
     assert main(["train", str(capture), "--out", str(avatar), "--effects", "shading", "--steps", "8",
                  "--rays-per-step", "128", "--resume"]) == 0
     assert json.loads((avatar / "avatar.json").read_text())["step"] == 8
+    capsys.readouterr()
+    assert main(["train", str(capture), "--out", str(avatar), "--effects", "none", "--steps", "9", "--resume"]) == 2
+    assert "trained with shading" in capsys.readouterr().err  # not silently ignored
     assert main(["eval", str(avatar), str(capture), "--out", str(tmp_path / "ev")]) == 0
     metrics = json.loads((tmp_path / "ev" / "metrics.json").read_text())["metrics"]
     assert {"psnr", "ssim", "face_mse", "normal_deg", "render_ms"} <= set(metrics)
