@@ -18,7 +18,7 @@ from app.progress import Progress
 from app.turntable import INSPECT, TurntableConfig, buffer_image, turntable_frames
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
-from models.capture.dataset import load_split
+from models.capture.dataset import check_images, load_split
 from models.capture.frames import camera_of, load_rgb
 from models.capture.synthetic import read_png16
 from models.device import device_of
@@ -148,6 +148,7 @@ def shadow_metrics(avatar, frame, split, raster, truth: np.ndarray, on: np.ndarr
 def run_eval(cfg: EvalConfig) -> int:
     avatar, meta = load_avatar(cfg.avatar, cfg.device)
     split = load_split(cfg.dataset, cfg.split)
+    check_images(split)
     gl = GLContext.headless()
     raster = Rasterizer(gl)
     cfg.out.mkdir(parents=True, exist_ok=True)

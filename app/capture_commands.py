@@ -7,7 +7,7 @@ from pathlib import Path
 
 from app.errors import UserInputError
 from app.progress import Progress
-from models.capture.dataset import SPLITS, load_split
+from models.capture.dataset import SPLITS, check_images, load_split
 from models.capture.synthetic import SynthConfig, synthesize
 from models.head.sources import load_head
 from render.gl.context import GLContext
@@ -44,9 +44,11 @@ class DatasetConfig:
 
 
 def run_dataset(cfg: DatasetConfig) -> int:
-    """Validate every split of a capture and summarise it; the first problem ends with exit status 2."""
+    """Validate every split of a capture (its files, and every image they list opened and measured) and summarise
+    it; the first problem ends with exit status 2."""
     for split in SPLITS:
         s = load_split(cfg.dataset, split)
+        check_images(s)
         fx = s.intrinsics[0]
         extras = sorted({k for f in s.frames for k in f.extra})
         print(f"{split:5s}: {len(s.frames):4d} frames, {s.width}x{s.height}, f={fx:.1f} px, format {s.source_format}, "

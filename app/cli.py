@@ -43,6 +43,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"avatar-studio {cmd.name}: interrupted", file=sys.stderr)
         return 130
+    except OSError as e:
+        if e.filename is None:  # not about a path the user gave: the program's failure
+            traceback.print_exc()
+            return 1
+        # An output whose parent is a file, a folder without write permission, a read-only place...
+        print(f"avatar-studio {cmd.name}: error: {e.filename}: {e.strerror or e}", file=sys.stderr)
+        return 2
     except Exception:
         traceback.print_exc()
         return 1

@@ -39,18 +39,36 @@ def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar, dict]:
     ck = load_checkpoint(folder)
     meta = ck.meta
     try:
+        check_meta(meta)
         head = load_head(meta["head_model"])
         cls = avatar_class(meta.get("model", DEFAULT_MODEL))
         avatar = cls.from_meta(head, meta)
+    except (KeyError, TypeError, ValueError) as e:
+        raise CheckpointError(f"{Path(folder) / 'avatar.json'}: {e}") from None
+    try:
         avatar.load_state_dict(ck.weights)
-    except (KeyError, TypeError, ValueError, RuntimeError) as e:
-        raise CheckpointError(f"{Path(folder) / 'avatar.json'}: does not describe these weights ({e})") from None
+    except RuntimeError as e:  # torch lists every mismatched tensor, one a line: the first says enough
+        first = next((ln.strip() for ln in str(e).splitlines()[1:] if ln.strip()), str(e).splitlines()[0])
+        raise CheckpointError(f"{Path(folder) / 'avatar.json'}: does not describe these weights ({first})") from None
     avatar.eval()
     # draft/preview/final, chosen and measured by `bench` (and where: machine, image size), else built in
     avatar.presets, avatar.presets_measured = load_presets(folder)
     size = meta.get("image_px")
     avatar.capture_px = int(size[0]) if isinstance(size, list) and size and isinstance(size[0], int) else None
     return avatar.to(device_of(device)), meta
+
+
+def check_meta(meta: dict) -> None:
+    """The fields every avatar.json has: ValueError naming the one that is wrong."""
+    try:
+        bg = np.asarray(meta["background"], np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"field background {meta['background']!r}: not an RGB colour") from None
+    if bg.shape != (3,) or not np.isfinite(bg).all():
+        raise ValueError(f"field background {meta['background']!r}: not an RGB colour (three finite numbers)")
+    frames = meta["frames"]
+    if not isinstance(frames, int) or isinstance(frames, bool) or frames < 1:
+        raise ValueError(f"field frames {frames!r}: not a positive whole number")
 
 
 def untrained_avatar(name: str, head_model, background: np.ndarray | None = None) -> Avatar:

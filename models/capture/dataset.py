@@ -125,6 +125,28 @@ def _image_size(path: Path) -> tuple[int, int]:
         raise DatasetError(f"{path}: not a readable image ({e})") from None
 
 
+def check_images(split: CaptureSplit, progress=None) -> int:
+    """Open every image the split lists (frames, masks and the other per-frame images, a background plate),
+    decode it whole (a truncated file fails here) and check its size against the split's: DatasetError naming
+    the file. Returns how many were checked."""
+    paths = [p for f in split.frames for p in (f.image_path, *f.extra.values())]
+    if isinstance(split.background, Path):
+        paths.append(split.background)
+    for k, path in enumerate(paths):
+        try:
+            with Image.open(path) as im:
+                im.load()
+                size = im.size
+        except (OSError, ValueError, SyntaxError) as e:
+            raise DatasetError(f"{path}: not a readable image ({e})") from None
+        if size != (split.width, split.height):
+            raise DatasetError(f"{path}: {size[0]}x{size[1]} pixels, but the capture's images are "
+                               f"{split.width}x{split.height}")
+        if progress is not None:
+            progress(k + 1, len(paths))
+    return len(paths)
+
+
 def load_split(folder: str | Path, split: str = "train") -> CaptureSplit:
     """A split of a capture folder in any supported format (ours, NerFACE's or IMavatar's)."""
     folder = Path(folder)

@@ -17,7 +17,7 @@ from models.avatars.base import Avatar, TrainingBatch
 from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from models.avatars.effects import parse_effects
 from models.avatars.registry import DEFAULT_MODEL, ModelName, avatar_class
-from models.capture.dataset import DatasetError, load_split
+from models.capture.dataset import DatasetError, check_images, load_split
 from models.capture.frames import background_plate
 from models.device import device_of
 from models.files import atomic_write_bytes
@@ -85,6 +85,8 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
     the avatar the registry names, read and rasterize the frames. model_config: the model's own sizes or loss
     weights (its for_capture's `config`; None: its defaults)."""
     split, val_split = load_split(cfg.dataset, "train"), load_split(cfg.dataset, "val")
+    for s in (split, val_split):  # a truncated or wrong-size image: a clear error before any work
+        check_images(s)
     if not split.trains_codynerf:
         raise DatasetError(f"{cfg.dataset}: the capture has no head model tracked on its frames; "
                            "every avatar here reads the head's pose and expression from it")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import asdict, dataclass, replace
-from typing import ClassVar
+from typing import Annotated, ClassVar
 
 import numpy as np
 import torch
@@ -29,6 +29,7 @@ from models.avatars.quality import Quality
 from models.head.controls import Controls
 from models.head.lbs import rotation_matrix_from_axis_angle
 from models.head.model import HeadModel
+from models.ranges import Range, check_config
 from render.camera import Camera
 from render.gl.raster import Rasterizer
 from render.rays import Raster, Rays
@@ -40,21 +41,21 @@ from render.volume import composite, expected_depth
 class RenderConfig:
     """How many samples, where. Lengths in metres."""
 
-    samples_per_ray: int = 12
+    samples_per_ray: Annotated[int, Range(1, 4096)] = 12
     """Samples in the shell about the surface (or across the box for rays that miss the mesh)."""
-    shell_m: float = 0.03
+    shell_m: Annotated[float, Range(0, 1, above=True)] = 0.03
     """Half-thickness of the shell about the rasterized surface."""
-    box_margin_m: float = 0.03
+    box_margin_m: Annotated[float, Range(0, 1)] = 0.03
     """The head's box: the posed mesh's bounds grown by this much."""
-    silhouette_px: int = 3
+    silhouette_px: Annotated[int, Range(0, 1000)] = 3
     """Rays within this many pixels of the mesh's silhouette are rendered (at least as many as the shell
     spans at the head's distance); farther ones are background."""
-    silhouette_m: float | None = None
+    silhouette_m: Annotated[float, Range(0, 1)] | None = None
     """How far the capture's foreground reaches beyond the mesh's silhouette (hair, shoulders), metres,
     measured from the capture's masks when training starts; None (no masks): the whole shell."""
-    prior_falloff_m: float = 0.05
+    prior_falloff_m: Annotated[float, Range(0, 10, above=True)] = 0.05
     """Length over which the 3DMM prior fades with distance from the mesh."""
-    stop_below: float = 1e-3
+    stop_below: Annotated[float, Range(0, 1)] = 1e-3
     """Display ends a ray early once less than this share of the light gets through its front half."""
     occupancy: bool = False
     """Display skips the density network where the occupancy grid says the canonical point is empty. Off:
@@ -63,13 +64,13 @@ class RenderConfig:
     saved 8% of the time (149 to 137 ms at 128 px)."""
     bf16: bool = False
     """Display runs the networks in bfloat16 (training is always float32)."""
-    fine_samples: int = 0
+    fine_samples: Annotated[int, Range(0, 4096)] = 0
     """Display: a second pass adds this many samples where the first pass's weights lie (0: one pass)."""
-    min_weight: float = 1e-4
+    min_weight: Annotated[float, Range(0, 1)] = 1e-4
     """Display skips the colour of samples that add less than this to their pixel (training never does)."""
-    chunk_rays: int = 4096
+    chunk_rays: Annotated[int, Range(1, 1 << 22)] = 4096
     """Rays per batch when rendering an image (memory)."""
-    dense_samples: int = 0
+    dense_samples: Annotated[int, Range(0, 1 << 16)] = 0
     """The slow reference (tests): ignore the mesh and spread this many samples over the head's box on every
     pixel's ray, with no shortcut (0: the shell sampler)."""
 
@@ -134,8 +135,11 @@ class CoDyNeRFAvatar(Avatar):
 
     @classmethod
     def from_meta(cls, head_model: HeadModel, meta: dict) -> CoDyNeRFAvatar:
-        avatar = cls(head_model, field_config(meta), int(meta["frames"]), np.asarray(meta["background"], np.float32),
-                     RenderConfig(**meta["render"]))
+        field_cfg, render_cfg = field_config(meta), RenderConfig(**meta["render"])
+        check_config(field_cfg)
+        check_config(render_cfg)
+        avatar = cls(head_model, field_cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32),
+                     render_cfg)
         if meta.get("pose_corrections", False):
             avatar.correct_poses()
         return avatar
@@ -437,8 +441,12 @@ def field_config(meta: dict) -> FieldConfig:
     """The field's sizes from avatar.json (avatars written before the shadow factor existed have no light_dir)."""
     f = meta["field"]
     light = f.get("light_dir")
-    return FieldConfig(**{**f, "effects": tuple(f["effects"]),
-                          "light_dir": None if light is None else tuple(float(v) for v in light)})
+    if light is not None:
+        light = np.asarray(light, np.float64)
+        if light.shape != (3,) or not np.isfinite(light).all() or np.linalg.norm(light) < 1e-9:
+            raise ValueError(f"field light_dir {f['light_dir']}: not a direction (three finite numbers, not all 0)")
+        light = tuple(float(v) for v in light / np.linalg.norm(light))
+    return FieldConfig(**{**f, "effects": tuple(f["effects"]), "light_dir": light})
 
 
 def key_light_dir(lighting: dict | None) -> tuple[float, float, float] | None:

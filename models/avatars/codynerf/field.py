@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Annotated
 
 import torch
 import torch.nn.functional as F
@@ -30,6 +31,7 @@ from torch import nn
 from models.avatars.codynerf.prior import PriorSamples
 from models.avatars.components.encoding import encoded_size, frequency_encoding
 from models.avatars.components.mlp import MLP
+from models.ranges import Range
 
 SHADOW_BIAS = 4.0  # the shadow factor's logit at initialisation: 98% of the light reaches every point
 
@@ -40,20 +42,20 @@ class FieldConfig:
 
     effects: tuple[str, ...] = ()
     """Lighting effects the avatar models: any of shading, specular, shadows (empty: an ambient capture)."""
-    width: int = 64
+    width: Annotated[int, Range(1, 4096)] = 64
     """Hidden width of the deformation, density and appearance networks."""
-    deform_code_dim: int = 8
+    deform_code_dim: Annotated[int, Range(0, 4096)] = 8
     """omega: per-frame code of the residual deformation."""
-    appearance_code_dim: int = 8
+    appearance_code_dim: Annotated[int, Range(0, 4096)] = 8
     """phi: per-frame code of the appearance (camera and exposure changes)."""
-    feature_dim: int = 16
+    feature_dim: Annotated[int, Range(1, 4096)] = 16
     """tau: features passed from the density to the appearance network."""
     deform_frequencies: int = 4
     prior_frequencies: int = 2
     density_frequencies: int = 6
     view_frequencies: int = 2
     landmark_features: int = 16
-    scale_m: float = 0.25
+    scale_m: Annotated[float, Range(0, 100, above=True)] = 0.25
     """Half the extent that position encodings cover without aliasing."""
     light_dir: tuple[float, float, float] | None = None
     """The capture's key light (world, towards the light), where its lighting record has one. With shadows,

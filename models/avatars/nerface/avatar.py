@@ -16,7 +16,7 @@ unposed mesh onto the posed one, so any head model works without knowing its joi
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import ClassVar
+from typing import Annotated, ClassVar
 
 import numpy as np
 import torch
@@ -28,6 +28,7 @@ from models.avatars.components import losses
 from models.avatars.components.encoding import encoded_size, frequency_encoding
 from models.head.controls import Controls
 from models.head.model import HeadModel
+from models.ranges import Range, check_config
 from render.camera import Camera
 from render.gl.raster import Rasterizer
 from render.rays import Raster, Rays
@@ -41,19 +42,19 @@ NONRIGID_JOINTS = ("neck", "jaw", "eye_l", "eye_r")
 class NerfaceConfig:
     """NerFACE's published sizes."""
 
-    width: int = 256
-    depth: int = 8
+    width: Annotated[int, Range(1, 4096)] = 256
+    depth: Annotated[int, Range(2, 64)] = 8
     """Hidden layers of the density branch (a skip joins the input again after half of them)."""
     position_frequencies: int = 10
     view_frequencies: int = 4
-    latent_dim: int = 32
-    coarse_samples: int = 64
-    fine_samples: int = 64
-    box_margin_m: float = 0.05
+    latent_dim: Annotated[int, Range(0, 4096)] = 32
+    coarse_samples: Annotated[int, Range(1, 4096)] = 64
+    fine_samples: Annotated[int, Range(0, 4096)] = 64
+    box_margin_m: Annotated[float, Range(0, 1)] = 0.05
     """The canonical head box (the template's bounds grown by this much) bounds every ray."""
-    face_ray_fraction: float = 0.95
+    face_ray_fraction: Annotated[float, Range(0, 1)] = 0.95
     """Share of training rays drawn inside the face's box; the rest anywhere in the image."""
-    chunk_rays: int = 1024
+    chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1024
 
 
 class NerfaceMLP(nn.Module):
@@ -166,7 +167,9 @@ class NerfaceAvatar(Avatar):
 
     @classmethod
     def from_meta(cls, head_model: HeadModel, meta: dict) -> NerfaceAvatar:
-        return cls(head_model, NerfaceConfig(**meta["nerface"]), int(meta["frames"]),
+        cfg = NerfaceConfig(**meta["nerface"])
+        check_config(cfg)
+        return cls(head_model, cfg, int(meta["frames"]),
                    np.asarray(meta["background"], np.float32))
 
     def meta(self) -> dict:

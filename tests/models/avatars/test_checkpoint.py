@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import pytest
 import torch
@@ -72,3 +73,26 @@ def test_bad_folders_name_the_problem(tmp_path):
     (tmp_path / "weights-000003.safetensors").write_bytes(b"\x00" * 20)
     with pytest.raises(CheckpointError, match="not a readable safetensors file"):
         load_checkpoint(tmp_path)
+
+
+@pytest.mark.parametrize("change", [
+    {"background": "abc"}, {"background": [0.5, 0.5]}, {"frames": "many"}, {"frames": 0}, {"frames": 7},
+    {"render": {"chunk_rays": 0}}, {"render": {"samples_per_ray": 0}}, {"render": {"shell_m": -0.03}},
+    {"field": {"light_dir": [0, 0, 0]}}, {"field": {"width": 65}}])
+def test_a_broken_avatar_json_is_one_clear_line(change, tmp_path, capsys):
+    """Each of these once ended in a traceback, a torch dump or a silent wrong render."""
+    import shutil
+
+    from app.cli import main
+
+    demo = Path(__file__).resolve().parents[3] / "resources" / "demo_avatar"
+    folder = tmp_path / "av"
+    shutil.copytree(demo, folder)
+    meta = json.loads((folder / "avatar.json").read_text())
+    for key, value in change.items():
+        meta[key] = {**meta[key], **value} if isinstance(value, dict) else value
+    (folder / "avatar.json").write_text(json.dumps(meta))
+    assert main(["render", str(folder), "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "avatar.json" in err[0], err
+    assert not (tmp_path / "x.png").exists()
