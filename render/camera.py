@@ -139,6 +139,25 @@ class Camera:
                                       self.near_m, self.far_m)
 
 
+def clipping_around(camera: Camera, points: np.ndarray, margin_m: float = 0.15) -> Camera:
+    """The camera with its near and far planes around `points` (N,3), world (the posed head: a translation control
+    moves it anywhere), `margin_m` beyond them (hair and the field's shell reach past the mesh). Points behind the
+    camera leave it as it is.
+
+    >>> cam = Camera(np.eye(4), 30.0, 8, 8, near_m=0.5, far_m=0.6)
+    >>> c = clipping_around(cam, np.array([[0.0, 0.0, -2.0], [0.0, 0.1, -3.0]]))
+    >>> round(c.near_m, 3), round(c.far_m, 3)
+    (1.85, 3.15)
+    """
+    p = np.asarray(points, np.float64)
+    depth = -(p @ camera.view[:3, :3].T + camera.view[:3, 3])[:, 2]
+    depth = depth[np.isfinite(depth)]
+    if len(depth) == 0 or depth.max() <= 0:
+        return camera
+    near = max(1e-3, float(depth.min()) - margin_m, 1e-3 * float(depth.max()))
+    return replace(camera, near_m=near, far_m=float(depth.max()) + margin_m)
+
+
 def orbit_camera(yaw_deg: float = 0.0, pitch_deg: float = 0.0, distance_m: float = 0.6,
                  target: tuple[float, float, float] = (0.0, 0.0, 0.0), fov_y_deg: float = 30.0,
                  width_px: int = 512, height_px: int = 512) -> Camera:

@@ -26,7 +26,7 @@ from models.avatars.quality import BUILTIN_PRESETS, Preset, Quality
 from models.head.controls import Controls
 from models.head.head import Head
 from models.head.model import HeadModel
-from render.camera import Camera
+from render.camera import Camera, clipping_around
 from render.gl.raster import Rasterizer
 from render.rays import Raster, Rays, image_rays, rays_to_images
 
@@ -238,6 +238,7 @@ class Avatar(nn.Module, ABC):
         RenderCancelled is raised (a newer request won). `inspect` adds the inspection buffers."""
         device = self.background.device
         geo = self.frame_geometry(controls, rasterizer).to(device)
+        camera = clipping_around(camera, geo.posed.cpu().numpy())  # the head may be anywhere (a translation)
         rays, idx = self.image_rays(geo, camera, rasterizer)
         plate = self.plate_for(camera)
         if plate is not None:

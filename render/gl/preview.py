@@ -9,7 +9,7 @@ from typing import Literal
 import moderngl
 import numpy as np
 
-from render.camera import Camera, linear_depth_from_ndc
+from render.camera import Camera, clipping_around, linear_depth_from_ndc
 from render.gl.context import GLContext
 from render.gl.shadow import ShadowMap, bounding_sphere, light_view_projection
 from render.mesh import vertex_normals
@@ -104,6 +104,7 @@ class PreviewRenderer:
                read_depth: bool = False) -> np.ndarray:
         """RGB image (H,W,3) uint8, top row first. With read_depth, the camera depth (metres along the
         view axis, inf for background) is kept in `last_depth`."""
+        camera = clipping_around(camera, frame.vertices, margin_m=0.05)  # as draw() clips: its depth's range
         with self.gl.current():
             result = self.draw(frame, camera, settings)
             w, h = camera.width_px, camera.height_px
@@ -122,6 +123,7 @@ class PreviewRenderer:
     def draw(self, frame: MeshFrame, camera: Camera, settings: PreviewSettings = PreviewSettings()
              ) -> moderngl.Framebuffer:
         """Draw without reading back; returns the single-sample framebuffer that holds the image."""
+        camera = clipping_around(camera, frame.vertices, margin_m=0.05)  # wherever the controls put the head
         with self.gl.current():
             self._upload(frame)
             ctx = self.ctx

@@ -76,3 +76,25 @@ def test_pinhole_projection_and_pixel_rays_agree_off_centre():
     centred = Camera(view, 40.0, 32, 24)
     np.testing.assert_allclose(centred.projection, perspective(40.0, 32 / 24, 0.05, 5.0))
     np.testing.assert_allclose(centred.cropped(0, 0, 32, 24).projection, centred.projection, atol=1e-12)
+
+
+def test_a_translated_head_stays_in_view(gl):
+    """A translation control moves the head out of the neutral head's clipping range (+0.25 m: the near plane cut
+    the face; -0.5 m: it vanished). The planes follow the posed head: the preview shows it whole either way."""
+    from models.head.controls import Controls
+    from models.head.head import Head
+    from models.head.sources import load_head
+    from render.camera import framing_camera
+    from render.gl.preview import MeshFrame, PreviewRenderer
+
+    model = load_head("builtin")
+    cam = framing_camera(model.template, width_px=48, height_px=48)
+    preview = PreviewRenderer(gl)
+    covered = {}
+    for dz in (0.0, 0.25, -0.5):
+        verts = Head(model).pose([Controls(translation=np.array([0.0, 0.0, dz], np.float32))])[0][0].numpy()
+        img = preview.render(MeshFrame(verts, model.triangles), cam, read_depth=True)
+        covered[dz] = np.isfinite(preview.last_depth).mean()
+        assert img.std() > 5
+    # Nearer heads look bigger, farther smaller, and none is cut away.
+    assert covered[0.25] > covered[0.0] > covered[-0.5] > 0.05, covered
