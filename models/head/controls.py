@@ -68,14 +68,22 @@ def _vec3(value: object, where: str) -> np.ndarray:
     return arr
 
 
+LIMITS = {"shape": 10.0, "expression": 10.0, "pose": 2 * np.pi, "gaze": np.pi / 2, "translation": 2.0}
+"""The largest magnitude each control takes from a file: identity and expression weights (a model's useful range
+is about -2..2; 1e30 overflowed to garbage), rotations (radians), gaze (radians), translation (metres)."""
+
+
 def _numbers(value: object, where: str) -> np.ndarray:
     if not isinstance(value, list) or not all(
         isinstance(v, int | float) and not isinstance(v, bool) for v in value
     ):
         raise ControlsError(f"{where} must be a list of numbers, got {value!r}")
-    arr = np.asarray(value, np.float32)
-    if not np.all(np.isfinite(arr)):
+    arr = np.asarray(np.asarray(value, np.float64).clip(-1e30, 1e30), np.float32)
+    if not np.all(np.isfinite(np.asarray(value, np.float64))):
         raise ControlsError(f"{where} has non-finite numbers")
+    limit = LIMITS[where.split(".")[0]]
+    if np.abs(arr).max(initial=0.0) > limit:
+        raise ControlsError(f"{where} has a value of magnitude {np.abs(arr).max():g}; at most {limit:g} is allowed")
     return arr
 
 
@@ -99,9 +107,11 @@ def controls_from_dict(data: object, head: HeadModel | None = None) -> Controls:
     if isinstance(expr, dict):
         if head is None:
             raise ControlsError("named expressions need a head model")
-        bad = [k for k, v in expr.items() if not isinstance(v, int | float) or isinstance(v, bool)]
+        bad = [k for k, v in expr.items() if not isinstance(v, int | float) or isinstance(v, bool)
+               or not np.isfinite(v) or abs(v) > LIMITS["expression"]]
         if bad:
-            raise ControlsError(f"expression weights must be numbers: {bad}")
+            raise ControlsError(f"expression weights must be finite numbers of magnitude at most "
+                                f"{LIMITS['expression']:g}: {bad}")
         c = c.with_expression(head, {k: float(v) for k, v in expr.items()})
     elif expr is not None:
         c = replace(c, expression=_numbers(expr, "expression"))
