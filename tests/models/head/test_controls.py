@@ -9,7 +9,7 @@ from models.head.controls import ControlsError, controls_from_dict
 from models.head.sources import load_head
 
 
-@pytest.mark.parametrize("data, where", [
+@pytest.mark.parametrize(("data", "where"), [
     ({"expression": [0.5, 1e30]}, "expression"), ({"expression": {"jawOpen": 1e30}}, "jawOpen"),
     ({"expression": {"jawOpen": float("nan")}}, "jawOpen"), ({"translation": [0, 0, 5]}, "translation"),
     ({"pose": {"root": [0, 100, 0]}}, "pose.root"), ({"gaze": {"left": [0, 3, 0]}}, "gaze.left"),
