@@ -143,6 +143,20 @@ class ShowFrame(Action):
 
 
 @dataclass(frozen=True)
+class ShowAtSize(Action):
+    """The viewport shows the render at this size (the window was resized, the layout changed): render anew at
+    it where that changes the render's size."""
+
+    px: int
+
+    def apply(self, s: Session) -> None:
+        before = s.display.neural_size
+        s.display.shown_px = int(self.px)
+        if s.display.neural_size != before:
+            s.dirty = True
+
+
+@dataclass(frozen=True)
 class CopyFrameToSliders(Action):
     """The timeline's frame becomes the sliders' controls."""
 

@@ -91,6 +91,11 @@ class View:
         self.zoom = float(np.clip(self.zoom * 1.1**wheel, 0.25, 8.0))
 
 
+LIVE_MAX_PX = 256
+"""The largest neural render the studio renders live: 256 px take four times 128's time (README: 'all' 617 ms
+at 256 px on this machine)."""
+
+
 @dataclass
 class Display:
     """What the viewport shows and how the neural render refines."""
@@ -101,10 +106,16 @@ class Display:
     wireframe: bool = False
     landmarks: bool = False
     layout: str = "beside"
-    """beside: guide and render side by side; over: the guide over the render."""
+    """beside: guide and render side by side; over: the guide over the render; render: the render alone."""
     overlay_alpha: float = 0.5
-    neural_size: int = 160
-    """The neural render's size at the final preset, pixels."""
+    shown_px: int = 160
+    """How large the viewport shows the render (pixels, square), as the window's size leaves room for."""
+
+    @property
+    def neural_size(self) -> int:
+        """The neural render's size at the final preset: the size it is shown at (a multiple of 8, at least 64),
+        up to LIVE_MAX_PX, beyond which it is shown scaled up (linear filtering)."""
+        return int(min(max(64, self.shown_px // 8 * 8), LIVE_MAX_PX))
     refine_to: str = "final"
     """The last pass the viewport refines to while the controls rest."""
 

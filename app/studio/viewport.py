@@ -150,21 +150,25 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         if c:
             act(a.SetDisplay({name: on}))
         imgui.same_line()
-    for layout in ("beside", "over"):
-        if imgui.radio_button(layout, d.layout == layout):
+    imgui.new_line()  # the layout on a line of its own: the toolbar fits a 1280 px window
+    for layout, label in (("beside", "beside"), ("over", "over"), ("render", "render alone")):
+        if imgui.radio_button(label, d.layout == layout):
             act(a.SetDisplay({"layout": layout}))
-        if layout == "beside":
-            imgui.same_line()
-    if d.layout == "over":
         imgui.same_line()
+    if d.layout == "over":
         imgui.set_next_item_width(100)
         c, alpha = imgui.slider_float("guide opacity", d.overlay_alpha, 0.0, 1.0)
         if c:
             act(a.SetDisplay({"overlay_alpha": alpha}))
+        imgui.same_line()
+    imgui.text_disabled(f"render {d.neural_size} px shown at {d.shown_px} px"
+                        + (" (linear filter)" if d.shown_px != d.neural_size else ""))
 
     avail = imgui.get_content_region_avail()
     n = 2 if d.layout == "beside" else 1
     size = int(max(64, min((avail.x - 8 * (n - 1)) / n, avail.y - 4)))
+    if size != d.shown_px:
+        act(a.ShowAtSize(size))
     vp.draw_guide(s, size)
     vp.update_neural(r, d.buffer)
     origin = imgui.get_cursor_screen_pos()
@@ -177,6 +181,12 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         if vp.neural_tex is not None:
             imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
             _mouse(act, size)
+    elif d.layout == "render":
+        if vp.neural_tex is not None:
+            imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
+        else:
+            imgui.dummy(imgui.ImVec2(size, size))
+        _mouse(act, size)
     else:
         if vp.neural_tex is not None:
             imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))

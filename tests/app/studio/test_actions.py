@@ -125,6 +125,14 @@ def test_inspection_buffers_render_again_only_when_first_asked_for(session):
         a.SetDisplay({"neural_size": 4}).apply(session)
     a.RefineTo("preview").apply(session)
     assert session.display.refine_to == "preview" and session.dirty
+    session.dirty = False
+    a.ShowAtSize(203).apply(session)  # shown larger: rendered at the size shown, in steps of 8 px
+    assert session.display.neural_size == 200 and session.dirty
+    session.dirty = False
+    a.ShowAtSize(205).apply(session)  # the same render size: nothing to render again
+    assert not session.dirty
+    a.ShowAtSize(900).apply(session)
+    assert session.display.neural_size == 256 and session.dirty  # the live limit; shown scaled up
 
 
 def test_messages_keep_the_last_eight(session):
