@@ -15,7 +15,7 @@ import numpy as np
 from models.avatars.base import Avatar
 from models.head.controls import Controls
 from models.ranges import Range
-from render.camera import framing_camera
+from render.camera import turntable_camera
 from render.gl.raster import Rasterizer
 
 
@@ -95,8 +95,8 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
     for k in range(cfg.frames):
         phase = 2 * math.pi * k / cfg.frames
         yaw = cfg.sweep_deg * math.sin(phase) if cfg.sweep_deg else math.degrees(phase)
-        cam = framing_camera(avatar.head_model.template, yaw, cfg.elevation_deg, fov_y_deg=18.0,
-                             width_px=size, height_px=size, zoom=cfg.zoom)
+        cam = turntable_camera(avatar.head_model.template, yaw, cfg.elevation_deg, fov_y_deg=18.0,
+                               width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
         yield buffer_image(avatar.render_image(c, cam, rasterizer, should_stop=should_stop), "rgb")
         if on_frame:

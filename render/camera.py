@@ -183,3 +183,26 @@ def framing_camera(vertices: np.ndarray, yaw_deg: float = 0.0, pitch_deg: float 
     cam = orbit_camera(yaw_deg, pitch_deg, distance, tuple(center), fov_y_deg, width_px, height_px)
     return Camera(cam.view, fov_y_deg, width_px, height_px, near_m=max(0.01, distance - 2 * radius),
                   far_m=distance + 2 * radius)
+
+
+def turntable_camera(vertices: np.ndarray, yaw_deg: float, pitch_deg: float = 0.0, fov_y_deg: float = 18.0,
+                     width_px: int = 256, height_px: int = 256, margin: float = 1.06, zoom: float = 1.0) -> Camera:
+    """An orbit camera for a turntable: it fits the vertices' cylinder about the vertical axis through their box's
+    centre (its radius across, its height up), so the head fills the frame at every yaw, where framing_camera's
+    bounding sphere (the neck's and the crown's corners counted in every direction) leaves it about half the
+    frame's height."""
+    v = np.asarray(vertices, np.float64)
+    center = 0.5 * (v.min(0) + v.max(0))
+    radius = float(np.linalg.norm((v - center)[:, [0, 2]], axis=1).max())
+    half_h = 0.5 * float(v[:, 1].max() - v[:, 1].min())
+    tan_y = math.tan(math.radians(fov_y_deg) / 2)
+    tan_x = tan_y * width_px / height_px
+    pitch = math.radians(abs(pitch_deg))
+    # Seen from the front (or tilted), the cylinder's outline: its radius across, its height (and a tilted top)
+    # up; the nearest point is `radius` in front of the axis.
+    up = half_h * math.cos(pitch) + radius * math.sin(pitch)
+    distance = radius + margin * max(up / tan_y, radius / tan_x) / max(zoom, 1e-3)
+    cam = orbit_camera(yaw_deg, pitch_deg, distance, tuple(center), fov_y_deg, width_px, height_px)
+    reach = float(np.linalg.norm(v - center, axis=1).max())
+    return Camera(cam.view, fov_y_deg, width_px, height_px, near_m=max(0.01, distance - 2 * reach),
+                  far_m=distance + 2 * reach)

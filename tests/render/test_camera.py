@@ -98,3 +98,23 @@ def test_a_translated_head_stays_in_view(gl):
         assert img.std() > 5
     # Nearer heads look bigger, farther smaller, and none is cut away.
     assert covered[0.25] > covered[0.0] > covered[-0.5] > 0.05, covered
+
+
+def test_turntable_camera_fills_the_frame_at_every_yaw():
+    """The built-in head's vertices, projected: inside the frame at every yaw, and at least 80% of its height at
+    the front (framing_camera's bounding sphere gave about 55%)."""
+    from models.head.sources import load_head
+    from render.camera import turntable_camera
+
+    v = load_head("builtin").template
+    for yaw in (0.0, 45.0, 90.0, 180.0, 270.0):
+        for pitch in (0.0, 10.0):
+            cam = turntable_camera(v, yaw, pitch, width_px=100, height_px=100)
+            p = np.c_[v, np.ones(len(v))] @ (cam.projection @ cam.view).T
+            ndc = p[:, :2] / p[:, 3:]
+            assert np.abs(ndc).max() <= 1.0, (yaw, pitch, np.abs(ndc).max())
+            if yaw == 0.0 and pitch == 0.0:
+                assert np.ptp(ndc[:, 1]) / 2 > 0.8, np.ptp(ndc[:, 1]) / 2
+                sphere = framing_camera(v, 0.0, 0.0, fov_y_deg=18.0, width_px=100, height_px=100)
+                q = np.c_[v, np.ones(len(v))] @ (sphere.projection @ sphere.view).T
+                assert np.ptp(q[:, 1] / q[:, 3]) / 2 < np.ptp(ndc[:, 1]) / 2
