@@ -89,6 +89,7 @@ class Script:
     failed: str = ""
     waited_frames: int = 0
     wait_started: float = 0.0
+    last_progress: object = None
     pending_screenshot: Path | None = None
     ran: int = 0
     """Steps completed (the report's steps_run: every step runs once)."""
@@ -110,14 +111,16 @@ class Script:
         self.waited_frames = 0
         self.wait_started = 0.0
 
-    def waiting(self, condition: bool) -> bool:
-        """True while the step must wait; fails it after WAIT_S seconds."""
+    def waiting(self, condition: bool, progress: object = None) -> bool:
+        """True while the step must wait; fails it after WAIT_S seconds without `progress` changing (work that
+        moves on, however slowly on a busy machine, is waited for)."""
         if condition:
             return False
-        if not self.wait_started:
-            self.wait_started = time.perf_counter()
-        elif time.perf_counter() - self.wait_started > WAIT_S:
-            self.fail(f"still waiting after {WAIT_S:.0f} s")
+        now = time.perf_counter()
+        if not self.wait_started or (progress is not None and progress != self.last_progress):
+            self.wait_started, self.last_progress = now, progress
+        elif now - self.wait_started > WAIT_S:
+            self.fail(f"still waiting after {WAIT_S:.0f} s" + (" without progress" if progress is not None else ""))
         return True
 
     def step(self, studio: Driven) -> None:
@@ -254,7 +257,17 @@ def _expect_open(sc: Script, st: Driven, s: dict) -> bool:
 
 @step("wait_job")
 def _wait_job(sc: Script, st: Driven, s: dict) -> bool:
-    return not sc.waiting(not any(j.state in ("queued", "running") for j in st.jobs.jobs))
+    """Until every job is done; a job whose log or progress moves is not timed out."""
+    busy = [j for j in st.jobs.jobs if j.state in ("queued", "running")]
+    progress = tuple((j.id, j.stage, len(j.progress), _log_size(j)) for j in busy)
+    return not sc.waiting(not busy, progress)
+
+
+def _log_size(job) -> int:
+    try:
+        return job.log_path.stat().st_size  # tracking writes its progress there
+    except OSError:
+        return 0
 
 
 @step("cancel_jobs")
