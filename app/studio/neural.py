@@ -38,6 +38,11 @@ class Result:
     ms: float
 
 
+INTERACTIVE_CHUNK = 1024
+"""Rays a batch in the window: a new request waits at most for the batch in flight (a quarter of the avatars'
+own 4096, whose batches are for throughput)."""
+
+
 @dataclass
 class PresetFigures:
     """A quality preset measured on the loaded avatar: time per frame and error against `final`."""
@@ -143,7 +148,8 @@ class NeuralWorker:
             cam = scaled(request.camera, avatar.presets[name].quality.scale)
             t0 = time.perf_counter()
             buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
-                                          should_stop=lambda: self._stale(request_id), inspect=request.inspect)
+                                          should_stop=lambda: self._stale(request_id), inspect=request.inspect,
+                                          chunk_rays=INTERACTIVE_CHUNK)
             ms = 1e3 * (time.perf_counter() - t0)
             with self._cv:
                 if self._stale(request_id):
@@ -164,8 +170,8 @@ class NeuralWorker:
             times = []
             for _ in range(3):
                 t0 = time.perf_counter()
-                images[name] = avatar.render_image(Controls(), c, raster,
-                                                   should_stop=lambda: self._stale(request_id))["rgb"]
+                images[name] = avatar.render_image(Controls(), c, raster, should_stop=lambda: self._stale(request_id),
+                                                   chunk_rays=INTERACTIVE_CHUNK)["rgb"]
                 times.append(1e3 * (time.perf_counter() - t0))
             figures.ms[name] = float(np.median(times))
             reference = images["final"]

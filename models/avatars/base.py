@@ -232,10 +232,12 @@ class Avatar(nn.Module, ABC):
         return Rays(origin.expand(len(idx), 3), dirs[idx], surface_t), idx
 
     def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer | None, frame: int | None = None,
-                     should_stop: Callable[[], bool] | None = None, inspect: bool = False) -> dict[str, np.ndarray]:
+                     should_stop: Callable[[], bool] | None = None, inspect: bool = False,
+                     chunk_rays: int | None = None) -> dict[str, np.ndarray]:
         """The avatar's buffers as images (H,W,...). `frame` picks a training frame's codes; None uses the mean
         code (novel controls). `should_stop` is asked between batches of rays; when it says yes,
-        RenderCancelled is raised (a newer request won). `inspect` adds the inspection buffers."""
+        RenderCancelled is raised (a newer request won). `inspect` adds the inspection buffers. `chunk_rays`: rays a
+        batch (default the avatar's; smaller batches let a newer request in sooner)."""
         device = self.background.device
         geo = self.frame_geometry(controls, rasterizer).to(device)
         camera = clipping_around(camera, geo.posed.cpu().numpy())  # the head may be anywhere (a translation)
@@ -247,10 +249,11 @@ class Avatar(nn.Module, ABC):
         names = self.inspection_buffers() if inspect else ()
         parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *self.default_buffers(), *names)}
         with self.display_mode():
-            for a in range(0, len(rays), self.chunk_rays):
+            chunk = chunk_rays or self.chunk_rays
+            for a in range(0, len(rays), chunk):
                 if should_stop is not None and should_stop():
                     raise RenderCancelled
-                out = self.render_rays(rays[a:a + self.chunk_rays], geo, frame)
+                out = self.render_rays(rays[a:a + chunk], geo, frame)
                 buffers = out.buffers | self.inspect(out, geo, names)
                 buffers["depth"] = torch.where(buffers["opacity"] > 0.5, buffers["depth"],
                                                torch.full_like(buffers["depth"], np.inf))
