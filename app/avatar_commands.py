@@ -238,8 +238,6 @@ def run_turntable(cfg: TurntableConfig) -> int:
     avatar, _ = load_avatar(cfg.avatar)
     if cfg.frames < 1 or cfg.size < 8:
         raise UserInputError(f"--frames {cfg.frames} --size {cfg.size}: need at least 1 frame of 8 pixels")
-    if not 0 <= cfg.sweep_deg <= 180:
-        raise UserInputError(f"--sweep-deg {cfg.sweep_deg}: must be between 0 (a full turn) and 180 degrees")
     if cfg.out.suffix.lower() != ".mp4":
         raise UserInputError(f"{cfg.out}: the turntable is written as an .mp4")
     gl = GLContext.headless()

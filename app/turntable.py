@@ -26,9 +26,10 @@ class TurntableConfig:
     out: Path = Path("out/turntable.mp4")
     """The mp4 to write (H.264); PNG frames go to a folder beside it unless --no-pngs."""
     frames: Annotated[int, Range(1, 100000)] = 120
-    sweep_deg: Annotated[float, Range(0, 180)] = 0.0
-    """Swing the camera this many degrees to each side of the front (a video's avatar has seen the head
-    only from about the front); 0: a full turn."""
+    sweep_deg: Annotated[float, Range(0, 180)] | None = None
+    """Swing the camera this many degrees to each side of the front; 0: a full turn (default: as far as the
+    capture's views went and 10 degrees more, a full turn where they went round the head: a video's avatar has
+    seen the head only from about the front)."""
     elevation_deg: Annotated[float, Range(-89, 89)] = 5.0
     """Camera height above the head's centre, degrees."""
     zoom: Annotated[float, Range(0.05, 20)] = 1.0
@@ -92,9 +93,10 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
     """(size,size,3) uint8 frames of the turntable; on_frame(k) after each."""
     size = avatar.apply_preset(cfg.preset, cfg.size)
     controls = controls or Controls()
+    sweep = avatar.turntable_sweep_deg() if cfg.sweep_deg is None else cfg.sweep_deg
     for k in range(cfg.frames):
         phase = 2 * math.pi * k / cfg.frames
-        yaw = cfg.sweep_deg * math.sin(phase) if cfg.sweep_deg else math.degrees(phase)
+        yaw = sweep * math.sin(phase) if sweep else math.degrees(phase)
         cam = turntable_camera(avatar.head_model.template, yaw, cfg.elevation_deg, fov_y_deg=18.0,
                                width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls

@@ -19,7 +19,8 @@ from models.avatars.quality import PRESET_NAMES
 class ExportForm:
     out: str = field(default_factory=lambda: str(STUDIO_HOME / "turntable.mp4"))
     frames: int = 120
-    sweep: float = 0.0
+    views_only: bool = True
+    """Swing within the capture's views (and 10 degrees) rather than turn all the way round."""
     elevation: float = 5.0
     zoom: float = 1.0
     size: int = 256
@@ -28,7 +29,7 @@ class ExportForm:
 
     def config(self, avatar: Path) -> TurntableConfig:
         return TurntableConfig(avatar, Path(self.out), frames=max(1, self.frames),
-                               sweep_deg=min(max(self.sweep, 0.0), 180.0), elevation_deg=self.elevation,
+                               sweep_deg=None if self.views_only else 0.0, elevation_deg=self.elevation,
                                zoom=self.zoom, size=max(16, self.size - self.size % 2),
                                preset=list(PRESET_NAMES)[self.preset], animate=self.animate)
 
@@ -46,9 +47,9 @@ def draw(ctx: PanelContext) -> None:
     imgui.set_next_item_width(90)
     _, e.size = imgui.input_int("size", e.size, 32)
     imgui.set_next_item_width(90)
-    _, e.sweep = imgui.slider_float("sweep", e.sweep, 0, 90, "+-%.0f deg")
+    _, e.views_only = imgui.checkbox("captured views only", e.views_only)
     if imgui.is_item_hovered():
-        imgui.set_tooltip("0: a full turn; else the camera swings this far to each side of the front")
+        imgui.set_tooltip("swing as far round the head as the capture saw it (and 10 degrees), not a full turn")
     imgui.same_line()
     imgui.set_next_item_width(90)
     _, e.elevation = imgui.slider_float("elevation", e.elevation, -45, 45, "%.0f deg")

@@ -21,7 +21,7 @@ pictures). Steps:
   {"expect_open": FOLDER}                 fail unless the open avatar is FOLDER
   {"open_job": true}                      open the last job's avatar
   {"cancel_jobs": true}                   cancel every job (running ones checkpoint first)
-  {"export": {"out": MP4, "frames": N, "size": PX, "preset": P, "animate": false, "sweep_deg": 0}}
+  {"export": {"out": MP4, "frames": N, "size": PX, "preset": P, "animate": false, "sweep_deg": null}}
   {"wait_export": true}
   {"wait_frames": N}                      let N frames pass (frame-rate measurements)
   {"orbit": DX}                           orbit the camera as a mouse drag of DX pixels does
@@ -287,7 +287,7 @@ def _export(sc: Script, st: Driven, s: dict) -> bool:
     x = s["export"]
     size = int(x.get("size", 64))
     cfg = TurntableConfig(st.session.folder, Path(x["out"]), frames=max(1, int(x.get("frames", 12))),
-                          sweep_deg=float(x.get("sweep_deg", 0.0)), size=max(16, size - size % 2),
+                          sweep_deg=x.get("sweep_deg"), size=max(16, size - size % 2),
                           preset=x.get("preset", "draft"), animate=bool(x.get("animate", False)))
     st.act(a.ExportTurntable(cfg))
     return True

@@ -163,6 +163,11 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         imgui.same_line()
     imgui.text_disabled(f"render {d.neural_size} px shown at {d.shown_px} px"
                         + (" (linear filter)" if d.shown_px != d.neural_size else ""))
+    relative_yaw = s.view.yaw_deg - float(s.sliders.head[0])  # the camera about the head, as the capture saw it
+    if s.avatar.views_beyond(relative_yaw):
+        lo, hi = s.avatar.view_range["yaw_deg"]
+        imgui.text_colored(imgui.ImVec4(1.0, 0.75, 0.3, 1.0), f"beyond the captured views (yaw {lo:.0f} to {hi:.0f} "
+                           "degrees): the avatar never saw this side of the head")
 
     avail = imgui.get_content_region_avail()
     n = 2 if d.layout == "beside" else 1

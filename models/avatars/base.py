@@ -86,6 +86,9 @@ class Avatar(nn.Module, ABC):
         self.presets_measured: dict = {}
         self.capture_px: int | None = None
         """The width of the capture's images it was trained on (avatar.json's "image_px"; None: not recorded)."""
+        self.view_range: dict[str, list[float]] | None = None
+        """The directions its capture saw the head from (avatar.json's "view_range": yaw_deg and pitch_deg, least
+        and most); None: not recorded."""
 
     # ---- the background plate --------------------------------------------------------------------------
     def set_plate(self, image: np.ndarray, camera: Camera) -> None:
@@ -101,6 +104,25 @@ class Avatar(nn.Module, ABC):
         if key is None or not np.allclose(camera_key(camera), key.cpu().numpy(), rtol=1e-6, atol=1e-4):
             return None
         return self.plate.reshape(-1, 3)
+
+    def views_beyond(self, yaw_deg: float, margin_deg: float = 10.0) -> bool:
+        """Whether a camera at this yaw (about the head, 0: in front) looks from farther round than the capture
+        did (by more than margin_deg): the avatar has not seen that side."""
+        if self.view_range is None:
+            return False
+        lo, hi = self.view_range["yaw_deg"]
+        if hi - lo >= 300:
+            return False
+        yaw = (yaw_deg + 180.0) % 360.0 - 180.0
+        return yaw < lo - margin_deg or yaw > hi + margin_deg
+
+    def turntable_sweep_deg(self, margin_deg: float = 10.0) -> float:
+        """How far a turntable may swing each side of the front: the captured yaws and a margin (0: a full turn,
+        where the capture went round the head or did not record its views)."""
+        if self.view_range is None or np.ptp(self.view_range["yaw_deg"]) >= 300:
+            return 0.0
+        lo, hi = self.view_range["yaw_deg"]
+        return float(min(max(abs(lo), abs(hi)) + margin_deg, 180.0))
 
     def ray_background(self, rays: Rays) -> torch.Tensor:
         """What each ray sees behind the avatar: the plate's pixel where the rays carry one, else the colour."""

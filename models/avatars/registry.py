@@ -55,6 +55,11 @@ def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar, dict]:
     avatar.presets, avatar.presets_measured = load_presets(folder)
     size = meta.get("image_px")
     avatar.capture_px = int(size[0]) if isinstance(size, list) and size and isinstance(size[0], int) else None
+    views = meta.get("view_range")
+    try:
+        avatar.view_range = {k: [float(views[k][0]), float(views[k][1])] for k in ("yaw_deg", "pitch_deg")}
+    except (TypeError, KeyError, IndexError, ValueError):
+        avatar.view_range = None  # an older avatar: its views unknown
     return avatar.to(device_of(device)), meta
 
 

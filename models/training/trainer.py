@@ -18,7 +18,7 @@ from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoi
 from models.avatars.effects import parse_effects
 from models.avatars.registry import DEFAULT_MODEL, ModelName, avatar_class
 from models.capture.dataset import DatasetError, check_images, load_split
-from models.capture.frames import background_plate
+from models.capture.frames import background_plate, view_range
 from models.device import device_of
 from models.files import atomic_write_bytes
 from models.head.sources import load_head
@@ -139,6 +139,8 @@ class Trainer:
         self.frames = frames
         self.split = frames.split
         self.validation = validation
+        template = avatar.head_model.template
+        self.view_range = view_range(frames.split, 0.5 * (template.min(0) + template.max(0)))
         self.rays_per_step = cfg.rays_per_step or avatar.rays_per_step
         # The networks and each frame's geometry go to the device; images, rays, the k-d trees and the random
         # generator (its state is part of the checkpoint) stay on the CPU, and each step's rays are moved over.
@@ -157,7 +159,7 @@ class Trainer:
     # ---- state -----------------------------------------------------------------------------------------
     def meta(self) -> dict:
         return {**self.avatar.meta(), "head_model": self.split.head_model, "frames": len(self.split.frames),
-                "image_px": [self.split.width, self.split.height],
+                "image_px": [self.split.width, self.split.height], "view_range": self.view_range,
                 "background": self.avatar.background.tolist(),
                 "provenance": {"dataset": str(self.cfg.dataset),
                                "dataset_resolved": str(Path(self.cfg.dataset).resolve()), "steps": self.step,

@@ -11,11 +11,11 @@ from app.studio.jobs_panel import JobForm
 
 
 def test_export_form_fields_reach_their_options():
-    cfg = ExportForm(frames=24, sweep=30.0, elevation=10.0, zoom=1.5, size=129, preset=2, animate=True).config(
+    cfg = ExportForm(frames=24, views_only=False, elevation=10.0, zoom=1.5, size=129, preset=2, animate=True).config(
         Path("av"))
     assert (cfg.frames, cfg.sweep_deg, cfg.elevation_deg, cfg.zoom, cfg.size, cfg.preset, cfg.animate) == \
-        (24, 30.0, 10.0, 1.5, 128, "final", True)
-    assert ExportForm(sweep=500.0).config(Path("av")).sweep_deg == 180.0
+        (24, 0.0, 10.0, 1.5, 128, "final", True)
+    assert ExportForm().config(Path("av")).sweep_deg is None  # the avatar's captured views
 
 
 def test_default_outputs_are_under_the_studio_home():
