@@ -150,13 +150,14 @@ class CoDyNeRFAvatar(Avatar):
 
     # ---- the tracked poses, corrected ------------------------------------------------------------------
     def fit_to_tracked_video(self) -> None:
-        """Learn a correction of each training frame's head pose with the avatar (correct_poses); and no Cauchy
+        """Learn a correction of each training frame's head pose with the avatar (correct_poses); Eq. 13 shapes
+        the normals only, not the density (LossWeights.consistency_shapes_density); and no Cauchy
         sparsity (Eq. 14): on the tracked d3 video (25 minutes, `none`) it held the density to a fog that let 32%
         of the light through the head (the room's plate would show through it when the head moves), against 1%
         without, at the same held-out PSNR (16.60 and 16.54 dB) and 26% less render time (the early stop ends
         rays at an opaque skin)."""
         self.correct_poses()
-        self.loss_weights = replace(self.loss_weights, cauchy=0.0)
+        self.loss_weights = replace(self.loss_weights, cauchy=0.0, consistency_shapes_density=False)
 
     def correct_poses(self) -> None:
         """Give every training frame a pose correction, learned with the avatar."""
@@ -347,7 +348,7 @@ class CoDyNeRFAvatar(Avatar):
         consistency = consistency_weight(w, batch.progress)
         # Second derivatives only while Eq. 13 ties density gradients to the normals: before that the density
         # gradient is an input the normals network reads, not something to train through.
-        second_order = self.field_cfg.needs_normals and consistency > 0
+        second_order = self.field_cfg.needs_normals and consistency > 0 and w.consistency_shapes_density
         out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True,
                                create_graph=second_order)
         parts = ray_terms(w, out.internals, out.buffers["rgb"], batch.target, batch.rays.directions,

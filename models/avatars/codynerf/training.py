@@ -21,6 +21,12 @@ class LossWeights:
     tying density gradients to the normals before the density has settled wrecks the density (measured:
     validation PSNR 21.8 dB with Eq. 13 from the start vs 30.5 without, after 1000 steps)."""
     consistency_ramp: float = 0.3
+    consistency_shapes_density: bool = True
+    """Eq. 13 pulls both ways: the predicted normals towards the density's gradient and the density's gradient
+    (second derivatives) towards the normals. Off, it pulls only the normals (the density's gradient detached, no
+    second derivatives): on the tracked d3 video (`all`, 30 minutes) the two-way pull wrecked the density the
+    moment it came in (training photometric error 0.0019 to 0.037 within 100 steps, still 0.02 400 steps on),
+    where the synthetic captures' clean surfaces took it well (README: `all` 4 dB over `none`)."""
     cauchy: float = 1e-3  # Eq. 14 (1e-3 vs 1e-4: val PSNR 30.7 vs 30.1 dB at 1000 steps, a sparser field)
     cauchy_c: float = 100.0
     codes: float = 1e-3
@@ -70,6 +76,7 @@ def ray_terms(w: LossWeights, r: CoDyNeRFRays, rgb: torch.Tensor, target: torch.
                                                                                   directions)
         consistency = consistency_weight(w, progress)
         if consistency > 0:
-            parts["normal_consistency"] = consistency * losses.top_k_normal_consistency(
-                r.weights, r.point_normal, r.point_grad_normal)
+            grad = r.point_grad_normal if w.consistency_shapes_density else r.point_grad_normal.detach()
+            parts["normal_consistency"] = consistency * losses.top_k_normal_consistency(r.weights, r.point_normal,
+                                                                                        grad)
     return parts

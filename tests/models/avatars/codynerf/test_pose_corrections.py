@@ -78,6 +78,7 @@ def test_corrections_learn_slowly_and_are_saved(tmp_path):
     avatar, meta = load_avatar(DEMO)
     avatar.fit_to_tracked_video()
     assert avatar.loss_weights.cauchy == 0.0  # an opaque head in front of the room
+    assert not avatar.loss_weights.consistency_shapes_density  # Eq. 13 pulls the normals only
     groups = avatar.parameter_groups()
     assert [g["lr_scale"] for g in groups] == [1.0, POSE_LR_SCALE]
     assert groups[1]["params"] == [avatar.pose_corrections]
