@@ -77,7 +77,7 @@ class BenchConfig:
     nerface: Path | None = None
     """A trained NerFACE avatar of the capture (timed and measured); by default an untrained one of the
     published size is timed (its weights do not change the work)."""
-    train_seconds: Annotated[float, Range(0, above=True)] | None = None
+    train_seconds: Annotated[float, Range(0)] | None = None
     """Training seconds per effect set for the training curves (default 300; quick: 25; 0: no curves, measure
     the --avatars only)."""
     size: Annotated[int, Range(8, 4096)] | None = None

@@ -144,11 +144,11 @@ def split_of(k: int, n: int, n_test: int) -> str:
 def run_track(cfg: TrackConfig) -> int:
     t_start = time.perf_counter()
     check_config(cfg)
+    info = video_info(cfg.video)  # the video first: the input the user thinks of
     bundle = landmarker_path(cfg)
     model = load_head(cfg.head)
     canonical, _ = canonical_face_mesh(bundle)
     corr = correspond(model, canonical)
-    info = video_info(cfg.video)
     kept, dropped, read = sharp_faces(cfg, bundle)
     t_landmarks = time.perf_counter() - t_start
     print(f"{cfg.video}: {len(kept)} of {read} frames kept ({len(dropped)} dropped) in {t_landmarks:.1f} s",
