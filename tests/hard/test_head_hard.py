@@ -1,6 +1,7 @@
-"""Hard cases for the head models (DESIGN 6): rotations at 0, 1e-8, pi - 1e-6, pi, 2 pi; expression
-weights of +-10; random controls swept by hypothesis (finite outputs, small changes move vertices a
-little)."""
+"""Hard cases for the head models (DESIGN 6), on every kind of head model (the built-in head, a generated FLAME
+file, ICT-FaceKit where ../shared has it): rotations at 0, 1e-8, pi - 1e-6, pi, 2 pi about every joint (both
+eyes); expression weights of +-10; random controls swept by hypothesis (finite outputs and gradients, small
+changes move vertices a little); NaN and huge controls refused where they come in."""
 
 from __future__ import annotations
 
@@ -19,8 +20,18 @@ AXES = {"x": [1.0, 0.0, 0.0], "oblique": [0.48, -0.6, 0.64]}
 
 
 @pytest.fixture(scope="module")
-def head(builtin_model):
-    return Head(builtin_model, dtype=torch.float64)
+def flame_head_model(tmp_path_factory, builtin_model):
+    from models.head.sources import load_head
+    from tests.models.head.flame_files import write_flame_from_head
+
+    return load_head(f"flame:{write_flame_from_head(tmp_path_factory.mktemp('flame'), builtin_model)}")
+
+
+@pytest.fixture(scope="module", params=["builtin", "flame", "ict"])
+def head(request, builtin_model):
+    model = {"builtin": lambda: builtin_model, "flame": lambda: request.getfixturevalue("flame_head_model"),
+             "ict": lambda: request.getfixturevalue("ict_model")}[request.param]()
+    return Head(model, dtype=torch.float64)
 
 
 def _inputs(head, pose=None, expression=None):
@@ -35,9 +46,11 @@ def _inputs(head, pose=None, expression=None):
 
 @pytest.mark.parametrize("axis", AXES)
 @pytest.mark.parametrize("angle", ANGLES)
-@pytest.mark.parametrize("joint", [0, 1, 2, 3])
+@pytest.mark.parametrize("joint", [0, 1, 2, 3, 4])
 def test_rotations_finite_with_finite_gradients(head, joint, angle, axis):
-    pose = torch.zeros(1, 5, 3, dtype=torch.float64)
+    if joint >= head.model.num_joints:
+        pytest.skip(f"{head.model.name} has {head.model.num_joints} joints")
+    pose = torch.zeros(1, head.model.num_joints, 3, dtype=torch.float64)
     pose[0, joint] = ANGLES[angle] * torch.tensor(AXES[axis], dtype=torch.float64)
     pose.requires_grad_(True)
     verts, _joints, lmks = head(**_inputs(head, pose=pose))
@@ -51,7 +64,7 @@ def test_rotations_finite_with_finite_gradients(head, joint, angle, axis):
 
 def test_half_turn_about_y_mirrors_about_the_joint(head):
     """A root rotation of exactly pi about +y maps (x, y, z) to (-x, y, -z) about the root joint."""
-    pose = torch.zeros(1, 5, 3, dtype=torch.float64)
+    pose = torch.zeros(1, head.model.num_joints, 3, dtype=torch.float64)
     pose[0, 0, 1] = math.pi
     verts, _joints, _ = head(**_inputs(head, pose=pose))
     rest, rest_joints, _ = head(**_inputs(head))
@@ -63,8 +76,8 @@ def test_half_turn_about_y_mirrors_about_the_joint(head):
 @pytest.mark.parametrize("weight", [-10.0, 10.0])
 def test_extreme_expressions_finite(head, weight):
     expr = torch.full((1, head.model.num_expression), weight, dtype=torch.float64, requires_grad=True)
-    pose = torch.zeros(1, 5, 3, dtype=torch.float64)
-    pose[0, 2, 0] = 1.0
+    pose = torch.zeros(1, head.model.num_joints, 3, dtype=torch.float64)
+    pose[0, min(2, head.model.num_joints - 1), 0] = 1.0
     verts, _, lmks = head(**_inputs(head, pose=pose, expression=expr))
     assert torch.isfinite(verts).all() and torch.isfinite(lmks).all()
     (g,) = torch.autograd.grad(verts.sum(), expr)
@@ -81,25 +94,36 @@ control = st.floats(-3, 3, allow_nan=False)
 rotation = st.floats(-math.pi, math.pi, allow_nan=False)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(
-    expr=st.lists(control, min_size=16, max_size=16),
+    expr=st.lists(control, min_size=60, max_size=60),
     shape=st.lists(control, min_size=12, max_size=12),
     pose=st.lists(rotation, min_size=15, max_size=15),
-    direction=st.integers(0, 16 + 12 + 15 - 1),
+    direction=st.integers(0, 10_000),
     step=st.floats(1e-6, 1e-3),
 )
 def test_random_controls_finite_and_continuous(head, expr, shape, pose, direction, step):
-    base = torch.tensor(expr + shape + pose, dtype=torch.float64)
+    """Any controls (every expression, the first 12 identity coefficients, every joint): finite vertices and
+    finite gradients; a small step along one of them moves every vertex at most as far as the model allows."""
+    m = head.model
+    E, S, J = m.num_expression, min(m.num_shape, 12), m.num_joints
+    base = torch.tensor(expr[:E] + [0.0] * max(0, E - 60) + shape[:S] + pose[:3 * J], dtype=torch.float64)
 
     def run(vec):
-        return head(shape=vec[None, 16:28], expression=vec[None, :16], full_pose=vec[28:].reshape(1, 5, 3),
-                    translation=torch.zeros(1, 3, dtype=torch.float64))
+        full_shape = torch.zeros(1, m.num_shape, dtype=torch.float64)
+        full_shape[0, :S] = vec[E:E + S]
+        return head(shape=full_shape, expression=vec[None, :E], full_pose=vec[E + S:].reshape(1, J, 3),
+                     translation=torch.zeros(1, 3, dtype=torch.float64))
 
-    v0, joints0, _ = run(base)
-    assert torch.isfinite(v0).all()
+    leaf = base.clone().requires_grad_(True)
+    v0, joints0, lmks = run(leaf)
+    assert torch.isfinite(v0).all() and torch.isfinite(lmks).all()
+    (grad,) = torch.autograd.grad(v0.square().sum() + lmks.sum(), leaf)
+    assert torch.isfinite(grad).all()
+    v0, joints0 = v0.detach(), joints0.detach()
+    k = direction % len(base)
     moved = base.clone()
-    moved[direction] += step
+    moved[k] += step
     v1 = run(moved)[0]
     per_coeff = _per_coefficient_bound(head)
     reach = torch.cdist(v0[0], joints0[0]).max().item()  # of this shaped, posed head
@@ -108,5 +132,16 @@ def test_random_controls_finite_and_continuous(head, expr, shape, pose, directio
     # A coefficient step moves the shaped vertices by at most per_coeff * step, and the rest joints (convex
     # combinations of vertices) as much; each of the <= 3 rotated joints above a vertex turns its pivot's
     # shift by (I - R), adding at most 2 * per_coeff * step each.
-    bound = step * (per_coeff * (1 + 2 * 3) if direction < 28 else reach)
+    bound = step * (per_coeff * (1 + 2 * 3) if k < E + S else reach)
     assert (v1 - v0).norm(dim=-1).max().item() <= bound * (1 + 1e-6) + 1e-12
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), 1e30])
+def test_nan_inf_and_huge_controls_are_refused_where_they_come_in(bad):
+    """Controls enter from files (--controls, the dataset's frames): refused there, not rendered as garbage."""
+    from models.head.controls import ControlsError, controls_from_dict
+
+    for data in ({"expression": [0.0, bad]}, {"pose": {"jaw": [bad, 0.0, 0.0]}}, {"gaze": {"right": [0.0, bad, 0.0]}},
+                 {"translation": [0.0, 0.0, bad]}, {"shape": [bad]}):
+        with pytest.raises(ControlsError):
+            controls_from_dict(data)
