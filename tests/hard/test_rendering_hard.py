@@ -111,6 +111,24 @@ def test_fields_finite_far_from_the_mesh_with_finite_gradients(distance, scale, 
     assert all(g is None or torch.isfinite(g).all() for g in grads)
 
 
+@settings(max_examples=12, deadline=None)
+@given(st.sampled_from([0.0, 0.1, 10.0, 1e3, 1e6]), st.integers(0, 2))
+def test_nerface_field_finite_far_away_with_finite_gradients(distance, seed):
+    """The NerFACE baseline's MLP at points metres (up to 1e6 m) from the head, with huge conditions."""
+    from models.avatars.nerface.avatar import NerfaceConfig, NerfaceMLP
+
+    torch.manual_seed(seed)
+    cfg = NerfaceConfig(width=32, depth=4)
+    net = NerfaceMLP(cfg, condition_dim=20)
+    x = torch.nn.functional.normalize(torch.randn(8, 3), dim=-1) * distance
+    view = torch.nn.functional.normalize(torch.randn(8, 3), dim=-1)
+    condition = torch.randn(8, 20) * 1e3
+    sigma, rgb = net(x, view, condition, 0.15)
+    assert torch.isfinite(sigma).all() and torch.isfinite(rgb).all()
+    grads = torch.autograd.grad(sigma.sum() + rgb.sum(), list(net.parameters()), allow_unused=True)
+    assert all(g is None or torch.isfinite(g).all() for g in grads)
+
+
 def test_zero_density_gradient_gives_zero_normals_not_nan():
     cfg = FieldConfig(effects=("shading",))
     field = CoDyNeRFField(cfg, 1)
