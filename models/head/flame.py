@@ -67,8 +67,8 @@ def load_flame(path: str | Path, landmarks_path: str | Path | None = None) -> He
         (J_reg.shape == (J, V), "J_regressor", f"({J},{V})", J_reg.shape),
         (weights.shape == (V, J), "weights", f"({V},{J})", weights.shape),
         (posedirs.shape == (V, 3, (J - 1) * 9), "posedirs", f"({V},3,{(J - 1) * 9})", posedirs.shape),
-        (faces.shape[1:] == (3,) and faces.min() >= 0 and faces.max() < V, "f",
-         f"(F,3) indices below {V}", faces.shape),
+        (faces.shape[1:] == (3,) and len(faces) > 0 and faces.min() >= 0 and faces.max() < V, "f",
+         f"(F,3) indices below {V}, F > 0", faces.shape),
     ]
     for ok, key, want, got in checks:
         if not ok:
@@ -101,6 +101,7 @@ def _load_embedding(path: Path, num_faces: int) -> Landmarks:
         raise HeadModelError(f"{path}: a landmark embedding needs 'lmk_face_idx' and 'lmk_b_coords'")
     faces = np.asarray(d["lmk_face_idx"]).astype(np.int64).ravel()
     bary = np.asarray(d["lmk_b_coords"], np.float64)
-    if bary.shape != (len(faces), 3) or faces.min() < 0 or faces.max() >= num_faces:
+    if len(faces) == 0 or bary.shape != (len(faces), 3) or faces.min() < 0 or faces.max() >= num_faces \
+            or not np.isfinite(bary).all():
         raise HeadModelError(f"{path}: landmark embedding does not fit the model's {num_faces} triangles")
     return Landmarks(faces=faces, bary=bary.astype(np.float32))

@@ -63,6 +63,14 @@ def _codecs_encode(text: str, encoding: str = "utf-8") -> bytes:
     return codecs.encode(text, "latin1")
 
 
+def _bytes(*args: object) -> bytes:
+    # Python 3 writes an empty bytes object in protocol 2 as a call of bytes() with no arguments (a FLAME array of
+    # size 0 holds one); bytes with arguments could allocate anything, so only the empty call is allowed.
+    if args:
+        raise UnsafePickleError("refused bytes() with arguments")
+    return b""
+
+
 def _ndarray_reconstruct(subtype: type, shape: object, dtype: object) -> np.ndarray:
     if subtype is not np.ndarray:
         raise UnsafePickleError(f"refused array subtype {subtype!r}")
@@ -92,6 +100,7 @@ _ALLOWED: dict[tuple[str, str], object] = {
     ("copyreg", "_reconstructor"): _reconstructor,
     **{(m, t.__name__): t for m in ("__builtin__", "builtins") for t in (object, set, frozenset)},
     ("_codecs", "encode"): _codecs_encode,
+    **{(m, "bytes"): _bytes for m in ("__builtin__", "builtins")},
     ("chumpy.ch", "Ch"): ChumpyArray,
     **{(module, f"{fmt}_{kind}"): SparseMatrix
        for fmt in ("csc", "csr") for kind in ("matrix", "array")

@@ -130,3 +130,20 @@ def test_truncated_pickle(tmp_path):
     path.write_bytes(path.read_bytes()[:5000])
     with pytest.raises(HeadModelError, match="not a readable FLAME pickle"):
         load_flame(path)
+
+
+@pytest.mark.parametrize("protocol", [2, 4])
+def test_empty_faces_and_embedding_are_clear_errors(tmp_path, protocol):
+    """A FLAME file with an empty face array (protocol 2 writes its empty data as bytes(), which the restricted
+    unpickler allows with no arguments) and an empty landmark embedding: one clear error each."""
+    arrays = flame_arrays()
+    arrays["f"] = np.zeros((0, 3), np.int64)
+    path = tmp_path / "FLAME_NEUTRAL.pkl"
+    path.write_bytes(pickle.dumps(arrays, protocol=protocol))
+    with pytest.raises(HeadModelError, match=r"FLAME field 'f' must be \(F,3\) indices"):
+        load_flame(path)
+    good = write_flame_2023(tmp_path, flame_arrays())
+    (tmp_path / "flame_static_embedding.pkl").write_bytes(pickle.dumps(
+        {"lmk_face_idx": np.zeros(0, np.int64), "lmk_b_coords": np.zeros((0, 3))}, protocol=protocol))
+    with pytest.raises(HeadModelError, match="landmark embedding does not fit"):
+        load_flame(good)
