@@ -192,8 +192,7 @@ class Studio:
         s = self.session
         if s.avatar is None:
             return
-        size = s.display.neural_size
-        cam = s.view.camera(s.avatar.head_model.template, size, size)
+        cam = s.render_camera(s.display.neural_size)
         passes = ("draft", "preview", "final")[: ("draft", "preview", "final").index(s.display.refine_to) + 1]
         frame = s.timeline_frame if s.timeline_frame >= 0 else None
         self.last_submit_id = self.worker.submit(Request(s.controls(), cam, passes, frame,

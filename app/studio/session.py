@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from models.avatars.base import Avatar
 from models.avatars.registry import load_avatar
 from models.capture.dataset import CaptureSplit, DatasetError, load_split
+from models.capture.frames import camera_of
 from models.head.controls import Controls
 from render.camera import Camera, framing_camera
 
@@ -194,6 +195,15 @@ class Session:
     @property
     def name(self) -> str:
         return self.folder.name if self.folder else "(none)"
+
+    def render_camera(self, size: int) -> Camera:
+        """The neural render's camera: on the timeline the capture frame's own (its intrinsics scaled to `size`
+        across: the render lines up with the captured image), else the orbit camera."""
+        cap = self.capture
+        if cap is not None and 0 <= self.timeline_frame < len(cap.frames):
+            height = max(8, round(size * cap.height / cap.width))
+            return camera_of(cap, cap.frames[self.timeline_frame].camera_to_world).resized(size, height)
+        return self.view.camera(self.avatar.head_model.template, size, size)
 
     def controls(self) -> Controls:
         """What the avatar is shown with: a capture frame's controls on the timeline, else the sliders'."""

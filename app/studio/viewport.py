@@ -7,6 +7,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 from imgui_bundle import imgui
+from PIL import Image
 
 from app.studio import actions as a
 from app.studio.context import PanelContext
@@ -57,6 +58,8 @@ class Viewport:
         self.neural_image: np.ndarray | None = None
         self.guide_image_size = (0, 0)
         self.shown = (-1, "", "")  # (request id, pass, buffer) on screen
+        self.capture_tex: moderngl.Texture | None = None
+        self._capture_key: tuple = ()
         self.rect: tuple[int, int, int, int] | None = None
         """Where the guide and the render were drawn in the window last frame: x, y, width, height (pixels)."""
         self._guide_key: tuple = ()
@@ -84,7 +87,7 @@ class Viewport:
         self._guide_key = key
         head = s.avatar.head_model
         verts, lmks = posed_mesh(s.avatar.head, s.controls())
-        cam = v.camera(head.template, size, size)
+        cam = s.render_camera(size)  # on the timeline, the capture's camera: the guide lines up with its image
         settings = PreviewSettings(pass_name=d.guide_pass, wireframe_overlay=d.wireframe, landmarks=d.landmarks,
                                    samples=1, shadow_map_px=1024)
         with self.gl.current():
@@ -93,6 +96,25 @@ class Viewport:
             self.gl.ctx.copy_framebuffer(self.guide_tex, fb)
             self.gl.ctx.detect_framebuffer(0).use()
         self.guide_image_size = (size, size)
+
+    def update_capture(self, s: Session) -> bool:
+        """On the timeline: the captured frame's image in its texture (read when the frame changes). False when
+        no capture frame is shown."""
+        cap, k = s.capture, s.timeline_frame
+        if cap is None or not 0 <= k < len(cap.frames):
+            return False
+        key = (id(cap), k)
+        if key != self._capture_key:
+            try:
+                with Image.open(cap.frames[k].image_path) as im:
+                    img = np.ascontiguousarray(np.asarray(im.convert("RGB")))
+            except OSError:
+                return False
+            with self.gl.current():
+                self.capture_tex = self.texture(self.capture_tex, (img.shape[1], img.shape[0]))
+                self.capture_tex.write(img.tobytes())
+            self._capture_key = key
+        return True
 
     def update_neural(self, r: Result | None, buffer: str) -> None:
         if r is None:
@@ -170,7 +192,8 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
                            "degrees): the avatar never saw this side of the head")
 
     avail = imgui.get_content_region_avail()
-    n = 2 if d.layout == "beside" else 1
+    captured = vp.update_capture(s) and d.layout == "beside"  # the timeline's frame as the camera saw it
+    n = (3 if captured else 2) if d.layout == "beside" else 1
     size = int(max(64, min((avail.x - 8 * (n - 1)) / n, avail.y - 4)))
     if size != d.shown_px:
         act(a.ShowAtSize(size))
@@ -186,6 +209,11 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         if vp.neural_tex is not None:
             imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
             _mouse(act, size)
+        if captured:
+            imgui.same_line()
+            imgui.image(imgui.ImTextureRef(vp.capture_tex.glo), imgui.ImVec2(size, size))
+            if imgui.is_item_hovered():
+                imgui.set_tooltip(f"capture frame {s.timeline_frame}, as the camera saw it")
     elif d.layout == "render":
         if vp.neural_tex is not None:
             imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))

@@ -85,8 +85,16 @@ def test_timeline_shows_a_capture_frame_and_moves_the_sliders_to_it(session, fil
     np.testing.assert_allclose(c.expression[:n], frame.expression, atol=1e-6)
     for joint in ("root", "neck", "gaze_left"):
         np.testing.assert_allclose(getattr(c, joint), getattr(frame, joint), atol=1e-5)  # Euler round trip
+    a.ShowFrame(2).apply(session)  # on the timeline the render takes the capture's own camera, scaled
+    cam = session.render_camera(64)
+    fx, fy, cx, cy = files.capture.intrinsics
+    s = 64 / files.capture.width
+    np.testing.assert_allclose(cam.intrinsics, (fx * s, fy * s, cx * s, cy * s), rtol=1e-6)
+    np.testing.assert_allclose(cam.view, np.linalg.inv(files.capture.frames[2].camera_to_world), atol=1e-9)
     a.ShowFrame(99).apply(session)  # past the capture: the sliders
     assert session.timeline_frame == -1
+    orbit = session.view.camera(session.avatar.head_model.template, 64, 64)
+    np.testing.assert_allclose(session.render_camera(64).view, orbit.view)
 
 
 def test_camera_actions(session):
