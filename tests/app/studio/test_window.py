@@ -89,19 +89,32 @@ def test_expression_slider_changes_the_face(display, avatar, tmp_path):
     assert guide.std() > 5 and neural.std() > 5
 
 
-def test_shadow_buffers_in_the_viewport(display, avatar, tmp_path):
+def test_shadow_buffers_in_the_viewport(display, avatar, capture, tmp_path):
     """With the head turned and the jaw open: the render without cast shadows is nowhere darker than the
-    render, the light reaching the surface is white off the head and darker somewhere on it, as shown."""
+    render, the light reaching the surface is white off the head and darker somewhere on it, as shown. Then a
+    capture frame on the timeline: the captured image is shown beside the guide and the render."""
     shots = {b: tmp_path / f"{b}.png" for b in ("rgb", "rgb_no_shadows", "rgb_light")}
     steps = [{"head": [35, -10, 0]}, {"jaw_open_deg": 20}]
     for b, path in shots.items():
         steps += [{"buffer": b}, {"refine_to": "preview"}, {"wait_render": "preview"}, {"save_neural": str(path)}]
+    timeline = tmp_path / "timeline.png"
+    steps += [{"buffer": "rgb"}, {"timeline": 2}, {"wait_render": "preview"}, {"save_viewport": str(timeline)},
+              {"wait_frames": 2}]
     report = run_script(display, tmp_path, avatar, steps)
     assert report["errors"] == []
     rgb, without, light = (np.asarray(Image.open(shots[b]), np.int16) for b in shots)
     assert rgb.shape == without.shape == light.shape == (256, 256, 3)
     assert (without >= rgb - 1).all()  # uint8 rounding
     assert (light[0, 0] == 255).all() and light.min() < 255
+    view = np.asarray(Image.open(timeline), np.float64)
+    h, w = view.shape[:2]
+    assert 2.8 * h < w < 3.3 * h, view.shape  # guide, render, captured image
+    from models.capture.dataset import load_split
+
+    frame = load_split(capture, "train").frames[2]
+    truth = np.asarray(Image.open(frame.image_path).convert("RGB").resize((24, 24)), np.float64)
+    shown = np.asarray(Image.fromarray(view[:, w - h:].astype(np.uint8)).resize((24, 24)), np.float64)
+    assert np.abs(shown - truth).mean() < 12  # the capture's own frame, as the window shows it
 
 
 def test_errors_training_job_and_turntable(display, avatar, capture, tmp_path):
