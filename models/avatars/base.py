@@ -99,11 +99,23 @@ class Avatar(nn.Module, ABC):
         self.register_buffer("plate_camera", torch.as_tensor(camera_key(camera), device=self.background.device))
 
     def plate_for(self, camera: Camera) -> torch.Tensor | None:
-        """(H*W,3) the plate where `camera` is the capture's (the same size, intrinsics and view), else None."""
+        """(H*W,3) the plate where `camera` is the capture's, or the capture's scaled to another image size (the
+        studio's timeline renders at the size it shows: the plate resampled to it, area-averaged); else None."""
         key = getattr(self, "plate_camera", None)
-        if key is None or not np.allclose(camera_key(camera), key.cpu().numpy(), rtol=1e-6, atol=1e-4):
+        if key is None:
             return None
-        return self.plate.reshape(-1, 3)
+        key = key.cpu().numpy()
+        mine = camera_key(camera)
+        if np.allclose(mine, key, rtol=1e-6, atol=1e-4):
+            return self.plate.reshape(-1, 3)
+        sx, sy = mine[0] / key[0], mine[1] / key[1]
+        scaled = np.concatenate([np.asarray(mine[2:6]) / [sx, sy, sx, sy], mine[6:]])  # back to the plate's size
+        if not np.allclose(scaled, key[2:], rtol=1e-6, atol=1e-4):
+            return None
+        import cv2
+
+        image = cv2.resize(self.plate.cpu().numpy(), (camera.width_px, camera.height_px), interpolation=cv2.INTER_AREA)
+        return torch.as_tensor(image, device=self.plate.device).reshape(-1, 3)
 
     def views_beyond(self, yaw_deg: float, margin_deg: float = 10.0) -> bool:
         """Whether a camera at this yaw (about the head, 0: in front) looks from farther round than the capture

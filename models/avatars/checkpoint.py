@@ -22,6 +22,8 @@ from models.files import atomic_write
 
 FORMAT = "avatar-studio/checkpoint/1"
 _NAME = re.compile(r"(weights|train_state)-\d{6,}\.safetensors")
+_TEMPORARY = re.compile(r"\.((weights|train_state)-\d{6,}\.safetensors|avatar\.json)\..+\.tmp")
+"""The temporary files atomic_write makes beside a checkpoint's files (a kill can leave one)."""
 
 
 class CheckpointError(ValueError):
@@ -69,6 +71,9 @@ def save_checkpoint(folder: str | Path, meta: dict, weights: dict[str, torch.Ten
     for old in folder.glob("*.safetensors"):
         if _NAME.fullmatch(old.name) and old.name not in files.values():
             old.unlink(missing_ok=True)
+    for left in folder.glob(".*.tmp"):  # what killed writers left (the writer lock makes this run the only one)
+        if _TEMPORARY.fullmatch(left.name):
+            left.unlink(missing_ok=True)
     return folder / "avatar.json"
 
 

@@ -96,3 +96,15 @@ def test_a_broken_avatar_json_is_one_clear_line(change, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "avatar.json" in err[0], err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_leftovers_of_killed_writes_are_cleaned_and_nothing_else(tmp_path):
+    folder = tmp_path / "av"
+    folder.mkdir()
+    left = [folder / ".weights-000003.safetensors.ab12cd.tmp", folder / ".avatar.json.x9y8.tmp"]
+    mine = [folder / "notes.tmp", folder / ".my.tmp", folder / "weights-000001.safetensors.bak"]
+    for p in left + mine:
+        p.write_bytes(b"x")
+    save_checkpoint(folder, {"model": "codynerf"}, {"w": torch.zeros(2)}, 5)
+    assert not any(p.exists() for p in left)
+    assert all(p.exists() for p in mine)  # not the program's names: not touched

@@ -64,9 +64,11 @@ def test_plate_composites_behind_the_capture_camera_only(gl):
     np.testing.assert_allclose(with_plate["rgb"], expected, atol=2e-5)
     assert (bare["opacity"] < 1e-3).mean() > 0.3  # much of the frame is the room
     np.testing.assert_array_equal(with_plate["opacity"], bare["opacity"])
-    other = avatar.render_image(controls, cam.resized(20, 18), r)  # another camera: no plate
-    corner = other["rgb"][0, 0]
-    np.testing.assert_allclose(corner, bg, atol=1e-6)
+    half = avatar.render_image(controls, cam.resized(20, 18), r)  # the same camera at half the size: the plate
+    np.testing.assert_allclose(half["rgb"][0, 0], plate[:2, :2].mean((0, 1)), atol=1e-5)  # area-averaged
+    other = avatar.render_image(controls, framing_camera(avatar.head_model.template, 40.0, 0.0, fov_y_deg=18.0,
+                                                         width_px=40, height_px=36), r)  # another view: no plate
+    np.testing.assert_allclose(other["rgb"][0, 0], bg, atol=1e-6)
     r.release()
 
 
@@ -78,6 +80,7 @@ def test_plate_is_saved_with_the_avatar(tmp_path):
     save_checkpoint(tmp_path / "av", json.loads(json.dumps(meta)), avatar.state_dict(), 1)
     again, _ = load_avatar(tmp_path / "av")
     np.testing.assert_array_equal(again.plate.numpy(), plate)
-    assert again.plate_for(cam) is not None and again.plate_for(cam.resized(24, 20)) is None
+    assert again.plate_for(cam) is not None and again.plate_for(cam.resized(24, 20)).shape == (480, 3)
+    assert again.plate_for(framing_camera(again.head_model.template, 5.0, 0.0, width_px=12, height_px=10)) is None
     # An avatar without a plate (the shipped demo) still loads, and has none.
     assert load_avatar(DEMO)[0].plate_for(cam) is None
