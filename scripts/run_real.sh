@@ -2,7 +2,7 @@
 # The real-video results of the README: track each shared clip (every frame, SIZE px), train `none` and `all`
 # on it for MINUTES each (the two at once, one core each: this machine has two), evaluate both on the held-out
 # last 10% and draw truth / none / all on three of those frames. Writes out/real/<SIZE>/<video>/ (dataset, none,
-# all, *.log) and docs/img/real_<video>_<SIZE>.png.
+# all, *.log) and out/real/<SIZE>/<video>.png (not docs/: the clips and frames of them stay out of the repository).
 # Usage: scripts/run_real.sh [VIDEO...]   (default: the three clips of ../shared/data/video/)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -24,5 +24,5 @@ for v in $VIDEOS; do
     for e in none all; do
         .venv/bin/avatar-studio eval "$root/$e" "$root/dataset" --split test --out "$root/$e/eval"
     done
-    .venv/bin/python scripts/results_picture.py "$root" "docs/img/real_${v}_$SIZE.png" --runs none,all --frames spread
+    .venv/bin/python scripts/results_picture.py "$root" "out/real/$SIZE/$v.png" --runs none,all --frames spread
 done
