@@ -22,7 +22,7 @@ from models.capture.dataset import check_images, load_split
 from models.capture.frames import camera_of, load_rgb
 from models.capture.synthetic import read_png16
 from models.device import device_of
-from models.files import FolderBusy, WriterLock
+from models.files import FolderBusy, WriterLock, foreign_files
 from models.head.controls import Controls, load_controls
 from models.ranges import Range
 from models.training.metrics import face_mse, luminance, normal_angle_deg, pearson, psnr, ssim
@@ -146,6 +146,9 @@ def shadow_metrics(avatar, frame, split, raster, truth: np.ndarray, on: np.ndarr
 
 
 def run_eval(cfg: EvalConfig) -> int:
+    foreign = foreign_files(cfg.out, r"metrics\.json|(train|val|test)_\d{4}\.png")
+    if foreign:
+        raise UserInputError(f"{cfg.out}: holds files eval did not write ({foreign[0].name}...); choose another --out")
     avatar, meta = load_avatar(cfg.avatar, cfg.device)
     split = load_split(cfg.dataset, cfg.split)
     check_images(split)
@@ -242,6 +245,9 @@ def run_turntable(cfg: TurntableConfig) -> int:
         raise UserInputError(f"{cfg.out}: the turntable is written as an .mp4")
     gl = GLContext.headless()
     pngs = cfg.out.with_suffix("") if cfg.pngs else None
+    if pngs is not None and (pngs.is_file() or foreign_files(pngs, r"frame_\d{4}\.png")):
+        raise UserInputError(f"{pngs}: the turntable's PNG frames go there, and it holds other files; choose another "
+                             "--out or pass --no-pngs")
     t0 = time.perf_counter()
     bar = Progress("turntable", cfg.frames)
     n = write_video(turntable_frames(avatar, Rasterizer(gl), cfg, on_frame=lambda k: bar.update(k + 1)), cfg.out,

@@ -115,3 +115,15 @@ def partial_folder(out: str | Path) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def foreign_files(folder: str | Path, ours: str) -> list[Path]:
+    """The files in `folder` whose names do not match the regular expression `ours` (what a command writes
+    there): a command that would write into a folder holding any must not, or it could overwrite them."""
+    import re
+
+    pattern = re.compile(ours)
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(p for p in folder.iterdir() if not pattern.fullmatch(p.name))

@@ -5,6 +5,7 @@ failed export never leaves a file that looks finished."""
 from __future__ import annotations
 
 import os
+import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -20,7 +21,10 @@ def write_video(frames: Iterable[np.ndarray], mp4: str | Path, fps: float = 30.0
     no mp4 behind."""
     mp4 = Path(mp4)
     mp4.parent.mkdir(parents=True, exist_ok=True)
-    tmp = mp4.with_name(f".{mp4.stem}.partial{mp4.suffix}")
+    fd, name = tempfile.mkstemp(dir=mp4.parent, prefix=f".{mp4.stem}.partial-", suffix=mp4.suffix)  # our own name
+    os.fchmod(fd, 0o644)  # an ordinary file once renamed (mkstemp's is owner-only)
+    os.close(fd)
+    tmp = Path(name)
     if png_dir is not None:
         Path(png_dir).mkdir(parents=True, exist_ok=True)
     writer = None

@@ -134,3 +134,23 @@ def test_the_table_covers_every_command():
     covered = {argv[0] for _, argv, _ in CASES}
     assert covered == {c.name for c in COMMANDS} - {"studio"}, covered  # the studio: tests/app/studio
     print(f"{len(CASES)} bad-input cases over {len(covered)} commands")
+
+
+@pytest.mark.gl
+def test_outputs_never_overwrite_a_users_other_files(place, tmp_path, capsys):
+    """eval into a folder of the user's, a turntable whose PNG folder holds the user's files: refused; a turntable
+    into a fresh place writes an ordinary mp4 and nothing else beside it."""
+    import stat
+
+    mine = tmp_path / "photos"
+    mine.mkdir()
+    (mine / "test_0000.jpg").write_bytes(b"mine")
+    assert main(["eval", str(place / "avatar"), str(place / "capture"), "--out", str(mine)]) == 2
+    assert "eval did not write" in capsys.readouterr().err
+    assert main(["turntable", str(place / "avatar"), "--out", str(tmp_path / "photos.mp4"), "--frames", "2",
+                 "--size", "16", "--preset", "draft"]) == 2
+    assert "other files" in capsys.readouterr().err and (mine / "test_0000.jpg").read_bytes() == b"mine"
+    out = tmp_path / "fresh" / "turn.mp4"
+    assert main(["turntable", str(place / "avatar"), "--out", str(out), "--frames", "2", "--size", "16",
+                 "--preset", "draft", "--no-pngs"]) == 0
+    assert stat.S_IMODE(out.stat().st_mode) == 0o644 and sorted(p.name for p in out.parent.iterdir()) == ["turn.mp4"]
