@@ -50,7 +50,6 @@ def draw(ctx: PanelContext) -> None:
     _, e.views_only = imgui.checkbox("captured views only", e.views_only)
     if imgui.is_item_hovered():
         imgui.set_tooltip("swing as far round the head as the capture saw it (and 10 degrees), not a full turn")
-    imgui.same_line()
     imgui.set_next_item_width(90)
     _, e.elevation = imgui.slider_float("elevation", e.elevation, -45, 45, "%.0f deg")
     imgui.same_line()

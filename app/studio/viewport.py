@@ -154,29 +154,29 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         return
     # What to show.
     available = [b for b in BUFFERS if buffer_available(b, s.avatar, None if r is None else r.buffers)]
-    imgui.set_next_item_width(300)
+    # Three short lines, so that nothing is clipped in the viewport a 1280 px window leaves (about 530 px).
+    imgui.set_next_item_width(230)
     if imgui.begin_combo("buffer", buffer_label(d.buffer, s.avatar)):
         for b in available:
             if imgui.selectable(buffer_label(b, s.avatar), b == d.buffer)[0]:
                 act(a.ShowBuffer(b))
         imgui.end_combo()
     imgui.same_line()
-    imgui.set_next_item_width(110)
+    imgui.set_next_item_width(90)
     passes = ("shaded", "normals", "shadow")
     changed, k = imgui.combo("guide", passes.index(d.guide_pass), list(passes))
     if changed:
         act(a.SetDisplay({"guide_pass": passes[k]}))
-    imgui.same_line()
     for name in ("wireframe", "landmarks"):
         c, on = imgui.checkbox(name, getattr(d, name))
         if c:
             act(a.SetDisplay({name: on}))
         imgui.same_line()
-    imgui.new_line()  # the layout on a line of its own: the toolbar fits a 1280 px window
     for layout, label in (("beside", "beside"), ("over", "over"), ("render", "render alone")):
         if imgui.radio_button(label, d.layout == layout):
             act(a.SetDisplay({"layout": layout}))
         imgui.same_line()
+    imgui.new_line()
     if d.layout == "over":
         imgui.set_next_item_width(100)
         c, alpha = imgui.slider_float("guide opacity", d.overlay_alpha, 0.0, 1.0)
