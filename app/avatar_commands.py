@@ -215,9 +215,9 @@ class RenderCommandConfig:
 
 def run_render(cfg: RenderCommandConfig) -> int:
     avatar, _ = load_avatar(cfg.avatar, cfg.device)
-    controls = load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls()
+    controls = avatar.at_rest(load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls())
     size = avatar.apply_preset(cfg.preset, cfg.size)
-    cam = framing_camera(avatar.head_model.template, cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
+    cam = framing_camera(avatar.rest_vertices(), cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
                          height_px=size)
     offered = avatar.inspection_buffers()
     if cfg.buffer in INSPECT and INSPECT[cfg.buffer] not in offered:

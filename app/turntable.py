@@ -92,12 +92,12 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
                      should_stop: Callable[[], bool] | None = None) -> Iterator[np.ndarray]:
     """(size,size,3) uint8 frames of the turntable; on_frame(k) after each."""
     size = avatar.apply_preset(cfg.preset, cfg.size)
-    controls = controls or Controls()
+    controls = avatar.at_rest(controls or Controls())
     sweep = avatar.turntable_sweep_deg() if cfg.sweep_deg is None else cfg.sweep_deg
     for k in range(cfg.frames):
         phase = 2 * math.pi * k / cfg.frames
         yaw = sweep * math.sin(phase) if sweep else math.degrees(phase)
-        cam = turntable_camera(avatar.head_model.template, yaw, cfg.elevation_deg, fov_y_deg=18.0,
+        cam = turntable_camera(avatar.rest_vertices(), yaw, cfg.elevation_deg, fov_y_deg=18.0,
                                width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
         yield buffer_image(avatar.render_image(c, cam, rasterizer, should_stop=should_stop), "rgb")

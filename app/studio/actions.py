@@ -208,7 +208,7 @@ class Pan(Action):
     def apply(self, s: Session) -> None:
         if s.avatar is None:
             return
-        cam = s.view.camera(s.avatar.head_model.template, self.size_px, self.size_px)
+        cam = s.view.camera(s.avatar.rest_vertices(), self.size_px, self.size_px)
         s.view.pan_by(self.dx_px, self.dy_px, cam)
         s.dirty = True
 

@@ -161,7 +161,7 @@ class NeuralWorker:
         """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`, at the size of
         the avatar's capture (a tracked video's 256 px costs four times a synthetic capture's 128)."""
         size = min(avatar.capture_px or 128, 256)
-        cam = framing_camera(avatar.head_model.template, 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
+        cam = framing_camera(avatar.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
         figures = PresetFigures(size_px=size)
         images = {}
         for name in ("final", "preview", "draft"):
@@ -170,7 +170,8 @@ class NeuralWorker:
             times = []
             for _ in range(3):
                 t0 = time.perf_counter()
-                images[name] = avatar.render_image(Controls(), c, raster, should_stop=lambda: self._stale(request_id),
+                images[name] = avatar.render_image(avatar.at_rest(Controls()), c, raster,
+                                                   should_stop=lambda: self._stale(request_id),
                                                    chunk_rays=INTERACTIVE_CHUNK)["rgb"]
                 times.append(1e3 * (time.perf_counter() - t0))
             figures.ms[name] = float(np.median(times))

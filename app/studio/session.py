@@ -203,13 +203,13 @@ class Session:
         if cap is not None and 0 <= self.timeline_frame < len(cap.frames):
             height = max(8, round(size * cap.height / cap.width))
             return camera_of(cap, cap.frames[self.timeline_frame].camera_to_world).resized(size, height)
-        return self.view.camera(self.avatar.head_model.template, size, size)
+        return self.view.camera(self.avatar.rest_vertices(), size, size)
 
     def controls(self) -> Controls:
         """What the avatar is shown with: a capture frame's controls on the timeline, else the sliders'."""
         if self.capture is not None and 0 <= self.timeline_frame < len(self.capture.frames):
             return self.capture.frames[self.timeline_frame].controls
-        return self.sliders.controls()
+        return self.avatar.at_rest(self.sliders.controls()) if self.avatar is not None else self.sliders.controls()
 
     def report(self, message: str) -> None:
         """A message in the window (the last 8 are kept)."""

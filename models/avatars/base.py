@@ -86,6 +86,9 @@ class Avatar(nn.Module, ABC):
         self.presets_measured: dict = {}
         self.capture_px: int | None = None
         """The width of the capture's images it was trained on (avatar.json's "image_px"; None: not recorded)."""
+        self.rest_translation = np.zeros(3, np.float32)
+        """Where its capture held the head (avatar.json "rest_pose": the training frames' mean translation): the
+        field reads world positions, so new controls (sliders, turntables, `render`) place the head there."""
         self.view_range: dict[str, list[float]] | None = None
         """The directions its capture saw the head from (avatar.json's "view_range": yaw_deg and pitch_deg, least
         and most); None: not recorded."""
@@ -116,6 +119,15 @@ class Avatar(nn.Module, ABC):
 
         image = cv2.resize(self.plate.cpu().numpy(), (camera.width_px, camera.height_px), interpolation=cv2.INTER_AREA)
         return torch.as_tensor(image, device=self.plate.device).reshape(-1, 3)
+
+    def at_rest(self, controls: Controls) -> Controls:
+        """New controls (the sliders', a turntable's) placed where the capture held the head (rest_translation
+        added): a capture frame's own controls are already placed and do not come through here."""
+        return replace(controls, translation=np.asarray(controls.translation, np.float32) + self.rest_translation)
+
+    def rest_vertices(self) -> np.ndarray:
+        """The template where at_rest places it (what cameras frame)."""
+        return self.head_model.template + self.rest_translation
 
     def views_beyond(self, yaw_deg: float, margin_deg: float = 10.0) -> bool:
         """Whether a camera at this yaw (about the head, 0: in front) looks from farther round than the capture

@@ -55,6 +55,12 @@ def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar, dict]:
     avatar.presets, avatar.presets_measured = load_presets(folder)
     size = meta.get("image_px")
     avatar.capture_px = int(size[0]) if isinstance(size, list) and size and isinstance(size[0], int) else None
+    rest = meta.get("rest_pose", {}).get("translation") if isinstance(meta.get("rest_pose"), dict) else None
+    try:
+        t = np.asarray(rest if rest is not None else [0.0, 0.0, 0.0], np.float32)
+        avatar.rest_translation = t if t.shape == (3,) and np.isfinite(t).all() else np.zeros(3, np.float32)
+    except (TypeError, ValueError):
+        avatar.rest_translation = np.zeros(3, np.float32)
     views = meta.get("view_range")
     try:
         avatar.view_range = {k: [float(views[k][0]), float(views[k][1])] for k in ("yaw_deg", "pitch_deg")}

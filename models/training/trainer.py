@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import numpy as np
 import torch
 
 from models.avatars.base import Avatar, TrainingBatch
@@ -141,6 +142,8 @@ class Trainer:
         self.validation = validation
         template = avatar.head_model.template
         self.view_range = view_range(frames.split, 0.5 * (template.min(0) + template.max(0)))
+        self.rest_translation = np.mean([f.controls.translation for f in frames.split.frames], 0) \
+            if frames.split.frames else np.zeros(3)
         self.rays_per_step = cfg.rays_per_step or avatar.rays_per_step
         # The networks and each frame's geometry go to the device; images, rays, the k-d trees and the random
         # generator (its state is part of the checkpoint) stay on the CPU, and each step's rays are moved over.
@@ -160,6 +163,7 @@ class Trainer:
     def meta(self) -> dict:
         return {**self.avatar.meta(), "head_model": self.split.head_model, "frames": len(self.split.frames),
                 "image_px": [self.split.width, self.split.height], "view_range": self.view_range,
+                "rest_pose": {"translation": [round(float(v), 5) for v in self.rest_translation]},
                 "background": self.avatar.background.tolist(),
                 "provenance": {"dataset": str(self.cfg.dataset),
                                "dataset_resolved": str(Path(self.cfg.dataset).resolve()), "steps": self.step,

@@ -145,6 +145,12 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     test = load_split(d3_dataset, "test")
     assert avatar.plate_for(camera_of(test, test.frames[0].camera_to_world)) is not None
     assert avatar.pose_corrections is not None and 0 < avatar.pose_corrections.abs().max() < 0.05  # learned, small
+    # New controls are placed where the video held the head (the field reads world positions): the rest pose is the
+    # training frames' mean translation, half a metre in front of the camera.
+    mean_t = np.mean([f.controls.translation for f in load_split(d3_dataset, "train").frames], 0)
+    np.testing.assert_allclose(avatar.rest_translation, mean_t, atol=1e-4)
+    assert -1.0 < avatar.rest_translation[2] < -0.2
+    np.testing.assert_allclose(avatar.at_rest(Controls()).translation, avatar.rest_translation)
     raster = Rasterizer(gl)
     img = avatar.render_image(test.frames[0].controls, camera_of(test, test.frames[0].camera_to_world), raster)
     raster.release()
