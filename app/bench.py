@@ -34,7 +34,7 @@ from models.avatars.quality import PRESET_NAMES, Preset, Quality, pareto, save_p
 from models.avatars.registry import BASELINE_MODEL, load_avatar, untrained_avatar
 from models.capture.dataset import load_split
 from models.capture.frames import camera_of, load_rgb
-from models.files import atomic_write_bytes
+from models.files import atomic_write_bytes, foreign_files
 from models.head.sources import load_head
 from models.ranges import Range
 from models.training.metrics import face_mse, psnr
@@ -205,6 +205,9 @@ def run_bench(cfg: BenchConfig) -> int:
     seconds = cfg.train_seconds if cfg.train_seconds is not None else (25.0 if quick else 300.0)
     n_test = cfg.test_frames or (3 if quick else 6)
     out = cfg.out
+    foreign = foreign_files(out, r"results\.json|error_vs_time\.png|training_curves\.png|capture|avatars|\..*\.tmp")
+    if foreign:
+        raise UserInputError(f"{out}: holds files bench did not write ({foreign[0].name}...); choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     gl = GLContext.headless()
     t_start = time.perf_counter()

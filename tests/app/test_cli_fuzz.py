@@ -111,6 +111,7 @@ CASES = [
     ("turntable: sweep 200", ["turntable", "{p}/avatar", "--sweep-deg", "200"], "--sweep-deg"),
     ("turntable: broken avatar.json", ["turntable", "{p}/broken_avatar", "--out", "{p}/t.mp4"], "avatar.json"),
     ("bench: size 0", ["bench", "--size", "0", "--out", "{p}/b"], "--size"),
+    ("bench: into a folder of the user's", ["bench", "--out", "{p}/existing_dataset", "--quick"], "existing_dataset"),
     ("bench: missing dataset", ["bench", "--dataset", "{p}/nope", "--out", "{p}/b", "--train-seconds", "0"],
      "nope"),
 ]

@@ -39,8 +39,11 @@ def rays_of(origins, directions, surfaces) -> Rays:
                 torch.as_tensor(surfaces, dtype=torch.float32))
 
 
+inside = st.floats(-0.0625, 0.0625, allow_nan=False, width=32)  # within the head: a camera inside it
+origin = st.one_of(st.tuples(coord, coord, coord), st.tuples(inside, inside, inside)).map(
+    lambda v: np.asarray(v, np.float32))
 ray_batch = st.integers(1, 6).flatmap(lambda n: st.tuples(
-    st.lists(st.tuples(coord, coord, coord).map(lambda v: np.asarray(v, np.float32)), min_size=n, max_size=n),
+    st.lists(origin, min_size=n, max_size=n),
     st.lists(st.one_of(unit, axis), min_size=n, max_size=n),
     st.lists(surface, min_size=n, max_size=n)))
 
