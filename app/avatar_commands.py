@@ -39,14 +39,13 @@ def run_train(cfg: TrainConfig) -> int:
         parse_effects(cfg.effects or "all")
     except ValueError as e:
         raise UserInputError(f"--effects {cfg.effects}: {e}") from None
-    lock = WriterLock(cfg.out, "avatar-studio train")
     try:
-        lock.__enter__()
+        lock = WriterLock(cfg.out, "avatar-studio train").__enter__()
     except FolderBusy as e:
         raise UserInputError(str(e)) from None
     except OSError as e:
         raise UserInputError(f"{cfg.out}: cannot write the avatar there ({e.strerror})") from None
-    try:
+    try:  # held until training ends, however it ends
         return train_locked(cfg)
     finally:
         lock.__exit__()

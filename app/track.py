@@ -89,10 +89,9 @@ def landmarker_path(cfg: TrackConfig) -> Path:
     return path
 
 
-def detect_faces(cfg: TrackConfig, bundle: Path, progress) -> tuple[list[dict], list[dict], int]:
+def detect_faces(cfg: TrackConfig, bundle: Path, info, progress) -> tuple[list[dict], list[dict], int]:
     """Landmarks of the one face in each sampled frame; frames without a face are dropped (with the reason).
     Several faces in more than a tenth of the frames is an error: track needs a video of one person."""
-    info = video_info(cfg.video)
     share = min(cfg.fps / info.fps, 1.0) if cfg.fps else 1.0
     expected = max(1, round(info.frames * share)) if info.frames > 0 else None
     kept, dropped, several, read = [], [], 0, 0
@@ -149,7 +148,7 @@ def run_track(cfg: TrackConfig) -> int:
     model = load_head(cfg.head)
     canonical, _ = canonical_face_mesh(bundle)
     corr = correspond(model, canonical)
-    kept, dropped, read = sharp_faces(cfg, bundle)
+    kept, dropped, read = sharp_faces(cfg, bundle, info)
     t_landmarks = time.perf_counter() - t_start
     print(f"{cfg.video}: {len(kept)} of {read} frames kept ({len(dropped)} dropped) in {t_landmarks:.1f} s",
           flush=True)
@@ -215,7 +214,7 @@ def check_config(cfg: TrackConfig) -> None:
         raise UserInputError(f"--fov-deg {cfg.fov_deg}: must be between 0 and 170 degrees")
 
 
-def sharp_faces(cfg: TrackConfig, bundle: Path) -> tuple[list[dict], list[dict], int]:
+def sharp_faces(cfg: TrackConfig, bundle: Path, info) -> tuple[list[dict], list[dict], int]:
     """The frames with one face, sharp enough (the face's sharpness against the video's median), with progress:
     a bar on a terminal, a line every 25 frames in a log (the studio's job list shows its last line)."""
     tty = sys.stderr.isatty()
@@ -229,7 +228,7 @@ def sharp_faces(cfg: TrackConfig, bundle: Path) -> tuple[list[dict], list[dict],
         elif done % 25 == 0:
             print(f"landmarks: {done}" + (f" of about {total}" if total else "") + " frames", flush=True)
 
-    kept, dropped, read = detect_faces(cfg, bundle, progress)
+    kept, dropped, read = detect_faces(cfg, bundle, info, progress)
     bar.close()
     sharp = np.array([sharpness(f["rgb"], f["face"].landmarks_px) for f in kept])
     limit = cfg.blur * float(np.median(sharp))

@@ -115,10 +115,15 @@ class Avatar(nn.Module, ABC):
         scaled = np.concatenate([np.asarray(mine[2:6]) / [sx, sy, sx, sy], mine[6:]])  # back to the plate's size
         if not np.allclose(scaled, key[2:], rtol=1e-6, atol=1e-4):
             return None
-        import cv2
+        size = (camera.width_px, camera.height_px)
+        cached = getattr(self, "_plate_resized", None)
+        if cached is None or cached[0] != size or cached[1] is not self.plate:  # once per size (the timeline's)
+            import cv2
 
-        image = cv2.resize(self.plate.cpu().numpy(), (camera.width_px, camera.height_px), interpolation=cv2.INTER_AREA)
-        return torch.as_tensor(image, device=self.plate.device).reshape(-1, 3)
+            image = cv2.resize(self.plate.cpu().numpy(), size, interpolation=cv2.INTER_AREA)
+            cached = (size, self.plate, torch.as_tensor(image, device=self.plate.device).reshape(-1, 3))
+            self._plate_resized = cached
+        return cached[2]
 
     def at_rest(self, controls: Controls) -> Controls:
         """New controls (the sliders', a turntable's) placed where the capture held the head (rest_translation
