@@ -22,6 +22,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from models.avatars.components.codes import KEY_SCALE_FLOOR, control_key, nearest_code_weights
 from models.avatars.quality import BUILTIN_PRESETS, Preset, Quality
 from models.head.controls import Controls
 from models.head.head import Head
@@ -157,9 +158,28 @@ class Avatar(nn.Module, ABC):
         """What each ray sees behind the avatar: the plate's pixel where the rays carry one, else the colour."""
         return self.background if rays.background is None else rays.background
 
+    # ---- codes for new controls ------------------------------------------------------------------------
+    def key_codes(self, controls: list[Controls]) -> None:
+        """Let new controls take the codes of the training frames (in order) whose controls are nearest
+        (components/codes.py); the keys are saved with the weights. Without keys: the mean code."""
+        keys = np.stack([control_key(c, self.head_model.num_expression) for c in controls])
+        scale = np.maximum(keys.std(0), KEY_SCALE_FLOOR)
+        device = self.background.device
+        self.register_buffer("code_keys", torch.as_tensor(keys / scale, dtype=torch.float32, device=device))
+        self.register_buffer("code_key_scale", torch.as_tensor(scale, dtype=torch.float32, device=device))
+
+    def code_weights(self, controls: Controls) -> torch.Tensor | None:
+        """(N,) the training frames' share of the codes for these controls; None: the avatar has no keys (an
+        older one, or a capture that did not call for them): the mean code."""
+        keys = getattr(self, "code_keys", None)
+        if keys is None:
+            return None
+        query = torch.as_tensor(control_key(controls, self.head_model.num_expression), device=keys.device)
+        return nearest_code_weights(keys, query / self.code_key_scale)
+
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
-        """Weights with a plate give the avatar its plate buffers (of their size) before they are read."""
-        for name in ("plate", "plate_camera"):
+        """Weights with a plate or code keys give the avatar those buffers (of their size) before they are read."""
+        for name in ("plate", "plate_camera", "code_keys", "code_key_scale"):
             if prefix + name in state_dict:
                 self.register_buffer(name, torch.empty_like(state_dict[prefix + name]))
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
@@ -218,9 +238,10 @@ class Avatar(nn.Module, ABC):
         """Adapt the render settings to the capture: how far (metres, per foreground pixel of the masks) the
         capture's foreground reaches beyond the mesh's silhouette; None where it has no masks."""
 
-    def fit_to_tracked_video(self) -> None:
+    def fit_to_tracked_video(self, new: bool = False) -> None:
         """The capture was tracked from a video: its head poses carry the tracker's error, and its background is
-        a real room. Models adapt what they learn (the default: nothing)."""
+        a real room. Models adapt what they learn (the default: nothing). new: nothing is trained yet (a model may
+        still change its networks; a resumed avatar's are those of its avatar.json)."""
 
     def parameter_groups(self) -> list[dict]:
         """The trained parameters in groups, each with its learning rate's scale (`lr_scale`)."""

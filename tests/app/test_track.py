@@ -119,8 +119,8 @@ def test_blinks_and_open_jaw_get_their_expression_weights(d3_dataset, landmarker
 def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     """From the real video through training to eval: the masks cover hair above the brows in every frame (the
     rows above the landmark box; measured 12-45% of them at 256 px, median 36%), the background plate is the
-    wall where the frames show it and not the face, the loss falls over 60 steps, and eval scores the held-out
-    frames over the plate."""
+    wall where the frames show it and not the face, the loss falls over 60 steps, the avatar has what a tracked
+    video gets, and eval scores the held-out frames over the plate."""
     from app.avatar_commands import EvalConfig, run_eval
     from models.capture.frames import load_mask, load_rgb
 
@@ -151,6 +151,11 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     np.testing.assert_allclose(avatar.rest_translation, mean_t, atol=1e-4)
     assert -1.0 < avatar.rest_translation[2] < -0.2
     np.testing.assert_allclose(avatar.at_rest(Controls()).translation, avatar.rest_translation)
+    # A tracked video's field reads tri-plane features; held-out controls take the nearest training frames' codes:
+    # a training frame's own controls give its own code the largest share.
+    assert avatar.field.grid is not None and avatar.field_cfg.grid_resolution > 0
+    train = load_split(d3_dataset, "train")
+    assert avatar.code_weights(train.frames[3].controls).argmax().item() == 3
     raster = Rasterizer(gl)
     img = avatar.render_image(test.frames[0].controls, camera_of(test, test.frames[0].camera_to_world), raster)
     raster.release()

@@ -77,6 +77,9 @@ class RenderConfig:
 
 POSE_LR_SCALE = 0.02
 """The pose corrections' learning rate against the networks' (Adam moves each by about its rate a step)."""
+TRACKED_GRID_RESOLUTION = 256
+"""Texels a side of the tri-plane a tracked video's field gets (FieldConfig.grid_resolution): 2 mm over the
+template's box grown by MAX_REACH_M."""
 MAX_REACH_M = 0.10
 """The farthest beyond the guide mesh an avatar models (hair, collar): the field's support and its sampling cost
 grow with it."""
@@ -114,7 +117,7 @@ class CoDyNeRFAvatar(Avatar):
         self.field_cfg = field_cfg
         self.render_cfg = render_cfg
         self.loss_weights = loss_weights or LossWeights()
-        self.field = CoDyNeRFField(field_cfg, max(head_model.landmarks.count, 1))
+        self.field = self.make_field()
         self.omega = nn.Embedding(n_frames, field_cfg.deform_code_dim)
         self.phi = nn.Embedding(n_frames, field_cfg.appearance_code_dim)
         nn.init.zeros_(self.omega.weight)
@@ -127,6 +130,13 @@ class CoDyNeRFAvatar(Avatar):
         the tracked head (correct_poses); None: the poses as given."""
 
     # ---- making and describing -------------------------------------------------------------------------
+    def make_field(self) -> CoDyNeRFField:
+        """The fields of field_cfg; a tri-plane covers the template grown by the farthest reach (MAX_REACH_M)."""
+        template = torch.as_tensor(self.head_model.template, dtype=torch.float32)
+        margin = MAX_REACH_M + 0.02
+        return CoDyNeRFField(self.field_cfg, max(self.head_model.landmarks.count, 1),
+                             (template.min(0).values - margin, template.max(0).values + margin))
+
     @classmethod
     def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
                     lighting: dict | None, config: LossWeights | None = None) -> CoDyNeRFAvatar:
@@ -149,7 +159,7 @@ class CoDyNeRFAvatar(Avatar):
                 "render": asdict(self.render_cfg), "pose_corrections": self.pose_corrections is not None}
 
     # ---- the tracked poses, corrected ------------------------------------------------------------------
-    def fit_to_tracked_video(self) -> None:
+    def fit_to_tracked_video(self, new: bool = False) -> None:
         """Learn a correction of each training frame's head pose with the avatar (correct_poses); Eq. 13 shapes
         the normals only, not the density (LossWeights.consistency_shapes_density); and no Cauchy
         sparsity (Eq. 14): on the tracked d3 video (25 minutes, `none`) it held the density to a fog that let 32%
@@ -157,7 +167,11 @@ class CoDyNeRFAvatar(Avatar):
         without, at the same held-out PSNR (16.60 and 16.54 dB) and 26% less render time (the early stop ends
         rays at an opaque skin)."""
         self.correct_poses()
-        self.loss_weights = replace(self.loss_weights, cauchy=0.0, consistency_shapes_density=False)
+        self.loss_weights = replace(self.loss_weights, cauchy=0.0, consistency_shapes_density=False,
+                                    mesh_normals_first=True)
+        if new and TRACKED_GRID_RESOLUTION and not self.field_cfg.grid_resolution:
+            self.field_cfg = replace(self.field_cfg, grid_resolution=TRACKED_GRID_RESOLUTION)
+            self.field = self.make_field().to(self.background.device)
 
     def correct_poses(self) -> None:
         """Give every training frame a pose correction, learned with the avatar."""
@@ -199,8 +213,9 @@ class CoDyNeRFAvatar(Avatar):
 
     # ---- per frame -------------------------------------------------------------------------------------
     def geometry(self, controls: Controls) -> FrameGeometry:
-        """The frame's meshes, tree, landmarks and box (no shadow map)."""
-        return frame_geometry(self.head, controls, self.render_cfg.box_margin_m)
+        """The frame's meshes, tree, landmarks and box (no shadow map), and the codes' weights new controls take."""
+        return replace(frame_geometry(self.head, controls, self.render_cfg.box_margin_m),
+                       code_weights=self.code_weights(controls))
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> FrameGeometry:
         geo = self.geometry(controls)
@@ -258,9 +273,12 @@ class CoDyNeRFAvatar(Avatar):
 
         return self.occupancy.build(density, threshold, generator=torch.Generator().manual_seed(0))
 
-    def codes(self, frame: int | None) -> tuple[torch.Tensor, torch.Tensor]:
-        """omega and phi (1,C) of a training frame, or the mean codes (novel controls)."""
+    def codes(self, frame: int | None, weights: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """omega and phi (1,C) of a training frame; for new controls (frame None) the training frames' codes
+        blended by `weights` (N,) (Avatar.code_weights), or without them the mean codes."""
         if frame is None:
+            if weights is not None:
+                return weights[None] @ self.omega.weight, weights[None] @ self.phi.weight
             return mean_code(self.omega), mean_code(self.phi)
         idx = torch.tensor([frame], device=self.omega.weight.device)
         return self.omega(idx), self.phi(idx)
@@ -277,15 +295,17 @@ class CoDyNeRFAvatar(Avatar):
 
     def render_rays(self, rays: Rays, geometry: FrameGeometry, frame: int | None,
                     generator: torch.Generator | None = None, training: bool = False,
-                    create_graph: bool = False) -> RayOutput:
+                    create_graph: bool = False, mesh_normals: bool = False) -> RayOutput:
         """Colour, opacity, depth (and, with normals, predicted and density-gradient normals) of R rays.
-        create_graph: keep the density gradients' graph (training through the normals, Eq. 13)."""
-        omega, phi = self.codes(frame)
+        create_graph: keep the density gradients' graph (training through the normals, Eq. 13). mesh_normals:
+        the mesh's normals stand in for both (RaySettings.mesh_normals)."""
+        omega, phi = self.codes(frame, geometry.code_weights)
         if not training:
             omega, phi = omega.detach(), phi.detach()
         if self.pose_corrections is not None and frame is not None:
             rays = self.corrected_rays(rays, geometry, frame)
-        return self.trace(rays, geometry, omega, phi, self.settings(training, create_graph), generator)
+        settings = replace(self.settings(training, create_graph), mesh_normals=mesh_normals)
+        return self.trace(rays, geometry, omega, phi, settings, generator)
 
     def trace(self, rays: Rays, geo: FrameGeometry, omega: torch.Tensor, phi: torch.Tensor,
               settings: render.RaySettings, generator: torch.Generator | None = None) -> RayOutput:
@@ -336,7 +356,8 @@ class CoDyNeRFAvatar(Avatar):
             inside = torch.nonzero(support > 0).squeeze(1)
             prior_in = prior_in.take(inside) if len(inside) < len(near) else prior_in
             keep = idx[near[inside]]
-            out = self.field.geometry(pts[keep], prior_in, omega, settings.create_graph, occupied)
+            out = self.field.geometry(pts[keep], prior_in, omega, settings.create_graph, occupied,
+                                      settings.mesh_normals)
             return render.Densities(keep, prior_in, out, support[inside])
 
         d = render.densities_early_stop(evaluate, samples, settings.stop_below)
@@ -349,11 +370,12 @@ class CoDyNeRFAvatar(Avatar):
         # Second derivatives only while Eq. 13 ties density gradients to the normals: before that the density
         # gradient is an input the normals network reads, not something to train through.
         second_order = self.field_cfg.needs_normals and consistency > 0 and w.consistency_shapes_density
+        mesh_normals = w.mesh_normals_first and batch.progress < w.consistency_start
         out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True,
-                               create_graph=second_order)
+                               create_graph=second_order, mesh_normals=mesh_normals)
         parts = ray_terms(w, out.internals, out.buffers["rgb"], batch.target, batch.rays.directions,
                           batch.progress, self.codes(batch.frame))
-        if out.internals.point_normal is not None:
+        if out.internals.point_normal is not None and not mesh_normals:
             parts["mesh_normals"] = w.mesh_normals * self.mesh_normal_term(batch, second_order)
         if self.pose_corrections is not None:
             parts["pose_corrections"] = w.pose_corrections * self.pose_correction_term(batch.frame)

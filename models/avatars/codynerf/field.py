@@ -31,6 +31,7 @@ from torch import nn
 from models.avatars.codynerf.prior import PriorSamples
 from models.avatars.components.encoding import encoded_size, frequency_encoding
 from models.avatars.components.mlp import MLP
+from models.avatars.components.triplane import TriPlane
 from models.ranges import Range
 
 SHADOW_BIAS = 4.0  # the shadow factor's logit at initialisation: 98% of the light reaches every point
@@ -55,6 +56,11 @@ class FieldConfig:
     density_frequencies: int = 6
     view_frequencies: int = 2
     landmark_features: int = 16
+    grid_resolution: Annotated[int, Range(0, 4096)] = 0
+    """Texels a side of the canonical tri-plane features that the density network reads beside its position
+    encoding (components/triplane.py); 0: none. A tracked video turns it on (CoDyNeRFAvatar.fit_to_tracked_video)."""
+    grid_features: Annotated[int, Range(1, 256)] = 8
+    """Features per plane of the tri-plane."""
     scale_m: Annotated[float, Range(0, 100, above=True)] = 0.25
     """Half the extent that position encodings cover without aliasing."""
     light_dir: tuple[float, float, float] | None = None
@@ -89,13 +95,20 @@ def safe_normalize(v: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:
 
 
 class CoDyNeRFField(nn.Module):
-    def __init__(self, cfg: FieldConfig, n_landmarks: int):
+    def __init__(self, cfg: FieldConfig, n_landmarks: int, grid_box: tuple[torch.Tensor, torch.Tensor] | None = None):
+        """grid_box: the canonical box (min, max) the tri-plane covers (needed with cfg.grid_resolution)."""
         super().__init__()
         self.cfg = cfg
         c = cfg
+        self.grid = None
+        if c.grid_resolution:
+            if grid_box is None:
+                raise ValueError("a field with tri-plane features needs the canonical box they cover")
+            self.grid = TriPlane(*grid_box, c.grid_resolution, c.grid_features)
         d_def = encoded_size(3, c.deform_frequencies) + encoded_size(3, c.prior_frequencies) + c.deform_code_dim
         self.deform = MLP(d_def, 3, c.width, 3, zero_last=True)
-        self.density = MLP(encoded_size(3, c.density_frequencies) + 1, 1 + c.feature_dim, c.width, 3)
+        d_density = encoded_size(3, c.density_frequencies) + 1 + (0 if self.grid is None else self.grid.out_features)
+        self.density = MLP(d_density, 1 + c.feature_dim, c.width, 3)
         # N starts as the mesh normal and learns a correction (zero-initialised last layer): Eq. 9 holds at
         # the start and the appearance sees sensible normals from the first step.
         self.normals = MLP(3 + 3 + 1, 3, 32, 2, zero_last=True) if c.needs_normals else None
@@ -120,16 +133,19 @@ class CoDyNeRFField(nn.Module):
         omega: torch.Tensor,  # (P, deform_code_dim), or (1, deform_code_dim) shared by every point
         create_graph: bool = False,  # keep the graph of density gradients (training through the normals)
         occupied: Callable[[torch.Tensor], torch.Tensor] | None = None,  # canonical points -> may hold density
+        mesh_normals: bool = False,  # the mesh's normals stand in for N and the density gradient (none computed)
     ) -> FieldOutput:
         """Deformation, density and normals (Eq. 2, 5, 8); rgb is left empty for `appearance` to fill. With
         `occupied` (display), the density network runs only where the deformed, canonical point may hold
-        density; elsewhere density and features are zero."""
+        density; elsewhere density and features are zero. With `mesh_normals` the normals are the mesh's
+        (what N starts as, its last layer being zero), at the cost of a network without normals."""
         c = self.cfg
         s = c.scale_m
-        if c.needs_normals and not x.requires_grad:
+        gradients = c.needs_normals and not mesh_normals
+        if gradients and not x.requires_grad:
             x = x.detach().requires_grad_(True)
         # Density gradients need autograd even when rendering for display (under no_grad, not inference_mode).
-        with torch.enable_grad() if c.needs_normals else contextlib.nullcontext():
+        with torch.enable_grad() if gradients else contextlib.nullcontext():
             x_prior = x + prior.offset  # Eq. 2: the prior's part of x_can
             delta = self.deform(torch.cat([frequency_encoding(x, c.deform_frequencies, s),
                                            frequency_encoding(prior.offset, c.prior_frequencies, s)], -1), omega)
@@ -142,7 +158,9 @@ class CoDyNeRFField(nn.Module):
                 sigma = s_k.new_zeros(len(x)).index_copy(0, idx, s_k)
                 tau = t_k.new_zeros(len(x), t_k.shape[1]).index_copy(0, idx, t_k)
             normal = grad_normal = None
-            if c.needs_normals:
+            if c.needs_normals and mesh_normals:
+                normal = grad_normal = safe_normalize(prior.mesh_normal)
+            elif c.needs_normals:
                 (grad,) = torch.autograd.grad(sigma.sum(), x, create_graph=create_graph, retain_graph=True)
                 grad_normal = safe_normalize(-grad)
                 normal = safe_normalize(prior.mesh_normal + self.normals(torch.cat(
@@ -152,8 +170,10 @@ class CoDyNeRFField(nn.Module):
     def canonical_density(self, x_can: torch.Tensor, distance: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Density (P,) and features tau (P,F) at canonical points, given their distance to the mesh (Eq. 5)."""
         c = self.cfg
-        raw = self.density(torch.cat([frequency_encoding(x_can, c.density_frequencies, c.scale_m),
-                                      distance[:, None]], -1))
+        inputs = [frequency_encoding(x_can, c.density_frequencies, c.scale_m), distance[:, None]]
+        if self.grid is not None:
+            inputs.append(self.grid(x_can))
+        raw = self.density(torch.cat(inputs, -1))
         return F.softplus(raw[:, 0] - 1.0) * 100.0, raw[:, 1:]  # densities of order 100 / m: opaque within ~1 cm
 
     def appearance(

@@ -30,6 +30,7 @@ class FrameGeometry:
     box_max: torch.Tensor  # (3,)
     neutral_landmarks: torch.Tensor  # (1, 3L) the same for the neutral head (no expression, no pose): inspection
     light: LightDepthMap | None = None  # the posed mesh seen from the key light, where the shadow factor reads it
+    code_weights: torch.Tensor | None = None  # (N,) the training frames' share of new controls' codes (None: mean)
 
     @property
     def posed(self) -> torch.Tensor:
@@ -41,7 +42,8 @@ class FrameGeometry:
         m = self.meshes
         return FrameGeometry(PriorMeshes(*(t.to(device) for t in (m.canonical, m.expressed, m.posed, m.normals))),
                              self.tree, self.landmarks.to(device), self.box_min.to(device), self.box_max.to(device),
-                             self.neutral_landmarks.to(device), None if self.light is None else self.light.to(device))
+                             self.neutral_landmarks.to(device), None if self.light is None else self.light.to(device),
+                             None if self.code_weights is None else self.code_weights.to(device))
 
 
 @torch.no_grad()

@@ -37,6 +37,9 @@ class RaySettings:
     """Skip the density network where the occupancy grid says the canonical point is empty."""
     create_graph: bool = False
     """Keep the graph of density gradients (training through the normals)."""
+    mesh_normals: bool = False
+    """The guide mesh's normals stand in for the predicted ones and the density's gradient (neither is computed):
+    a tracked video's training before Eq. 13 comes in (LossWeights.mesh_normals_first)."""
 
 
 def sample_rays(rays: Rays, box_min: torch.Tensor, box_max: torch.Tensor, settings: RaySettings,

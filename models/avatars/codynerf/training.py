@@ -27,6 +27,10 @@ class LossWeights:
     second derivatives): on the tracked d3 video (`all`, 30 minutes) the two-way pull wrecked the density the
     moment it came in (training photometric error 0.0019 to 0.037 within 100 steps, still 0.02 400 steps on),
     where the synthetic captures' clean surfaces took it well (README: `all` 4 dB over `none`)."""
+    mesh_normals_first: bool = False
+    """Until Eq. 13 comes in (consistency_start), the guide mesh's normals stand in for the predicted ones (which
+    start as them) and no density gradient is computed: that part of the run costs what `none` costs. On for
+    tracked videos, where `all` got 58% of `none`'s steps in 30 minutes and ended 0.8 dB below it on d3."""
     cauchy: float = 1e-3  # Eq. 14 (1e-3 vs 1e-4: val PSNR 30.7 vs 30.1 dB at 1000 steps, a sparser field)
     cauchy_c: float = 100.0
     codes: float = 1e-3

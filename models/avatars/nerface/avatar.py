@@ -98,10 +98,11 @@ class NerfaceGeometry:
     translation: torch.Tensor  # (3,)
     expression: torch.Tensor  # (1,E)
     posed: torch.Tensor  # (V,3)
+    code_weights: torch.Tensor | None = None  # (N,) the training frames' share of new controls' code (None: mean)
 
     def to(self, device: torch.device | str) -> NerfaceGeometry:
         return NerfaceGeometry(self.rotation.to(device), self.translation.to(device), self.expression.to(device),
-                               self.posed.to(device))
+                               self.posed.to(device), None if self.code_weights is None else self.code_weights.to(device))
 
 
 @dataclass
@@ -190,7 +191,8 @@ class NerfaceAvatar(Avatar):
         for k, joint in enumerate(NONRIGID_JOINTS):
             expr[self.head_model.num_expression + 3 * k:self.head_model.num_expression + 3 * k + 3] = \
                 controls.rotation(joint)
-        return NerfaceGeometry(rotation, translation, torch.as_tensor(expr)[None].to(rotation.device), v[1])
+        return NerfaceGeometry(rotation, translation, torch.as_tensor(expr)[None].to(rotation.device), v[1],
+                               self.code_weights(controls))
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> NerfaceGeometry:
         del rasterizer  # NerFACE samples every ray densely; it does not need the mesh
@@ -212,10 +214,11 @@ class NerfaceAvatar(Avatar):
         pick[:n_any] = torch.randint(n_pixels, (n_any,), generator=generator)
         return pick
 
-    def codes(self, frame: int | None) -> torch.Tensor:
-        """The latent code (1,C) of a training frame, or the mean code (novel controls)."""
+    def codes(self, frame: int | None, weights: torch.Tensor | None = None) -> torch.Tensor:
+        """The latent code (1,C) of a training frame; for new controls (frame None) the training frames' codes
+        blended by `weights` (N,) (Avatar.code_weights), or without them the mean code."""
         if frame is None:
-            return self.latent.weight.mean(0, keepdim=True)
+            return self.latent.weight.mean(0, keepdim=True) if weights is None else weights[None] @ self.latent.weight
         return self.latent(torch.tensor([frame], device=self.latent.weight.device))
 
     @property
@@ -230,7 +233,7 @@ class NerfaceAvatar(Avatar):
         del training
         c = self.cfg
         R = len(rays)
-        geo, latent = geometry, self.codes(frame)
+        geo, latent = geometry, self.codes(frame, geometry.code_weights)
         rot, tr = geo.rotation, geo.translation
         o = (rays.origins - tr) @ rot  # R^T (o - t), row vectors
         d = rays.directions @ rot

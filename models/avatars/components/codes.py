@@ -1,0 +1,58 @@
+"""Per-frame codes for controls no training frame had (held-out frames, sliders, turntables).
+
+The papers learn a code per training frame (NerFACE's and CoDyNeRF's latent codes) and leave open what a new
+frame gets; the mean code is the usual answer. A tracked video's codes carry what the head model's controls do
+not: where the hair fell, how the shoulders sat, the part of an expression the model misses; and those follow the
+controls. So new controls take a blend of the codes of the training frames whose controls are nearest
+(`nearest_code_weights`), and the codes change smoothly as the controls move.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from models.head.controls import Controls, fit_length
+
+NEAREST_FRAMES = 5
+"""Training frames whose codes a new frame blends. Chosen on the validation frames of the three shared clips (k
+of 1, 3, 5, 10; README "Real people"), then kept for every capture."""
+KEY_SCALE_FLOOR = 0.01
+"""The least spread (radians, or expression weight) a control's key is divided by: a control the training
+frames never moved would otherwise blow any change of it up into a distance that outweighs all the rest."""
+
+
+def control_key(controls: Controls, num_expression: int) -> np.ndarray:
+    """(D,) what of a frame's controls its code may follow: rotations (root, neck, jaw, both eyes; radians) and
+    expression weights. Not the translation or the shape: where the head stands and whose it is are the same in
+    every frame of a capture."""
+    return np.concatenate([controls.root, controls.neck, controls.jaw, controls.gaze_left, controls.gaze_right,
+                           fit_length(controls.expression, num_expression, "expression")]).astype(np.float32)
+
+
+def nearest_code_weights(keys: torch.Tensor, query: torch.Tensor, k: int = NEAREST_FRAMES) -> torch.Tensor:
+    """(N,) weights summing to 1 over the training frames' keys (N,D) for a query (D,): the k nearest frames
+    weighted by 1 - d_i / d_(k+1) (the distance to the first frame left out), so a weight reaches 0 just as its
+    frame leaves the k nearest and the blend is continuous in the query. Where that leaves nothing (the k+1
+    nearest all at one distance), the k nearest alike.
+
+    Keys at 0, 1, 2, 4 and a query at 0.5 with k = 2: distances 0.5, 0.5, 1.5, 3.5; d_3 = 1.5; weights
+    2/3, 2/3 -> 1/2 each.
+    >>> nearest_code_weights(torch.tensor([[0.0], [1.0], [2.0], [4.0]]), torch.tensor([0.5]), 2)
+    tensor([0.5000, 0.5000, 0.0000, 0.0000])
+    >>> nearest_code_weights(torch.tensor([[0.0], [1.0], [2.0], [4.0]]), torch.tensor([0.25]), 2)  # 6/7, 4/7 of d_3 = 1.75
+    tensor([0.6000, 0.4000, 0.0000, 0.0000])
+    """
+    assert keys.dim() == 2 and query.shape == keys.shape[1:], (keys.shape, query.shape)
+    n = len(keys)
+    d = (keys - query).norm(dim=-1)
+    if n <= k:  # every frame is among the nearest: weighted by how near, against the farthest
+        far = d.max()
+        w = (1.0 - d / far) if far > 0 else torch.ones_like(d)
+        return w / w.sum() if w.sum() > 0 else torch.full_like(d, 1.0 / n)
+    dist, idx = torch.topk(d, k + 1, largest=False)
+    w = torch.zeros_like(d)
+    near = (1.0 - dist[:k] / dist[k]).clamp_min(0.0) if dist[k] > 0 else torch.zeros(k, dtype=d.dtype)
+    near = near if near.sum() > 0 else torch.ones(k, dtype=d.dtype)
+    w[idx[:k]] = near / near.sum()
+    return w

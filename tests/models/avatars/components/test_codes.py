@@ -1,0 +1,65 @@
+"""Codes for new controls: the blend of the nearest training frames' codes, worked by hand, continuous as the
+controls move, a training frame's own controls giving its own code, and the keys saved with the avatar."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from models.avatars.checkpoint import save_checkpoint
+from models.avatars.components.codes import nearest_code_weights
+from models.avatars.registry import load_avatar
+from models.head.controls import Controls
+
+DEMO = Path(__file__).resolve().parents[4] / "resources" / "demo_avatar"
+
+
+def test_weights_worked_by_hand():
+    # keys (0,0), (3,4), (6,8), (0,10); query (0,0), k = 2: distances 0, 5, 10, 10 -> d_3 = 10;
+    # weights 1 - 0/10 = 1 and 1 - 5/10 = 0.5 -> 2/3 and 1/3
+    keys = torch.tensor([[0.0, 0.0], [3.0, 4.0], [6.0, 8.0], [0.0, 10.0]])
+    w = nearest_code_weights(keys, torch.tensor([0.0, 0.0]), k=2)
+    torch.testing.assert_close(w, torch.tensor([2 / 3, 1 / 3, 0.0, 0.0]))
+    # fewer frames than k: every frame, weighted against the farthest (distances 0, 5, 10, 10 -> 1, 0.5, 0, 0)
+    torch.testing.assert_close(nearest_code_weights(keys, torch.tensor([0.0, 0.0]), k=8),
+                               torch.tensor([2 / 3, 1 / 3, 0.0, 0.0]))
+
+
+def test_weights_change_continuously_as_the_query_moves():
+    """Along a path through 40 random keys the blend never jumps, though the nearest frames change many times."""
+    g = torch.Generator().manual_seed(0)
+    keys = torch.randn(40, 3, generator=g, dtype=torch.float64)
+    path = torch.linspace(-2, 2, 4001, dtype=torch.float64)[:, None] * torch.tensor([1.0, 0.5, -0.3],
+                                                                                   dtype=torch.float64)
+    ws = torch.stack([nearest_code_weights(keys, q) for q in path])
+    torch.testing.assert_close(ws.sum(1), torch.ones(len(path), dtype=torch.float64))
+    assert (ws >= 0).all()
+    changes = (ws.argmax(1)[1:] != ws.argmax(1)[:-1]).sum().item()
+    assert changes >= 5, changes  # the path does pass many frames
+    step = (path[1] - path[0]).norm().item()  # 0.0012: a jump would be of order 0.2
+    assert (ws[1:] - ws[:-1]).abs().max().item() < 50 * step
+
+
+def test_a_training_frames_own_controls_take_its_code_and_the_keys_are_saved(tmp_path):
+    avatar, meta = load_avatar(DEMO)
+    n = avatar.omega.num_embeddings
+    rng = np.random.default_rng(3)
+    controls = [Controls(expression=rng.uniform(0, 1, 6).astype(np.float32),
+                         jaw=np.array([rng.uniform(0, 0.3), 0, 0], np.float32)) for _ in range(n)]
+    assert avatar.code_weights(controls[0]) is None  # no keys: the mean code
+    avatar.key_codes(controls)
+    j = n // 2
+    w = avatar.code_weights(controls[j])
+    assert w.argmax().item() == j and w[j] > 0.3
+    with torch.no_grad():
+        avatar.omega.weight.copy_(torch.randn_like(avatar.omega.weight))
+    omega, _ = avatar.codes(None, w)
+    torch.testing.assert_close(omega[0], (w[:, None] * avatar.omega.weight).sum(0))
+    geo = avatar.geometry(controls[j])
+    torch.testing.assert_close(geo.code_weights, w)
+    save_checkpoint(tmp_path / "av", json.loads(json.dumps(meta)), avatar.state_dict(), 1)
+    again, _ = load_avatar(tmp_path / "av")
+    torch.testing.assert_close(again.code_weights(controls[j]), w)
