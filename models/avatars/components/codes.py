@@ -40,7 +40,7 @@ def nearest_code_weights(keys: torch.Tensor, query: torch.Tensor, k: int = NEARE
     2/3, 2/3 -> 1/2 each.
     >>> nearest_code_weights(torch.tensor([[0.0], [1.0], [2.0], [4.0]]), torch.tensor([0.5]), 2)
     tensor([0.5000, 0.5000, 0.0000, 0.0000])
-    >>> nearest_code_weights(torch.tensor([[0.0], [1.0], [2.0], [4.0]]), torch.tensor([0.25]), 2)  # 6/7, 4/7 of d_3 = 1.75
+    >>> nearest_code_weights(torch.tensor([[0.0], [1.0], [2.0], [4.0]]), torch.tensor([0.25]), 2)  # 6/7 and 4/7
     tensor([0.6000, 0.4000, 0.0000, 0.0000])
     """
     assert keys.dim() == 2 and query.shape == keys.shape[1:], (keys.shape, query.shape)

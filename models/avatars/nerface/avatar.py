@@ -101,8 +101,9 @@ class NerfaceGeometry:
     code_weights: torch.Tensor | None = None  # (N,) the training frames' share of new controls' code (None: mean)
 
     def to(self, device: torch.device | str) -> NerfaceGeometry:
+        weights = None if self.code_weights is None else self.code_weights.to(device)
         return NerfaceGeometry(self.rotation.to(device), self.translation.to(device), self.expression.to(device),
-                               self.posed.to(device), None if self.code_weights is None else self.code_weights.to(device))
+                               self.posed.to(device), weights)
 
 
 @dataclass
