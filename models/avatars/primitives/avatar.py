@@ -1,0 +1,232 @@
+"""The volumetric-primitives avatar (paper 002 Section 3.1, after MVP, Lombardi et al. 2021), behind the avatar
+interface: `train --model primitives`.
+
+Per frame: the head model's controls pose the guide mesh; the primitives take their places on it (layout.py: a
+K x K chart, each on its surface point, turned to the surface); the decoder (decoder.py) turns the frame's
+condition (expression and jaw/neck rotations, a per-frame code, the view direction in the head's frame; gaze apart)
+into each primitive's opacity and colour grid and its offsets, once; rays are marched through the primitives they
+meet (march.py). Display caches the decode on the frame's geometry, so a frame's many batches of rays decode once.
+
+Losses (MVP's, those that apply here): photometric (squared error, as the other models), the volume prior (the
+primitives' summed volume, relative to where they started: keeps them tight, so empty space costs nothing), the
+offsets' L2 (primitives stay near their places on the mesh), and the per-frame codes' L2.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Annotated, ClassVar
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from scipy.ndimage import binary_dilation
+from torch import nn
+
+from models.avatars.base import Avatar, RayOutput, TrainingBatch
+from models.avatars.components import losses
+from models.avatars.nerface.avatar import kabsch
+from models.avatars.primitives import march
+from models.avatars.primitives.decoder import SlabDecoder
+from models.avatars.primitives.layout import primitive_layout, surface_frames
+from models.avatars.quality import Quality
+from models.head.controls import Controls
+from models.head.lbs import rotation_matrix_from_axis_angle
+from models.head.model import HeadModel
+from models.ranges import Range, check_config
+from render.camera import Camera
+from render.gl.raster import Rasterizer
+from render.rays import Raster, Rays
+
+GAZE_JOINTS = ("eye_l", "eye_r")
+
+
+@dataclass(frozen=True)
+class PrimitivesConfig:
+    """Sizes of the primitives and their decoder."""
+
+    grid: Annotated[int, Range(8, 256)] = 16
+    """K: primitives on a K x K chart of the head (a power of two; cells the head does not fill have none)."""
+    voxels: Annotated[int, Range(2, 64)] = 8
+    """M: each primitive's grid is M^3 voxels (a power of two)."""
+    width: Annotated[int, Range(8, 1024)] = 64
+    """Channels of the decoder's first feature maps (halved down to 16 as they grow)."""
+    code_dim: Annotated[int, Range(0, 1024)] = 8
+    """The per-frame code."""
+    samples: Annotated[int, Range(1, 256)] = 8
+    """Samples each segment of a ray within a primitive takes (the quality presets change it)."""
+    density_scale: Annotated[float, Range(0, 1e6, above=True)] = 400.0
+    """Densities are softplus(raw - 1) times this, per metre: a raw 0 lets 70% of the light through 1 cm."""
+    stop_below: Annotated[float, Range(0, 1)] = 1e-3
+    """Display stops a ray once less than this share of its light gets through (early termination)."""
+    volume: Annotated[float, Range(0)] = 1e-3
+    """The volume prior's weight (the primitives' mean volume over their starting volume)."""
+    offsets: Annotated[float, Range(0)] = 1e-3
+    """The offsets' L2 weight."""
+    codes: Annotated[float, Range(0)] = 1e-3
+    chunk_rays: Annotated[int, Range(1, 1 << 22)] = 16384
+    reach: Annotated[float, Range(1, 10)] = 2.0
+    """Rendered pixels reach this many of the largest primitive half-sizes beyond the mesh's silhouette."""
+
+
+@dataclass
+class PrimitivesGeometry:
+    """One frame as the primitives see it: the posed mesh, the head's rigid pose, the decoder's inputs from the
+    controls, and the decode of this frame (display: made once, on first use)."""
+
+    posed: torch.Tensor  # (V,3)
+    rotation: torch.Tensor  # (3,3) head -> world
+    translation: torch.Tensor  # (3,)
+    condition: torch.Tensor  # (1,D) expression and jaw/neck rotations
+    gaze: torch.Tensor  # (1,6)
+    code_weights: torch.Tensor | None = None
+    decoded: dict = field(default_factory=dict)
+
+    def to(self, device: torch.device | str) -> PrimitivesGeometry:
+        w = None if self.code_weights is None else self.code_weights.to(device)
+        return PrimitivesGeometry(self.posed.to(device), self.rotation.to(device), self.translation.to(device),
+                                  self.condition.to(device), self.gaze.to(device), w)
+
+
+class PrimitivesAvatar(Avatar):
+    name: ClassVar[str] = "primitives"
+    rays_per_step: ClassVar[int] = 2048
+    quality_knobs: ClassVar[tuple[str, ...]] = ("samples",)
+
+    def __init__(self, head_model: HeadModel, cfg: PrimitivesConfig, n_frames: int, background: np.ndarray,
+                 effects: tuple[str, ...] = ()):
+        super().__init__(head_model, n_frames, background)
+        self.cfg = cfg
+        self._effects = tuple(effects)
+        layout = primitive_layout(head_model, cfg.grid)
+        self.register_buffer("layout_triangles", torch.as_tensor(layout.triangles, dtype=torch.long))
+        self.register_buffer("layout_bary", torch.as_tensor(layout.bary, dtype=torch.float32))
+        self.register_buffer("layout_cells", torch.as_tensor(layout.cells[:, 0] * cfg.grid + layout.cells[:, 1]))
+        self.register_buffer("layout_half", torch.as_tensor(layout.half_size_m, dtype=torch.float32))
+        self.register_buffer("triangles", torch.as_tensor(np.asarray(head_model.triangles), dtype=torch.long),
+                             persistent=False)
+        self.condition_dim = head_model.num_expression + 6
+        self.decoder = SlabDecoder(self.condition_dim + cfg.code_dim + 3, 6, cfg.grid, cfg.voxels, 3, cfg.width)
+        self.latent = nn.Embedding(n_frames, cfg.code_dim)
+        nn.init.zeros_(self.latent.weight)
+        self.samples = cfg.samples
+
+    # ---- making and describing -------------------------------------------------------------------------
+    @classmethod
+    def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
+                    lighting: dict | None, config: PrimitivesConfig | None = None) -> PrimitivesAvatar:
+        """Colour only, whatever the capture's effects: the light-dependent inputs are not built yet (the effect
+        set is recorded, and `none` is what it renders)."""
+        del effects, lighting
+        return cls(head_model, config or PrimitivesConfig(), n_frames, background)
+
+    @classmethod
+    def from_meta(cls, head_model: HeadModel, meta: dict) -> PrimitivesAvatar:
+        cfg = PrimitivesConfig(**meta["primitives"])
+        check_config(cfg)
+        return cls(head_model, cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32))
+
+    def meta(self) -> dict:
+        return {"model": self.name, "effects": list(self._effects), "primitives": asdict(self.cfg)}
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        return self._effects
+
+    @property
+    def count(self) -> int:
+        return len(self.layout_triangles)
+
+    def describe_rendering(self) -> str:
+        c = self.cfg
+        return f"{self.count} primitives of {c.voxels}^3 voxels, {self.samples} samples a segment"
+
+    def set_quality(self, quality: Quality) -> None:
+        self.samples = quality.samples
+
+    @property
+    def chunk_rays(self) -> int:
+        return self.cfg.chunk_rays
+
+    # ---- per frame -------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def geometry(self, controls: Controls) -> PrimitivesGeometry:
+        unposed = Controls(shape=controls.shape, expression=controls.expression)
+        v, _, _ = self.head.pose([unposed, controls])
+        rotation, translation = kabsch(v[0], v[1])
+        E = self.head_model.num_expression
+        cond = np.zeros(self.condition_dim, np.float32)
+        n = min(len(controls.expression), E)
+        cond[:n] = controls.expression[:n]
+        cond[E:E + 3], cond[E + 3:E + 6] = controls.rotation("jaw"), controls.rotation("neck")
+        gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
+        as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
+        return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_weights(controls))
+
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> PrimitivesGeometry:
+        del rasterizer  # the primitives' own boxes say which rays meet them
+        return self.geometry(controls)
+
+    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+        """The mesh's pixels and those within `reach` of its largest primitive's half-size beyond them."""
+        if not raster.hit.any():
+            return np.zeros_like(raster.hit)
+        near = float(raster.depth[np.isfinite(raster.depth)].min())
+        margin = self.cfg.reach * float(self.layout_half.max()) * camera.focal_px() / max(near, 1e-3)
+        return binary_dilation(raster.hit, iterations=max(1, int(np.ceil(margin))))
+
+    def codes(self, frame: int | None, weights: torch.Tensor | None = None) -> torch.Tensor:
+        """The per-frame code (1,C) of a training frame; new controls: the blend `weights` give, else the mean."""
+        if frame is None:
+            return self.latent.weight.mean(0, keepdim=True) if weights is None else weights[None] @ self.latent.weight
+        return self.latent(torch.tensor([frame], device=self.latent.weight.device))
+
+    # ---- the decode --------------------------------------------------------------------------------------
+    def decode(self, geo: PrimitivesGeometry, code: torch.Tensor, eye: torch.Tensor) -> march.Primitives:
+        """The frame's primitives, placed on its posed mesh, for a camera at `eye` (3,) (the view enters the
+        decoder as the direction to the eye in the head's frame)."""
+        view = (eye - geo.translation) @ geo.rotation  # R^T (eye - t)
+        view = view / view.norm().clamp_min(1e-9)
+        density_raw, colour_raw, offsets = self.decoder(torch.cat([geo.condition, code, view[None]], -1), geo.gaze)
+        cells = self.layout_cells
+        density_raw, colour_raw, offsets = density_raw[cells], colour_raw[cells], offsets[cells]
+        centres, rotations = surface_frames(geo.posed, self.triangles, self.layout_triangles, self.layout_bary)
+        half = self.layout_half[:, None] * torch.exp(offsets[:, 6:9].clamp(-3.0, 3.0))
+        centres = centres + (rotations @ (offsets[:, :3] * self.layout_half[:, None])[..., None])[..., 0]
+        rotations = rotations @ rotation_matrix_from_axis_angle(offsets[:, 3:6])
+        density = F.softplus(density_raw - 1.0) * self.cfg.density_scale
+        return march.Primitives(centres, rotations, half, density, torch.sigmoid(colour_raw)), offsets
+
+    def decoded(self, geo: PrimitivesGeometry, frame: int | None, eye: torch.Tensor, training: bool):
+        """decode, cached on the geometry for display (one decode a frame, whatever the batches of rays)."""
+        code = self.codes(frame, geo.code_weights)
+        if training:
+            return self.decode(geo, code, eye)
+        key = (frame, tuple(round(float(x), 6) for x in eye))
+        if key not in geo.decoded:
+            geo.decoded.clear()
+            geo.decoded[key] = self.decode(geo, code, eye)
+        return geo.decoded[key]
+
+    # ---- rays ------------------------------------------------------------------------------------------
+    def render_rays(self, rays: Rays, geometry: PrimitivesGeometry, frame: int | None,
+                    generator: torch.Generator | None = None, training: bool = False) -> RayOutput:
+        """rgb, opacity and depth of R rays marched through the primitives they meet (one pinhole's rays are
+        binned in screen tiles, march.candidate_pairs)."""
+        del generator  # the march is deterministic
+        prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training)
+        pair_ray, pair_prim = march.candidate_pairs(rays.origins, rays.directions, prims)
+        out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims, pair_ray, pair_prim,
+                          self.samples if not training else self.cfg.samples,
+                          0.0 if training else self.cfg.stop_below)
+        return RayOutput({"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}, (prims, offsets, out))
+
+    def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
+        c = self.cfg
+        out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)
+        prims, offsets, _ = out.internals
+        volume = (prims.half_sizes.prod(1) / self.layout_half.pow(3)).mean()
+        return {"photometric": losses.photometric(out.buffers["rgb"], batch.target),
+                "volume": c.volume * volume,
+                "offsets": c.offsets * offsets.square().sum(1).mean(),
+                "codes": c.codes * losses.code_l2(self.codes(batch.frame))}

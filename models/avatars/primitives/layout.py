@@ -1,0 +1,118 @@
+"""Where the volumetric primitives sit on the guide mesh (MVP, Lombardi et al. 2021; paper 002, Section 3.1): one
+primitive per cell of a K x K grid over a 2D layout of the head's surface, at the surface point of the cell's
+centre, turned to the surface (tangent, bitangent, normal) and sized to the cell. The decoder writes its slabs in
+the same grid, so neighbouring primitives are neighbouring pixels of its convolutions.
+
+The layout is a spherical chart of the template's outer surface about the head's centre (azimuth along the grid's
+columns, elevation along its rows), the same for every head model: the models' own UVs do not give one square
+layout (ICT's are split over seven UDIM tiles, u from 0 to 7; FLAME files often come without them). Each cell's
+primitive sits where the ray from the centre through the cell's direction leaves the mesh (the outermost hit), so
+the skin, the eyes' fronts and the lips get primitives and nothing hidden inside does."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from models.head.model import HeadModel
+
+AZIMUTH_DEG = (-180.0, 180.0)
+"""The chart's columns: the angle about the vertical axis from the face's front (+z)."""
+ELEVATION_DEG = (-60.0, 80.0)
+"""The chart's rows, from below the chin (the neck) to the crown."""
+
+
+@dataclass(frozen=True)
+class PrimitiveLayout:
+    """P primitives on a K x K grid: the template triangle each sits on, its barycentric point, its grid cell and
+    its half-size on the template (metres)."""
+
+    grid: int  # K
+    triangles: np.ndarray  # (P,) int
+    bary: np.ndarray  # (P,3)
+    cells: np.ndarray  # (P,2) int: row, column of the K x K grid
+    half_size_m: np.ndarray  # (P,)
+
+    @property
+    def count(self) -> int:
+        return len(self.triangles)
+
+
+def outermost_hits(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray, chunk: int = 16
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For rays from `origin` along dirs (N,3) (unit) against triangles tri (F,3,3): the farthest hit's triangle
+    (N,) (-1 where none), barycentrics (N,3) and distance (N,) (Moller-Trumbore with the inside test).
+
+    >>> tri = np.array([[[-1, -1, 2], [1, -1, 2], [0, 1, 2]], [[-1, -1, 3], [1, -1, 3], [0, 1, 3]]], float)
+    >>> f, b, t = outermost_hits(np.zeros(3), np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]), tri)
+    >>> f.tolist(), t.tolist(), b[0].round(3).tolist()  # the plane z = 3 is the farther; (0, 0) = v0/4 + v1/4 + v2/2
+    ([1, -1], [3.0, 0.0], [0.25, 0.25, 0.5])
+    """
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    s = origin - tri[:, 0]
+    q = np.cross(s, e1)  # (F,3), the same for every ray (one origin)
+    best_f = np.full(len(dirs), -1)
+    best_b = np.zeros((len(dirs), 3))
+    best_t = np.zeros(len(dirs))
+    for a in range(0, len(dirs), chunk):
+        d = dirs[a:a + chunk]  # (C,3)
+        p = np.cross(d[:, None], e2[None])  # (C,F,3)
+        det = np.einsum("fk,cfk->cf", e1, p)
+        ok = np.abs(det) > 1e-18
+        det = np.where(ok, det, 1.0)
+        u = np.einsum("fk,cfk->cf", s, p) / det
+        v = np.einsum("ck,fk->cf", d, q) / det
+        t = np.einsum("fk,fk->f", e2, q)[None] / det
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+        t_hit = np.where(hit, t, -np.inf)
+        f = t_hit.argmax(1)
+        any_hit = hit.any(1)
+        rows = np.arange(len(d))
+        best_f[a:a + chunk] = np.where(any_hit, f, -1)
+        best_t[a:a + chunk] = np.where(any_hit, t_hit[rows, f], 0.0)
+        best_b[a:a + chunk] = np.stack([1 - u[rows, f] - v[rows, f], u[rows, f], v[rows, f]], 1)
+    return best_f, best_b, best_t
+
+
+def chart_directions(grid: int) -> np.ndarray:
+    """(K*K,3) unit directions through the cell centres of the chart, row-major (row = elevation, column =
+    azimuth), +y up, +z the face's front."""
+    el = np.radians(np.interp((np.arange(grid) + 0.5) / grid, [0, 1], ELEVATION_DEG))[::-1]  # row 0: the crown
+    az = np.radians(np.interp((np.arange(grid) + 0.5) / grid, [0, 1], AZIMUTH_DEG))
+    e, a = np.meshgrid(el, az, indexing="ij")
+    return np.stack([np.cos(e) * np.sin(a), np.sin(e), np.cos(e) * np.cos(a)], -1).reshape(-1, 3)
+
+
+def primitive_layout(model: HeadModel, grid: int, overlap: float = 1.3) -> PrimitiveLayout:
+    """A primitive at each cell of the chart whose ray leaves the template somewhere; its half-size is half the
+    cell's width where it sits (the distance times the cell's angle, the larger of its two sides), times
+    `overlap` so that neighbours leave no gaps."""
+    verts = np.asarray(model.template, np.float64)
+    tris = np.asarray(model.triangles, np.int64)
+    centre = 0.5 * (verts.min(0) + verts.max(0))
+    f, b, t = outermost_hits(centre, chart_directions(grid), verts[tris])
+    keep = np.nonzero(f >= 0)[0]
+    if len(keep) == 0:
+        raise ValueError(f"head model '{model.name}': no ray from its centre leaves its surface")
+    el = np.radians(np.interp((keep // grid + 0.5) / grid, [0, 1], ELEVATION_DEG))
+    d_az = np.radians(np.ptp(AZIMUTH_DEG)) / grid * np.cos(el)
+    d_el = np.radians(np.ptp(ELEVATION_DEG)) / grid
+    half = 0.5 * overlap * t[keep] * np.maximum(d_az, d_el)
+    return PrimitiveLayout(grid, f[keep], b[keep], np.stack([keep // grid, keep % grid], 1),
+                           half.astype(np.float32))
+
+
+def surface_frames(vertices: torch.Tensor, triangles: torch.Tensor, layout_tris: torch.Tensor,
+                   bary: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The primitives' places on a posed mesh (V,3): centres (P,3) and rotations (P,3,3) whose columns are the
+    triangle's first edge (tangent), the normal cross it (bitangent) and the normal."""
+    tri = vertices[triangles[layout_tris]]  # (P,3,3)
+    centre = (bary[:, :, None] * tri).sum(1)
+    e1 = tri[:, 1] - tri[:, 0]
+    n = torch.linalg.cross(e1, tri[:, 2] - tri[:, 0])
+    n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    t = e1 / e1.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    b = torch.linalg.cross(n, t)
+    return centre, torch.stack([t, b, n], -1)

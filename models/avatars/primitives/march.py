@@ -1,0 +1,257 @@
+"""Ray marching through volumetric primitives (MVP, Lombardi et al. 2021), as pure functions of tensors.
+
+A frame's primitives are boxes (centre c, rotation R whose columns are the box's axes, half-sizes h) each holding an
+M^3 voxel grid of density and colour. A ray meets a primitive over [t_in, t_out] (the slab test in the box's unit
+frame); each such segment takes n samples at its midpoints, looked up trilinearly in that primitive's grid. The
+samples of all a ray's segments are composited front to back in order of distance (Eq. 1 of NeRF: w_i = T_i (1 -
+exp(-sigma_i delta_i))), so overlapping primitives add their densities where they overlap.
+
+Which primitives a ray meets: `candidate_pairs` bins the primitives' projected boxes into screen tiles (the rays of a
+camera share an origin) and pairs each ray with its tile's primitives only; `all_pairs` pairs every ray with every
+primitive (the reference). The slab test then keeps the pairs that truly meet, so both give the same segments.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+
+MAX_OPTICAL_DEPTH = 30.0
+"""sigma * delta of one sample is clamped here (exp(-30) ~ 1e-13 of the light passes): a density of 1e6 per metre
+stays finite in the running sums, and gradients beyond it are zero."""
+
+
+@dataclass
+class Primitives:
+    """A frame's P primitives, each an M^3 grid."""
+
+    centres: torch.Tensor  # (P,3) world, metres
+    rotations: torch.Tensor  # (P,3,3) columns: the box's axes in world
+    half_sizes: torch.Tensor  # (P,3) metres, along the box's axes
+    density: torch.Tensor  # (P,M,M,M) per metre, indexed [z, y, x] of the box's axes
+    colour: torch.Tensor  # (P,M,M,M,C) in [0,1] (C = 3)
+
+    def __post_init__(self):
+        P = len(self.centres)
+        assert self.rotations.shape == (P, 3, 3) and self.half_sizes.shape == (P, 3), (self.rotations.shape,)
+        assert self.density.dim() == 4 and self.density.shape[0] == P, self.density.shape
+        assert self.colour.shape[:4] == self.density.shape, (self.colour.shape, self.density.shape)
+
+    def __len__(self) -> int:
+        return len(self.centres)
+
+
+def all_pairs(n_rays: int, n_prims: int, device: torch.device | str = "cpu") -> tuple[torch.Tensor, torch.Tensor]:
+    """Every (ray, primitive) pair: (Q,) ray and primitive indices, Q = R P."""
+    r = torch.arange(n_rays, device=device).repeat_interleave(n_prims)
+    p = torch.arange(n_prims, device=device).repeat(n_rays)
+    return r, p
+
+
+def box_corners(prims: Primitives) -> torch.Tensor:
+    """(P,8,3) the boxes' corners in world."""
+    signs = torch.tensor([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=prims.centres.dtype,
+                         device=prims.centres.device)
+    local = signs[None] * prims.half_sizes[:, None]  # (P,8,3)
+    return prims.centres[:, None] + local @ prims.rotations.transpose(1, 2)
+
+
+def candidate_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, rays_per_tile: int = 64
+                    ) -> tuple[torch.Tensor, torch.Tensor]:
+    """(ray, primitive) pairs that may meet: rays of one pinhole (a shared origin) binned into screen tiles, each
+    primitive's box projected (its corners' bounding rectangle) into the tiles it covers. A superset of the pairs
+    that meet: the projection of a box in front of the eye lies within its corners' rectangle; a box reaching
+    behind the eye (the camera inside or beside it) is paired with every ray. Rays of many origins (a training
+    batch of several frames is never one): every pair."""
+    R, P = len(origins), len(prims)
+    if R == 0 or P == 0:
+        return all_pairs(R, P, origins.device)
+    o = origins[0]
+    fwd = directions.mean(0)
+    if (origins - o).abs().max() > 1e-6 or fwd.norm() < 1e-6:
+        return all_pairs(R, P, origins.device)
+    fwd = fwd / fwd.norm()
+    helper = torch.tensor([0.0, 1.0, 0.0], dtype=o.dtype, device=o.device)
+    if (fwd @ helper).abs() > 0.9:
+        helper = torch.tensor([1.0, 0.0, 0.0], dtype=o.dtype, device=o.device)
+    a = torch.linalg.cross(helper, fwd)
+    a = a / a.norm()
+    b = torch.linalg.cross(fwd, a)
+    dz = directions @ fwd
+    if dz.min() < 0.05:  # a field of view near 180 degrees: no plane to bin in
+        return all_pairs(R, P, origins.device)
+    ray_xy = torch.stack([directions @ a, directions @ b], 1) / dz[:, None]  # (R,2)
+    rel = box_corners(prims) - o  # (P,8,3)
+    cz = rel @ fwd
+    behind = (cz < 1e-4).any(1)  # (P,) reaches behind the eye: every ray
+    cxy = torch.stack([rel @ a, rel @ b], -1) / cz.clamp_min(1e-4)[..., None]  # (P,8,2)
+    lo, hi = cxy.min(1).values, cxy.max(1).values  # (P,2)
+    # Tiles over the rays' own rectangle, about rays_per_tile rays each.
+    r_lo, r_hi = ray_xy.min(0).values, ray_xy.max(0).values
+    n = max(1, int((R / rays_per_tile) ** 0.5))
+    size = (r_hi - r_lo).clamp_min(1e-9) / n
+    ray_tile = ((ray_xy - r_lo) / size).floor().clamp(0, n - 1).long()
+    ray_tile = ray_tile[:, 0] * n + ray_tile[:, 1]
+    t0 = ((lo - r_lo) / size).floor().clamp(-1, n).long()
+    t1 = ((hi - r_lo) / size).floor().clamp(-1, n).long()
+    t0 = torch.where(behind[:, None], torch.zeros_like(t0), t0.clamp(0, n - 1))
+    t1 = torch.where(behind[:, None], torch.full_like(t1, n - 1), t1.clamp(max=n - 1))
+    visible = behind | ((hi >= r_lo) & (lo <= r_hi)).all(1)
+    wx, wy = (t1[:, 0] - t0[:, 0] + 1).clamp_min(0), (t1[:, 1] - t0[:, 1] + 1).clamp_min(0)
+    count = torch.where(visible, wx * wy, torch.zeros_like(wx))
+    prim_of = torch.repeat_interleave(torch.arange(P, device=o.device), count)
+    local = torch.arange(len(prim_of), device=o.device) - torch.repeat_interleave(count.cumsum(0) - count, count)
+    tx = t0[prim_of, 0] + torch.div(local, wy[prim_of], rounding_mode="floor")
+    ty = t0[prim_of, 1] + local % wy[prim_of].clamp_min(1)
+    tile = tx * n + ty
+    order = torch.argsort(tile, stable=True)
+    prim_sorted = prim_of[order]
+    tile_count = torch.bincount(tile, minlength=n * n)
+    tile_start = tile_count.cumsum(0) - tile_count
+    per_ray = tile_count[ray_tile]
+    pair_ray = torch.repeat_interleave(torch.arange(R, device=o.device), per_ray)
+    local = torch.arange(len(pair_ray), device=o.device) - torch.repeat_interleave(per_ray.cumsum(0) - per_ray, per_ray)
+    return pair_ray, prim_sorted[tile_start[ray_tile[pair_ray]] + local]
+
+
+def ray_box_segments(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, pair_ray: torch.Tensor,
+                     pair_prim: torch.Tensor
+                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The slab test of each pair (Q,): t_in, t_out (metres along the unit ray, t_in >= 0), whether they meet, and
+    the ray in the box's unit frame, o' = R^T (o - c) / h and d' = R^T d / h (Q,3) (a point at t is o' + d' t
+    there). An axis the ray runs parallel to (|d'| < 1e-9) is met everywhere or nowhere, by the sign of 1 - |o'|."""
+    to_box = prims.rotations.transpose(1, 2) / prims.half_sizes.clamp_min(1e-9)[..., None]  # (P,3,3) rows R^T / h
+    if len(origins) and (origins - origins[0]).abs().max() == 0:  # one pinhole: o' once a primitive
+        o = ((to_box @ (origins[0] - prims.centres)[..., None])[..., 0])[pair_prim]
+    else:
+        o = (to_box[pair_prim] * (origins[pair_ray] - prims.centres[pair_prim])[:, None]).sum(-1)
+    d = (to_box[pair_prim] * directions[pair_ray][:, None]).sum(-1)
+    parallel = d.abs() < 1e-9
+    safe = torch.where(parallel, torch.ones_like(d), d)
+    ta, tb = (-1.0 - o) / safe, (1.0 - o) / safe
+    lo = torch.where(parallel, torch.where(o.abs() <= 1.0, -torch.inf, torch.inf), torch.minimum(ta, tb))
+    hi = torch.where(parallel, torch.where(o.abs() <= 1.0, torch.inf, -torch.inf), torch.maximum(ta, tb))
+    t_in = lo.max(1).values.clamp_min(0.0)
+    t_out = hi.min(1).values
+    meet = t_out > t_in
+    return t_in, torch.where(meet, t_out, t_in), meet, o, d
+
+
+def trilinear(values: torch.Tensor, prim: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+    """(N,C) values (P,M,M,M,C) of primitives prim (N,) at box coordinates local (N,3) in [-1,1] (x, y, z of the
+    box's axes; voxel centres at -1 + 2k/(M-1), clamped to the grid), trilinearly.
+
+    >>> v = torch.arange(8.0).reshape(1, 2, 2, 2, 1)  # value 4z + 2y + x at the corners
+    >>> trilinear(v, torch.tensor([0]), torch.tensor([[0.0, 0.0, 0.0], [1.0, -1.0, 0.5]]))[:, 0]
+    tensor([3.5000, 4.0000])
+    """
+    P, M = values.shape[0], values.shape[1]
+    flat = values.reshape(P * M * M * M, -1)
+    g = ((local + 1.0) * 0.5 * (M - 1)).clamp(0, M - 1)
+    i0 = g.floor().clamp(max=M - 2).long() if M > 1 else torch.zeros_like(g, dtype=torch.long)
+    f = g - i0
+    base = prim * (M * M * M)
+    out = 0.0
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                if M == 1 and (dx or dy or dz):
+                    continue
+                idx = base + (i0[:, 2] + dz) * M * M + (i0[:, 1] + dy) * M + (i0[:, 0] + dx)
+                w = ((f[:, 0] if dx else 1 - f[:, 0]) * (f[:, 1] if dy else 1 - f[:, 1])
+                     * (f[:, 2] if dz else 1 - f[:, 2])) if M > 1 else torch.ones_like(f[:, 0])
+                out = out + w[:, None] * flat[idx]
+    return out
+
+
+def segment_samples(t_in: torch.Tensor, t_out: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(Q,n) midpoints and lengths of n equal steps over each segment."""
+    step = (t_out - t_in) / n
+    k = torch.arange(n, dtype=t_in.dtype, device=t_in.device) + 0.5
+    return t_in[:, None] + step[:, None] * k, step[:, None].expand(-1, n)
+
+
+def pack(values: torch.Tensor) -> torch.Tensor:
+    """Primitives' grids (P,M,M,M,C) side by side along x as one volume (1,C,M,M,P*M) for `lookup`."""
+    P, M, C = values.shape[0], values.shape[1], values.shape[-1]
+    return values.permute(4, 1, 2, 0, 3).reshape(1, C, M, M, P * M)
+
+
+def lookup(packed: torch.Tensor, prim: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+    """`trilinear` on the packed volume (1,C,M,M,P*M), by one grid_sample: a point's x is its primitive's offset
+    plus its voxel x, clamped inside its primitive, so no lookup blends two primitives. (N,C)."""
+    M, W = packed.shape[2], packed.shape[4]
+    g = ((local + 1.0) * 0.5 * (M - 1)).clamp(0, M - 1)
+    x = prim.to(g.dtype) * M + g[:, 0]
+    grid = torch.stack([2.0 * x / (W - 1) - 1.0, local[:, 1].clamp(-1, 1), local[:, 2].clamp(-1, 1)], -1)
+    out = F.grid_sample(packed, grid.reshape(1, 1, 1, -1, 3), mode="bilinear", padding_mode="border",
+                        align_corners=True)
+    return out[0, :, 0, 0].T
+
+
+@dataclass
+class MarchOutput:
+    rgb: torch.Tensor  # (R,3) over the background
+    opacity: torch.Tensor  # (R,)
+    depth: torch.Tensor  # (R,) sum w t / sum w (0 where nothing)
+    samples: int  # lookups made
+    segments: int  # segments sampled
+
+
+def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: Primitives,
+          pair_ray: torch.Tensor, pair_prim: torch.Tensor, samples: int, stop_below: float = 0.0,
+          exact_lookup: bool = False) -> MarchOutput:
+    """Composite the primitives along R rays (origins, directions (R,3), background (R,3) or (3,)) over the given
+    candidate pairs, `samples` samples a segment, front to back: a ray's segments in order of where they begin,
+    each segment's samples in order along it (where two primitives overlap, the nearer-starting one's samples all
+    come first). The march goes in waves, the k-th segment of every ray at once; with stop_below > 0 (display) a ray
+    takes no more segments once less than that share of its light gets through (early termination).
+    exact_lookup: the gather-based `trilinear` instead of grid_sample (the reference)."""
+    R = len(origins)
+    t_in, t_out, meet, o_box, d_box = ray_box_segments(origins, directions, prims, pair_ray, pair_prim)
+    keep = torch.nonzero(meet).squeeze(1)
+    order = keep[torch.argsort(pair_ray[keep].double() * 1e4 + t_in[keep].double().clamp(0.0, 9e3))]
+    ray, prim, t0, t1 = pair_ray[order], pair_prim[order], t_in[order], t_out[order]
+    o_box, d_box = o_box[order], d_box[order]
+    idx = torch.arange(len(ray), device=ray.device)
+    first = torch.ones_like(ray, dtype=torch.bool)
+    first[1:] = ray[1:] != ray[:-1]
+    rank = idx - torch.cummax(torch.where(first, idx, torch.zeros_like(idx)), 0).values
+    by_rank = torch.argsort(rank, stable=True)
+    counts = torch.bincount(rank, minlength=1).tolist() if len(rank) else []
+    values = torch.cat([prims.density[..., None], prims.colour], -1)  # (P,M,M,M,4)
+    packed = None if exact_lookup else pack(values)
+    dtype = prims.density.dtype
+    trans = torch.ones(R, dtype=dtype, device=origins.device)
+    rgb = torch.zeros(R, prims.colour.shape[-1], dtype=dtype, device=origins.device)
+    opacity = torch.zeros(R, dtype=dtype, device=origins.device)
+    depth = torch.zeros(R, dtype=dtype, device=origins.device)
+    looked = used = 0
+    at = 0
+    for count in counts:
+        sel = by_rank[at:at + count]
+        at += count
+        if stop_below > 0:
+            sel = sel[trans.detach()[ray[sel]] > stop_below]
+            if len(sel) == 0:
+                break
+        r, p = ray[sel], prim[sel]
+        t, delta = segment_samples(t0[sel], t1[sel], samples)  # (S,n)
+        S = len(sel)
+        local = (o_box[sel][:, None] + d_box[sel][:, None] * t[..., None]).reshape(-1, 3)  # the box's unit frame
+        pn = p.repeat_interleave(samples)
+        v = trilinear(values, pn, local) if exact_lookup else lookup(packed, pn, local)
+        v = v.reshape(S, samples, -1)
+        tau = (v[..., 0] * delta).clamp(0.0, MAX_OPTICAL_DEPTH)
+        inside = torch.exp(-(tau.cumsum(1) - tau))  # the light reaching each sample from the segment's start
+        w = trans[r][:, None] * inside * (1.0 - torch.exp(-tau))  # (S,n)
+        rgb = rgb.index_add(0, r, (w[..., None] * v[..., 1:]).sum(1))
+        opacity = opacity.index_add(0, r, w.sum(1))
+        depth = depth.index_add(0, r, (w * t).sum(1))
+        trans = trans.index_copy(0, r, trans[r] * torch.exp(-tau.sum(1)))
+        looked += S * samples
+        used += S
+    depth = torch.where(opacity > 1e-10, depth / opacity.clamp_min(1e-10), torch.zeros_like(depth))
+    return MarchOutput(rgb + trans[:, None] * background, opacity, depth, looked, used)
