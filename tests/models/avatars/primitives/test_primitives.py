@@ -1,0 +1,98 @@
+"""The volumetric-primitives avatar: its layout on every head model, the decoder's gaze apart from expression, a
+tiny training run through the common trainer, its checkpoint and renders, and the display cache."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig
+from models.avatars.primitives.decoder import SlabDecoder
+from models.avatars.primitives.layout import primitive_layout, surface_frames
+from models.avatars.registry import load_avatar
+from models.capture.frames import camera_of
+from models.head.flame import load_flame
+from models.training.trainer import TrainConfig, prepare_training
+from render.gl.raster import Rasterizer
+from tests.models.head.flame_files import write_flame_from_head
+
+
+def check_layout_on(model, grid: int = 16) -> None:
+    layout = primitive_layout(model, grid)
+    assert layout.count > 0.5 * grid * grid  # the chart's cells mostly meet the head
+    v = torch.as_tensor(model.template, dtype=torch.float64)
+    tris = torch.as_tensor(np.asarray(model.triangles), dtype=torch.long)
+    centres, rot = surface_frames(v, tris, torch.as_tensor(layout.triangles), torch.as_tensor(layout.bary))
+    # each primitive sits on its triangle (barycentric point) and its frame is a rotation
+    torch.testing.assert_close(rot.transpose(1, 2) @ rot, torch.eye(3, dtype=torch.float64).expand_as(rot),
+                               atol=1e-9, rtol=0)
+    torch.testing.assert_close(torch.linalg.det(rot), torch.ones(len(rot), dtype=torch.float64), atol=1e-9, rtol=0)
+    extent = float(np.ptp(model.template, 0).max())
+    assert (layout.half_size_m > 0).all() and layout.half_size_m.max() < 0.25 * extent
+    # the outer surface: nine in ten primitives sit more than a fifth of the head's half-extent from its centre (a
+    # few chart directions leave through an opening of the mesh, the neck's or the mouth's, from inside)
+    centre = 0.5 * (v.min(0).values + v.max(0).values)
+    radial = (centres - centre).norm(dim=1)
+    assert (radial > 0.2 * extent / 2).double().mean() > 0.9
+
+
+def test_layout_on_every_head_model(builtin_model, ict_model, tmp_path):
+    check_layout_on(builtin_model)
+    check_layout_on(ict_model)
+    check_layout_on(load_flame(write_flame_from_head(tmp_path / "flame", builtin_model)))  # FLAME's file format
+
+
+def test_gaze_enters_apart_from_expression():
+    dec = SlabDecoder(10, 6, grid=8, voxels=4, width=16)
+    with torch.no_grad():
+        for p in dec.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    cond = torch.randn(1, 10)
+    a = dec(cond, torch.zeros(1, 6))
+    b = dec(cond, torch.tensor([[0.3, 0.0, 0.0, 0.3, 0.0, 0.0]]))
+    assert a[0].shape == (64, 4, 4, 4) and a[1].shape == (64, 4, 4, 4, 3) and a[2].shape == (64, 9)
+    assert (a[0] - b[0]).abs().max() > 1e-4  # gaze changes the slabs...
+    dec.offsets.weight.data.zero_()
+    dec.offsets.bias.data.zero_()
+    assert dec(cond, torch.zeros(1, 6))[2].abs().max() == 0  # ...and offsets start at zero
+
+
+SMALL = PrimitivesConfig(grid=8, voxels=4, width=16)
+
+
+@pytest.mark.gl
+def test_tiny_primitives_run(synth_capture, gl, tmp_path):
+    capture = synth_capture("studio", 16, 32)
+    cfg = TrainConfig(dataset=capture, out=tmp_path / "pr", model="primitives", steps=80, checkpoint_seconds=1e9)
+    t = prepare_training(cfg, gl, SMALL)
+    first = np.mean([t.train_step(0.0)["photometric"] for _ in range(3)])
+    for k in range(3, 77):
+        t.train_step(k / 80)
+    last = np.mean([t.train_step(1.0)["photometric"] for _ in range(3)])
+    assert last < first / 2, (first, last)
+    t.save()
+    avatar, meta = load_avatar(cfg.out)
+    assert isinstance(avatar, PrimitivesAvatar) and meta["model"] == "primitives"
+    for k, v in t.avatar.state_dict().items():
+        assert torch.equal(v, avatar.state_dict()[k]), k
+    f = t.split.frames[0]
+    cam = camera_of(t.split, f.camera_to_world)
+    r = Rasterizer(gl)
+    out = avatar.render_image(f.controls, cam, r)
+    again = avatar.render_image(f.controls, cam, r)
+    assert out["rgb"].shape == (32, 32, 3) and np.isfinite(out["rgb"]).all() and out["opacity"].max() > 0.5
+    np.testing.assert_array_equal(out["rgb"], again["rgb"])
+    # Display decodes once a frame: a frame's batches of rays share its decode.
+    geo = avatar.frame_geometry(f.controls, r)
+    rays, _ = avatar.image_rays(geo, cam, r)
+    with torch.inference_mode():
+        avatar.render_rays(rays[:50], geo, None)
+        cached = next(iter(geo.decoded.values()))
+        avatar.render_rays(rays[50:], geo, None)
+        assert next(iter(geo.decoded.values())) is cached
+    r.release()
+    # A new expression changes the render (the decoder reads the controls).
+    moved = avatar.render_image(f.controls.with_expression(avatar.head_model, {avatar.head_model.expr_names[0]: 1.0}),
+                                cam, Rasterizer(gl))
+    assert np.abs(moved["rgb"] - out["rgb"]).max() > 1e-3
