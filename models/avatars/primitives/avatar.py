@@ -24,6 +24,7 @@ from scipy.ndimage import binary_dilation
 from torch import nn
 
 from models.avatars.base import Avatar, RayOutput, TrainingBatch
+from models.avatars.codynerf.avatar import key_light_dir
 from models.avatars.components import losses
 from models.avatars.nerface.avatar import kabsch
 from models.avatars.primitives import march
@@ -69,6 +70,18 @@ class PrimitivesConfig:
     """Rendered pixels reach this many of the largest primitive half-sizes beyond the mesh's silhouette."""
 
 
+def grid_normals(density: torch.Tensor, rotations: torch.Tensor, half: torch.Tensor) -> torch.Tensor:
+    """(P,M,M,M,3) unit normals, world, of density grids (P,M,M,M) [z, y, x]: minus the density's gradient
+    (central differences, one-sided at the faces), from voxel steps to the box's unit frame ((M-1)/2 voxels a
+    unit), to metres (1/h) and to world (R); 0 where the density is flat."""
+    M = density.shape[1]
+    gz, gy, gx = torch.gradient(density, dim=(1, 2, 3)) if M > 1 else (torch.zeros_like(density),) * 3
+    g = torch.stack([gx, gy, gz], -1) * (0.5 * (M - 1)) / half.clamp_min(1e-9)[:, None, None, None]
+    world = torch.einsum("pij,pzyxj->pzyxi", rotations, g)
+    n2 = world.square().sum(-1, keepdim=True)
+    return -world * torch.rsqrt(n2.clamp_min(1e-12)) * (n2 > 1e-12)
+
+
 @dataclass
 class PrimitivesGeometry:
     """One frame as the primitives see it: the posed mesh, the head's rigid pose, the decoder's inputs from the
@@ -94,10 +107,13 @@ class PrimitivesAvatar(Avatar):
     quality_knobs: ClassVar[tuple[str, ...]] = ("samples",)
 
     def __init__(self, head_model: HeadModel, cfg: PrimitivesConfig, n_frames: int, background: np.ndarray,
-                 effects: tuple[str, ...] = ()):
+                 effects: tuple[str, ...] = (), light_dir: tuple[float, float, float] | None = None):
         super().__init__(head_model, n_frames, background)
         self.cfg = cfg
         self._effects = tuple(effects)
+        self.light_dir = light_dir if effects else None
+        """The capture's key light (world, towards it) where it records one and the effects call for light: the
+        decoder reads its direction in the head's frame (colour under that light as the head turns)."""
         layout = primitive_layout(head_model, cfg.grid)
         self.register_buffer("layout_triangles", torch.as_tensor(layout.triangles, dtype=torch.long))
         self.register_buffer("layout_bary", torch.as_tensor(layout.bary, dtype=torch.float32))
@@ -106,7 +122,9 @@ class PrimitivesAvatar(Avatar):
         self.register_buffer("triangles", torch.as_tensor(np.asarray(head_model.triangles), dtype=torch.long),
                              persistent=False)
         self.condition_dim = head_model.num_expression + 6
-        self.decoder = SlabDecoder(self.condition_dim + cfg.code_dim + 3, 6, cfg.grid, cfg.voxels, 3, cfg.width)
+        extra = 3 if self.light_dir is not None else 0
+        self.decoder = SlabDecoder(self.condition_dim + cfg.code_dim + 3 + extra, 6, cfg.grid, cfg.voxels, 3,
+                                   cfg.width)
         self.latent = nn.Embedding(n_frames, cfg.code_dim)
         nn.init.zeros_(self.latent.weight)
         self.samples = cfg.samples
@@ -115,19 +133,34 @@ class PrimitivesAvatar(Avatar):
     @classmethod
     def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
                     lighting: dict | None, config: PrimitivesConfig | None = None) -> PrimitivesAvatar:
-        """Colour only, whatever the capture's effects: the light-dependent inputs are not built yet (the effect
-        set is recorded, and `none` is what it renders)."""
-        del effects, lighting
-        return cls(head_model, config or PrimitivesConfig(), n_frames, background)
+        """`none` decodes colour alone; with effects the decoder reads the key light's direction (where the capture
+        records one) and, with shading or specular, the normals buffer comes from the opacity grids' gradients."""
+        return cls(head_model, config or PrimitivesConfig(), n_frames, background, effects, key_light_dir(lighting))
 
     @classmethod
     def from_meta(cls, head_model: HeadModel, meta: dict) -> PrimitivesAvatar:
         cfg = PrimitivesConfig(**meta["primitives"])
         check_config(cfg)
-        return cls(head_model, cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32))
+        light = meta.get("light_dir")
+        light = None if light is None else tuple(float(v) for v in light)
+        if light is not None and (len(light) != 3 or not np.isfinite(light).all()):
+            raise ValueError(f"light_dir {meta['light_dir']}: not a direction (three finite numbers)")
+        return cls(head_model, cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32),
+                   tuple(meta.get("effects", ())), light)
 
     def meta(self) -> dict:
-        return {"model": self.name, "effects": list(self._effects), "primitives": asdict(self.cfg)}
+        return {"model": self.name, "effects": list(self._effects), "primitives": asdict(self.cfg),
+                "light_dir": None if self.light_dir is None else list(self.light_dir)}
+
+    @property
+    def needs_normals(self) -> bool:
+        return "shading" in self._effects or "specular" in self._effects
+
+    def layout(self) -> dict[str, tuple[int, float | str]]:
+        return super().layout() | {"normals": (3, 0.0)}
+
+    def default_buffers(self) -> tuple[str, ...]:
+        return ("normals",) if self.needs_normals else ()
 
     @property
     def effects(self) -> tuple[str, ...]:
@@ -187,7 +220,10 @@ class PrimitivesAvatar(Avatar):
         decoder as the direction to the eye in the head's frame)."""
         view = (eye - geo.translation) @ geo.rotation  # R^T (eye - t)
         view = view / view.norm().clamp_min(1e-9)
-        density_raw, colour_raw, offsets = self.decoder(torch.cat([geo.condition, code, view[None]], -1), geo.gaze)
+        inputs = [geo.condition, code, view[None]]
+        if self.light_dir is not None:
+            inputs.append((torch.as_tensor(self.light_dir, dtype=view.dtype, device=view.device) @ geo.rotation)[None])
+        density_raw, colour_raw, offsets = self.decoder(torch.cat(inputs, -1), geo.gaze)
         cells = self.layout_cells
         density_raw, colour_raw, offsets = density_raw[cells], colour_raw[cells], offsets[cells]
         centres, rotations = surface_frames(geo.posed, self.triangles, self.layout_triangles, self.layout_bary)
@@ -195,7 +231,10 @@ class PrimitivesAvatar(Avatar):
         centres = centres + (rotations @ (offsets[:, :3] * self.layout_half[:, None])[..., None])[..., 0]
         rotations = rotations @ rotation_matrix_from_axis_angle(offsets[:, 3:6])
         density = F.softplus(density_raw - 1.0) * self.cfg.density_scale
-        return march.Primitives(centres, rotations, half, density, torch.sigmoid(colour_raw)), offsets
+        colour = torch.sigmoid(colour_raw)
+        if self.needs_normals:
+            colour = torch.cat([colour, grid_normals(density, rotations, half)], -1)
+        return march.Primitives(centres, rotations, half, density, colour), offsets
 
     def decoded(self, geo: PrimitivesGeometry, frame: int | None, eye: torch.Tensor, training: bool):
         """decode, cached on the geometry for display (one decode a frame, whatever the batches of rays)."""
@@ -219,7 +258,10 @@ class PrimitivesAvatar(Avatar):
         out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims, pair_ray, pair_prim,
                           self.samples if not training else self.cfg.samples,
                           0.0 if training else self.cfg.stop_below)
-        return RayOutput({"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}, (prims, offsets, out))
+        buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
+        if self.needs_normals:
+            buffers["normals"] = out.extra
+        return RayOutput(buffers, (prims, offsets, out))
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
         c = self.cfg

@@ -31,7 +31,7 @@ class Primitives:
     rotations: torch.Tensor  # (P,3,3) columns: the box's axes in world
     half_sizes: torch.Tensor  # (P,3) metres, along the box's axes
     density: torch.Tensor  # (P,M,M,M) per metre, indexed [z, y, x] of the box's axes
-    colour: torch.Tensor  # (P,M,M,M,C) in [0,1] (C = 3)
+    colour: torch.Tensor  # (P,M,M,M,C): rgb in [0,1], then any channels composited alike (normals)
 
     def __post_init__(self):
         P = len(self.centres)
@@ -194,6 +194,7 @@ def lookup(packed: torch.Tensor, prim: torch.Tensor, local: torch.Tensor) -> tor
 @dataclass
 class MarchOutput:
     rgb: torch.Tensor  # (R,3) over the background
+    extra: torch.Tensor  # (R,C-3) the colour grids' other channels, composited (nothing behind them)
     opacity: torch.Tensor  # (R,)
     depth: torch.Tensor  # (R,) sum w t / sum w (0 where nothing)
     samples: int  # lookups made
@@ -254,4 +255,4 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
         looked += S * samples
         used += S
     depth = torch.where(opacity > 1e-10, depth / opacity.clamp_min(1e-10), torch.zeros_like(depth))
-    return MarchOutput(rgb + trans[:, None] * background, opacity, depth, looked, used)
+    return MarchOutput(rgb[:, :3] + trans[:, None] * background, rgb[:, 3:], opacity, depth, looked, used)

@@ -7,12 +7,13 @@ import numpy as np
 import pytest
 import torch
 
-from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig
+from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, grid_normals
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
 from models.avatars.registry import load_avatar
 from models.capture.frames import camera_of
 from models.head.flame import load_flame
+from models.head.lbs import rotation_matrix_from_axis_angle
 from models.training.trainer import TrainConfig, prepare_training
 from render.gl.raster import Rasterizer
 from tests.models.head.flame_files import write_flame_from_head
@@ -41,6 +42,18 @@ def test_layout_on_every_head_model(builtin_model, ict_model, tmp_path):
     check_layout_on(builtin_model)
     check_layout_on(ict_model)
     check_layout_on(load_flame(write_flame_from_head(tmp_path / "flame", builtin_model)))  # FLAME's file format
+
+
+def test_grid_normals_of_a_density_ramp():
+    """Density rising along a rotated box's x axis: the normal is minus that axis in world, wherever in the grid
+    (one-sided differences at the faces give the same slope for a linear ramp)."""
+    M = 5
+    rot = rotation_matrix_from_axis_angle(torch.tensor([[0.3, -0.5, 0.8]], dtype=torch.float64))
+    x = torch.linspace(-1, 1, M, dtype=torch.float64)
+    density = (100.0 + 40.0 * x)[None, None, None, :].expand(1, M, M, M).contiguous()  # [z, y, x]
+    n = grid_normals(density, rot, torch.tensor([[0.01, 0.02, 0.03]], dtype=torch.float64))
+    torch.testing.assert_close(n, (-rot[0, :, 0]).expand(1, M, M, M, 3), atol=1e-12, rtol=0)
+    assert grid_normals(torch.ones(1, M, M, M), rot.float(), torch.ones(1, 3)).abs().max() == 0  # flat: 0
 
 
 def test_gaze_enters_apart_from_expression():
@@ -82,6 +95,10 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     out = avatar.render_image(f.controls, cam, r)
     again = avatar.render_image(f.controls, cam, r)
     assert out["rgb"].shape == (32, 32, 3) and np.isfinite(out["rgb"]).all() and out["opacity"].max() > 0.5
+    # `all` effects: the normals buffer, from the opacity grids' gradients, is unit where the head is opaque
+    assert avatar.needs_normals and avatar.light_dir is not None
+    lengths = np.linalg.norm(out["normals"], axis=-1)[out["opacity"] > 0.99]
+    assert len(lengths) and np.median(lengths) > 0.5 and lengths.max() < 1.0 + 1e-4
     np.testing.assert_array_equal(out["rgb"], again["rgb"])
     # Display decodes once a frame: a frame's batches of rays share its decode.
     geo = avatar.frame_geometry(f.controls, r)
