@@ -238,10 +238,9 @@ class Avatar(nn.Module, ABC):
         """Adapt the render settings to the capture: how far (metres, per foreground pixel of the masks) the
         capture's foreground reaches beyond the mesh's silhouette; None where it has no masks."""
 
-    def fit_to_tracked_video(self, new: bool = False) -> None:
+    def fit_to_tracked_video(self) -> None:
         """The capture was tracked from a video: its head poses carry the tracker's error, and its background is
-        a real room. Models adapt what they learn (the default: nothing). new: nothing is trained yet (a model may
-        still change its networks; a resumed avatar's are those of its avatar.json)."""
+        a real room. Models adapt what they learn (the default: nothing)."""
 
     def parameter_groups(self) -> list[dict]:
         """The trained parameters in groups, each with its learning rate's scale (`lr_scale`)."""

@@ -108,7 +108,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
         if plate is not None:
             avatar.set_plate(*plate)
     if split.tracked:  # (a resumed avatar too: what it learns is not all in avatar.json)
-        avatar.fit_to_tracked_video(new=resumed is None)
+        avatar.fit_to_tracked_video()
         # Its codes carry what the controls miss (hair, shoulders) and follow the controls: held-out frames and
         # sliders take the nearest training frames' (components/codes.py). Synthetic captures keep the mean code.
         avatar.key_codes([f.controls for f in split.frames])

@@ -77,9 +77,6 @@ class RenderConfig:
 
 POSE_LR_SCALE = 0.02
 """The pose corrections' learning rate against the networks' (Adam moves each by about its rate a step)."""
-TRACKED_GRID_RESOLUTION = 256
-"""Texels a side of the tri-plane a tracked video's field gets (FieldConfig.grid_resolution): 2 mm over the
-template's box grown by MAX_REACH_M."""
 MAX_REACH_M = 0.10
 """The farthest beyond the guide mesh an avatar models (hair, collar): the field's support and its sampling cost
 grow with it."""
@@ -159,7 +156,7 @@ class CoDyNeRFAvatar(Avatar):
                 "render": asdict(self.render_cfg), "pose_corrections": self.pose_corrections is not None}
 
     # ---- the tracked poses, corrected ------------------------------------------------------------------
-    def fit_to_tracked_video(self, new: bool = False) -> None:
+    def fit_to_tracked_video(self) -> None:
         """Learn a correction of each training frame's head pose with the avatar (correct_poses); Eq. 13 shapes
         the normals only, not the density (LossWeights.consistency_shapes_density); and no Cauchy
         sparsity (Eq. 14): on the tracked d3 video (25 minutes, `none`) it held the density to a fog that let 32%
@@ -169,9 +166,6 @@ class CoDyNeRFAvatar(Avatar):
         self.correct_poses()
         self.loss_weights = replace(self.loss_weights, cauchy=0.0, consistency_shapes_density=False,
                                     mesh_normals_first=True)
-        if new and TRACKED_GRID_RESOLUTION and not self.field_cfg.grid_resolution:
-            self.field_cfg = replace(self.field_cfg, grid_resolution=TRACKED_GRID_RESOLUTION)
-            self.field = self.make_field().to(self.background.device)
 
     def correct_poses(self) -> None:
         """Give every training frame a pose correction, learned with the avatar."""
