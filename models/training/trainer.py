@@ -41,7 +41,8 @@ class TrainConfig:
     """Lighting effects to model: none, all, or a comma list of shading, specular, shadows (default: all; with
     --resume the checkpoint's, and another set is an error)."""
     model: ModelName = DEFAULT_MODEL
-    """The avatar model (models/avatars/registry.py): codynerf, or the NerFACE baseline."""
+    """The avatar model (models/avatars/registry.py): codynerf, the NerFACE baseline, or primitives (volumetric
+    primitives on the guide mesh, decoded once a frame)."""
     minutes: Annotated[float, Range(0, 1e6, above=True)] | None = None
     """Time budget; training stops when it is spent (checkpointed)."""
     steps: Annotated[int, Range(1)] | None = None
