@@ -1,0 +1,40 @@
+"""Give an avatar trained on a tracked video before held-out frames took the nearest training frames' codes
+(models/avatars/components/codes.py) the keys that rule needs, from its capture's training frames, into a new
+folder (the avatar's own folder is left as it is).
+
+    .venv/bin/python scripts/key_codes.py AVATAR DATASET OUT
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from models.avatars.checkpoint import save_checkpoint
+from models.avatars.registry import load_avatar
+from models.capture.dataset import load_split
+
+
+def main() -> int:
+    if len(sys.argv) != 4:
+        print(__doc__, file=sys.stderr)
+        return 2
+    avatar_dir, dataset, out = map(Path, sys.argv[1:])
+    if out.exists():
+        print(f"{out}: exists; choose a new folder", file=sys.stderr)
+        return 2
+    avatar, meta = load_avatar(avatar_dir)
+    frames = load_split(dataset, "train").frames
+    if len(frames) != int(meta["frames"]):
+        print(f"{dataset}: {len(frames)} training frames, not the avatar's {meta['frames']}", file=sys.stderr)
+        return 2
+    avatar.key_codes([f.controls for f in frames])
+    save_checkpoint(out, meta, avatar.state_dict(), int(meta.get("step", 1)))
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
