@@ -65,7 +65,8 @@ class PrimitivesConfig:
     offsets: Annotated[float, Range(0)] = 1e-3
     """The offsets' L2 weight."""
     codes: Annotated[float, Range(0)] = 1e-3
-    chunk_rays: Annotated[int, Range(1, 1 << 22)] = 16384
+    chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1 << 18
+    """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
     """Rendered pixels reach this many of the largest primitive half-sizes beyond the mesh's silhouette."""
 
@@ -200,7 +201,16 @@ class PrimitivesAvatar(Avatar):
         del rasterizer  # the primitives' own boxes say which rays meet them
         return self.geometry(controls)
 
+    def image_rays(self, geometry: PrimitivesGeometry, camera: Camera, rasterizer: Rasterizer | None
+                   ) -> tuple[Rays, np.ndarray]:
+        """Every pixel's ray, without rasterizing the mesh: the march's screen tiles find the rays that may meet a
+        primitive, and a ray on no tile's list costs nothing."""
+        return super().image_rays(geometry, camera, None)
+
     def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+        return np.ones((camera.height_px, camera.width_px), bool)
+
+    def training_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
         """The mesh's pixels and those within `reach` of its largest primitive's half-size beyond them."""
         if not raster.hit.any():
             return np.zeros_like(raster.hit)
@@ -251,11 +261,11 @@ class PrimitivesAvatar(Avatar):
     def render_rays(self, rays: Rays, geometry: PrimitivesGeometry, frame: int | None,
                     generator: torch.Generator | None = None, training: bool = False) -> RayOutput:
         """rgb, opacity and depth of R rays marched through the primitives they meet (one pinhole's rays are
-        binned in screen tiles, march.candidate_pairs)."""
+        binned in screen tiles, march.candidate_lists)."""
         del generator  # the march is deterministic
         prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training)
-        pair_ray, pair_prim = march.candidate_pairs(rays.origins, rays.directions, prims)
-        out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims, pair_ray, pair_prim,
+        lists = march.candidate_lists(rays.origins, rays.directions, prims)
+        out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims, lists,
                           self.samples if not training else self.cfg.samples,
                           0.0 if training else self.cfg.stop_below)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}

@@ -2,13 +2,16 @@
 
 A frame's primitives are boxes (centre c, rotation R whose columns are the box's axes, half-sizes h) each holding an
 M^3 voxel grid of density and colour. A ray meets a primitive over [t_in, t_out] (the slab test in the box's unit
-frame); each such segment takes n samples at its midpoints, looked up trilinearly in that primitive's grid. The
-samples of all a ray's segments are composited front to back in order of distance (Eq. 1 of NeRF: w_i = T_i (1 -
-exp(-sigma_i delta_i))), so overlapping primitives add their densities where they overlap.
+frame); each such segment takes n samples at its midpoints, looked up trilinearly in that primitive's grid, and is
+composited front to back (Eq. 1 of NeRF: w_i = T_i (1 - exp(-sigma_i delta_i))). The primitives are taken in one
+order for every ray, nearest centre to the eye first (as splats are sorted), and each ray's samples within a
+segment in order along it.
 
-Which primitives a ray meets: `candidate_pairs` bins the primitives' projected boxes into screen tiles (the rays of a
-camera share an origin) and pairs each ray with its tile's primitives only; `all_pairs` pairs every ray with every
-primitive (the reference). The slab test then keeps the pairs that truly meet, so both give the same segments.
+Which primitives a ray may meet (`CandidateLists`): `candidate_lists` bins the primitives' projected boxes into
+screen tiles (the rays of a camera share an origin) and gives each ray its tile's list; `every_primitive` gives
+every ray every primitive (the reference). The march goes in waves, the k-th candidate of every ray at once: the
+slab test, then samples where it meets; display stops a ray once it is opaque (early termination), so what lies
+behind the first surfaces is neither tested nor sampled.
 """
 
 from __future__ import annotations
@@ -43,11 +46,31 @@ class Primitives:
         return len(self.centres)
 
 
-def all_pairs(n_rays: int, n_prims: int, device: torch.device | str = "cpu") -> tuple[torch.Tensor, torch.Tensor]:
-    """Every (ray, primitive) pair: (Q,) ray and primitive indices, Q = R P."""
-    r = torch.arange(n_rays, device=device).repeat_interleave(n_prims)
-    p = torch.arange(n_prims, device=device).repeat(n_rays)
-    return r, p
+@dataclass
+class CandidateLists:
+    """Each ray's candidate primitives: ray r's k-th is prims[start[r] + k] for k < count[r] (rays of one screen tile
+    share a list), every list in the same front-to-back order."""
+
+    prims: torch.Tensor  # (L,) primitive indices
+    start: torch.Tensor  # (R,)
+    count: torch.Tensor  # (R,)
+
+    @property
+    def pairs(self) -> int:
+        return int(self.count.sum())
+
+
+def front_to_back(origins: torch.Tensor, prims: Primitives) -> torch.Tensor:
+    """(P,) the primitives by the distance of their centres from the rays' (mean) origin, nearest first."""
+    eye = origins.mean(0) if len(origins) else torch.zeros(3, dtype=prims.centres.dtype)
+    return torch.argsort((prims.centres - eye).norm(dim=1), stable=True)
+
+
+def every_primitive(origins: torch.Tensor, prims: Primitives) -> CandidateLists:
+    """Every ray with every primitive (the reference)."""
+    R = len(origins)
+    zeros = torch.zeros(R, dtype=torch.long, device=origins.device)
+    return CandidateLists(front_to_back(origins, prims), zeros, zeros + len(prims))
 
 
 def box_corners(prims: Primitives) -> torch.Tensor:
@@ -58,20 +81,20 @@ def box_corners(prims: Primitives) -> torch.Tensor:
     return prims.centres[:, None] + local @ prims.rotations.transpose(1, 2)
 
 
-def candidate_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, rays_per_tile: int = 64
-                    ) -> tuple[torch.Tensor, torch.Tensor]:
-    """(ray, primitive) pairs that may meet: rays of one pinhole (a shared origin) binned into screen tiles, each
-    primitive's box projected (its corners' bounding rectangle) into the tiles it covers. A superset of the pairs
-    that meet: the projection of a box in front of the eye lies within its corners' rectangle; a box reaching
-    behind the eye (the camera inside or beside it) is paired with every ray. Rays of many origins (a training
-    batch of several frames is never one): every pair."""
+def candidate_lists(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, rays_per_tile: int = 64
+                    ) -> CandidateLists:
+    """The primitives each ray may meet: rays of one pinhole (a shared origin) binned into screen tiles, each
+    primitive's box projected (its corners' bounding rectangle) into the tiles it covers, each tile's list in
+    `front_to_back` order. A superset of those that meet: the projection of a box in front of the eye lies within
+    its corners' rectangle; a box reaching behind the eye (the camera inside or beside it) is on every list. Rays
+    of many origins: every primitive."""
     R, P = len(origins), len(prims)
     if R == 0 or P == 0:
-        return all_pairs(R, P, origins.device)
+        return every_primitive(origins, prims)
     o = origins[0]
     fwd = directions.mean(0)
     if (origins - o).abs().max() > 1e-6 or fwd.norm() < 1e-6:
-        return all_pairs(R, P, origins.device)
+        return every_primitive(origins, prims)
     fwd = fwd / fwd.norm()
     helper = torch.tensor([0.0, 1.0, 0.0], dtype=o.dtype, device=o.device)
     if (fwd @ helper).abs() > 0.9:
@@ -81,7 +104,7 @@ def candidate_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     b = torch.linalg.cross(fwd, a)
     dz = directions @ fwd
     if dz.min() < 0.05:  # a field of view near 180 degrees: no plane to bin in
-        return all_pairs(R, P, origins.device)
+        return every_primitive(origins, prims)
     ray_xy = torch.stack([directions @ a, directions @ b], 1) / dz[:, None]  # (R,2)
     rel = box_corners(prims) - o  # (P,8,3)
     cz = rel @ fwd
@@ -101,19 +124,18 @@ def candidate_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     visible = behind | ((hi >= r_lo) & (lo <= r_hi)).all(1)
     wx, wy = (t1[:, 0] - t0[:, 0] + 1).clamp_min(0), (t1[:, 1] - t0[:, 1] + 1).clamp_min(0)
     count = torch.where(visible, wx * wy, torch.zeros_like(wx))
+    order = front_to_back(origins, prims)
+    rank = torch.empty_like(order)
+    rank[order] = torch.arange(P, device=o.device)
     prim_of = torch.repeat_interleave(torch.arange(P, device=o.device), count)
     local = torch.arange(len(prim_of), device=o.device) - torch.repeat_interleave(count.cumsum(0) - count, count)
-    tx = t0[prim_of, 0] + torch.div(local, wy[prim_of], rounding_mode="floor")
+    tx = t0[prim_of, 0] + torch.div(local, wy[prim_of].clamp_min(1), rounding_mode="floor")
     ty = t0[prim_of, 1] + local % wy[prim_of].clamp_min(1)
     tile = tx * n + ty
-    order = torch.argsort(tile, stable=True)
-    prim_sorted = prim_of[order]
+    by_tile = torch.argsort(tile * P + rank[prim_of])  # tile by tile, front to back within each
     tile_count = torch.bincount(tile, minlength=n * n)
     tile_start = tile_count.cumsum(0) - tile_count
-    per_ray = tile_count[ray_tile]
-    pair_ray = torch.repeat_interleave(torch.arange(R, device=o.device), per_ray)
-    local = torch.arange(len(pair_ray), device=o.device) - torch.repeat_interleave(per_ray.cumsum(0) - per_ray, per_ray)
-    return pair_ray, prim_sorted[tile_start[ray_tile[pair_ray]] + local]
+    return CandidateLists(prim_of[by_tile], tile_start[ray_tile], tile_count[ray_tile])
 
 
 def ray_box_segments(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, pair_ray: torch.Tensor,
@@ -202,57 +224,49 @@ class MarchOutput:
 
 
 def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: Primitives,
-          pair_ray: torch.Tensor, pair_prim: torch.Tensor, samples: int, stop_below: float = 0.0,
-          exact_lookup: bool = False) -> MarchOutput:
-    """Composite the primitives along R rays (origins, directions (R,3), background (R,3) or (3,)) over the given
-    candidate pairs, `samples` samples a segment, front to back: a ray's segments in order of where they begin,
-    each segment's samples in order along it (where two primitives overlap, the nearer-starting one's samples all
-    come first). The march goes in waves, the k-th segment of every ray at once; with stop_below > 0 (display) a ray
-    takes no more segments once less than that share of its light gets through (early termination).
-    exact_lookup: the gather-based `trilinear` instead of grid_sample (the reference)."""
+          lists: CandidateLists, samples: int, stop_below: float = 0.0, exact_lookup: bool = False) -> MarchOutput:
+    """Composite the primitives along R rays (origins, directions (R,3), background (R,3) or (3,)), each through
+    its candidate list in order, `samples` samples a segment. Wave k takes every ray's k-th candidate: the slab
+    test, then the samples of the rays it meets. With stop_below > 0 (display) a ray takes no more candidates once
+    less than that share of its light gets through (early termination). exact_lookup: the gather-based
+    `trilinear` instead of grid_sample (the reference)."""
     R = len(origins)
-    t_in, t_out, meet, o_box, d_box = ray_box_segments(origins, directions, prims, pair_ray, pair_prim)
-    keep = torch.nonzero(meet).squeeze(1)
-    order = keep[torch.argsort(pair_ray[keep].double() * 1e4 + t_in[keep].double().clamp(0.0, 9e3))]
-    ray, prim, t0, t1 = pair_ray[order], pair_prim[order], t_in[order], t_out[order]
-    o_box, d_box = o_box[order], d_box[order]
-    idx = torch.arange(len(ray), device=ray.device)
-    first = torch.ones_like(ray, dtype=torch.bool)
-    first[1:] = ray[1:] != ray[:-1]
-    rank = idx - torch.cummax(torch.where(first, idx, torch.zeros_like(idx)), 0).values
-    by_rank = torch.argsort(rank, stable=True)
-    counts = torch.bincount(rank, minlength=1).tolist() if len(rank) else []
-    values = torch.cat([prims.density[..., None], prims.colour], -1)  # (P,M,M,M,4)
+    values = torch.cat([prims.density[..., None], prims.colour], -1)  # (P,M,M,M,1+C)
     packed = None if exact_lookup else pack(values)
     dtype = prims.density.dtype
     trans = torch.ones(R, dtype=dtype, device=origins.device)
-    rgb = torch.zeros(R, prims.colour.shape[-1], dtype=dtype, device=origins.device)
+    acc = torch.zeros(R, values.shape[-1] - 1, dtype=dtype, device=origins.device)
     opacity = torch.zeros(R, dtype=dtype, device=origins.device)
     depth = torch.zeros(R, dtype=dtype, device=origins.device)
     looked = used = 0
-    at = 0
-    for count in counts:
-        sel = by_rank[at:at + count]
-        at += count
+    longest = int(lists.count.max()) if R else 0
+    for k in range(longest):
+        live = lists.count > k
         if stop_below > 0:
-            sel = sel[trans.detach()[ray[sel]] > stop_below]
-            if len(sel) == 0:
-                break
-        r, p = ray[sel], prim[sel]
-        t, delta = segment_samples(t0[sel], t1[sel], samples)  # (S,n)
-        S = len(sel)
-        local = (o_box[sel][:, None] + d_box[sel][:, None] * t[..., None]).reshape(-1, 3)  # the box's unit frame
+            live &= trans.detach() > stop_below
+        r = torch.nonzero(live).squeeze(1)
+        if len(r) == 0:
+            break
+        p = lists.prims[lists.start[r] + k]
+        t0, t1, meet, o_box, d_box = ray_box_segments(origins, directions, prims, r, p)
+        hit = torch.nonzero(meet).squeeze(1)
+        if len(hit) == 0:
+            continue
+        r, p, o_box, d_box = r[hit], p[hit], o_box[hit], d_box[hit]
+        t, delta = segment_samples(t0[hit], t1[hit], samples)  # (S,n)
+        S = len(r)
+        local = (o_box[:, None] + d_box[:, None] * t[..., None]).reshape(-1, 3)  # the box's unit frame
         pn = p.repeat_interleave(samples)
         v = trilinear(values, pn, local) if exact_lookup else lookup(packed, pn, local)
         v = v.reshape(S, samples, -1)
         tau = (v[..., 0] * delta).clamp(0.0, MAX_OPTICAL_DEPTH)
         inside = torch.exp(-(tau.cumsum(1) - tau))  # the light reaching each sample from the segment's start
         w = trans[r][:, None] * inside * (1.0 - torch.exp(-tau))  # (S,n)
-        rgb = rgb.index_add(0, r, (w[..., None] * v[..., 1:]).sum(1))
+        acc = acc.index_add(0, r, (w[..., None] * v[..., 1:]).sum(1))
         opacity = opacity.index_add(0, r, w.sum(1))
         depth = depth.index_add(0, r, (w * t).sum(1))
         trans = trans.index_copy(0, r, trans[r] * torch.exp(-tau.sum(1)))
         looked += S * samples
         used += S
     depth = torch.where(opacity > 1e-10, depth / opacity.clamp_min(1e-10), torch.zeros_like(depth))
-    return MarchOutput(rgb[:, :3] + trans[:, None] * background, rgb[:, 3:], opacity, depth, looked, used)
+    return MarchOutput(acc[:, :3] + trans[:, None] * background, acc[:, 3:], opacity, depth, looked, used)

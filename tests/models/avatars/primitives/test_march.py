@@ -33,19 +33,19 @@ def camera_rays(size: int = 24, yaw: float = 20.0, distance: float = 0.6, dtype=
     return origin.to(dtype).expand(len(dirs), 3).contiguous(), dirs
 
 
-def render(prims, origins, dirs, pairs, samples=6, reference=False):
-    """The fast path (tiles, grid_sample lookups); reference: pairs from all_pairs, gathered lookups."""
+def render(prims, origins, dirs, lists, samples=6, reference=False):
+    """The fast path (tiled lists, grid_sample lookups); reference: every primitive on every list, gathered lookups."""
     bg = torch.tensor([0.2, 0.3, 0.4], dtype=origins.dtype)
-    return march.march(origins, dirs, bg, prims, *pairs, samples, exact_lookup=reference)
+    return march.march(origins, dirs, bg, prims, lists, samples, exact_lookup=reference)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_tiled_pairs_render_what_every_pair_renders(seed):
+def test_tiled_lists_render_what_every_primitive_renders(seed):
     prims = random_primitives(seed=seed)
     origins, dirs = camera_rays(yaw=30.0 * seed)
-    fast = march.candidate_pairs(origins, dirs, prims, rays_per_tile=16)
-    every = march.all_pairs(len(dirs), len(prims))
-    assert len(fast[0]) < 0.6 * len(every[0])  # the tiles do cull
+    fast = march.candidate_lists(origins, dirs, prims, rays_per_tile=16)
+    every = march.every_primitive(origins, prims)
+    assert fast.pairs < 0.6 * every.pairs  # the tiles do cull
     a, b = render(prims, origins, dirs, fast), render(prims, origins, dirs, every, reference=True)
     assert b.opacity.max() > 0.5 and (b.opacity < 1e-6).any()  # the image shows primitives and empty space
     torch.testing.assert_close(a.rgb, b.rgb, atol=1e-12, rtol=0)
@@ -58,8 +58,8 @@ def test_tiles_pair_a_primitive_about_the_eye_with_every_ray():
     origins, dirs = camera_rays()
     prims.centres[0] = origins[0] + 0.005
     prims.half_sizes[0] = 0.03
-    a = render(prims, origins, dirs, march.candidate_pairs(origins, dirs, prims, 16))
-    b = render(prims, origins, dirs, march.all_pairs(len(dirs), len(prims)), reference=True)
+    a = render(prims, origins, dirs, march.candidate_lists(origins, dirs, prims, 16))
+    b = render(prims, origins, dirs, march.every_primitive(origins, prims), reference=True)
     assert (a.opacity > 0.1).all()  # every ray starts inside it
     torch.testing.assert_close(a.rgb, b.rgb, atol=1e-12, rtol=0)
 
@@ -68,8 +68,8 @@ def test_gradients_match_the_reference():
     prims = random_primitives(P=12, M=3, seed=4)
     origins, dirs = camera_rays(size=12)
     grads = []
-    for reference, pairs in ((False, march.candidate_pairs(origins, dirs, prims, 8)),
-                             (True, march.all_pairs(len(dirs), len(prims)))):
+    for reference, pairs in ((False, march.candidate_lists(origins, dirs, prims, 8)),
+                             (True, march.every_primitive(origins, prims))):
         d = prims.density.clone().requires_grad_(True)
         c = prims.colour.clone().requires_grad_(True)
         p = march.Primitives(prims.centres, prims.rotations, prims.half_sizes, d, c)
@@ -94,10 +94,10 @@ def test_early_termination_changes_only_what_the_light_barely_reaches():
     prims = random_primitives(seed=6)
     prims.density.mul_(20)  # opaque: most rays end within their first segments
     origins, dirs = camera_rays()
-    pairs = march.candidate_pairs(origins, dirs, prims, 16)
+    pairs = march.candidate_lists(origins, dirs, prims, 16)
     bg = torch.tensor([0.2, 0.3, 0.4], dtype=origins.dtype)
-    full = march.march(origins, dirs, bg, prims, *pairs, 6)
-    cut = march.march(origins, dirs, bg, prims, *pairs, 6, stop_below=1e-3)
+    full = march.march(origins, dirs, bg, prims, pairs, 6)
+    cut = march.march(origins, dirs, bg, prims, pairs, 6, stop_below=1e-3)
     assert cut.samples < 0.7 * full.samples
     torch.testing.assert_close(cut.rgb, full.rgb, atol=2e-3, rtol=0)  # at most the light left, 1e-3, times a colour
 
@@ -110,7 +110,7 @@ def test_one_slab_of_known_density_hand_worked():
                              torch.full((P, M, M, M), 20.0), torch.tensor([1.0, 0, 0]).expand(P, M, M, M, 3))
     o, d = torch.tensor([[0.01, -0.02, -1.0]]), torch.tensor([[0.0, 0.0, 1.0]])
     bg = torch.tensor([0.0, 0.0, 1.0])
-    out = march.march(o, d, bg, prims, *march.all_pairs(1, 1), samples=5)
+    out = march.march(o, d, bg, prims, march.every_primitive(o, prims), samples=5)
     want = 1 - math.exp(-2.0)
     torch.testing.assert_close(out.opacity, torch.tensor([want]))
     torch.testing.assert_close(out.rgb, torch.tensor([[want, 0.0, 1 - want]]))
@@ -140,7 +140,7 @@ def test_hard_cases_stay_finite():
     d = density.clone().requires_grad_(True)
     h = half.clone().requires_grad_(True)
     p = march.Primitives(centres, prims.rotations, h, d, prims.colour)
-    out = march.march(origins, dirs, torch.zeros(3), p, *march.candidate_pairs(origins, dirs, p), 8)
+    out = march.march(origins, dirs, torch.zeros(3), p, march.candidate_lists(origins, dirs, p), 8)
     assert torch.isfinite(out.rgb).all() and torch.isfinite(out.opacity).all() and torch.isfinite(out.depth).all()
     assert (out.opacity <= 1 + 1e-5).all()
     (out.rgb.sum() + out.depth.sum()).backward()
