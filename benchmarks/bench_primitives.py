@@ -1,0 +1,73 @@
+"""Where a primitives avatar's frame time goes, at 128, 256 and 512 pixels on this machine: the decode (once a
+frame), the screen tiles' candidate lists, the march (slab tests, lookups and compositing, in waves), and the
+whole `render_image` (posing the mesh, rays, images); with the lookups made and the lookups a second.
+
+    .venv/bin/python -m benchmarks.bench_primitives AVATAR [--out benchmarks/results/primitives.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import torch
+
+from benchmarks.bench_render import median_seconds
+from models.avatars.primitives import march
+from models.avatars.registry import load_avatar
+from models.head.controls import Controls
+from render.camera import framing_camera
+from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
+
+
+def measure(avatar, raster: Rasterizer, controls: Controls, size: int) -> dict:
+    """One size's row: the parts' median times and the lookups."""
+    cam = framing_camera(avatar.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=size, height_px=size)
+    geo = avatar.frame_geometry(controls, raster)
+    rays, _ = avatar.image_rays(geo, cam, raster)
+    eye = rays.origins[0]
+    with torch.inference_mode():
+        code = avatar.codes(None, geo.code_weights)
+        decode = median_seconds(lambda: avatar.decode(geo, code, eye))
+        prims, _ = avatar.decode(geo, code, eye)
+        lists_s = median_seconds(lambda: march.candidate_lists(rays.origins, rays.directions, prims))
+        lists = march.candidate_lists(rays.origins, rays.directions, prims)
+        bg = avatar.ray_background(rays)
+
+        def run():
+            return march.march(rays.origins, rays.directions, bg, prims, lists, avatar.samples, avatar.cfg.stop_below)
+
+        march_s = median_seconds(run)
+        out = run()
+    whole = median_seconds(lambda: avatar.render_image(controls, cam, raster))
+    return {"size": size, "rays": len(rays), "decode_ms": 1e3 * decode, "lists_ms": 1e3 * lists_s,
+            "march_ms": 1e3 * march_s, "render_image_ms": 1e3 * whole, "candidates": lists.pairs,
+            "segments": out.segments, "lookups": out.samples, "lookups_per_s": out.samples / march_s}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("avatar", type=Path)
+    p.add_argument("--out", type=Path, default=Path("benchmarks/results/primitives.json"))
+    p.add_argument("--sizes", type=int, nargs="+", default=[128, 256, 512])
+    args = p.parse_args()
+    avatar, meta = load_avatar(args.avatar)
+    if meta.get("model") != "primitives":
+        raise SystemExit(f"{args.avatar}: a {meta.get('model')} avatar, not a primitives one")
+    raster = Rasterizer(GLContext.headless())
+    controls = avatar.at_rest(Controls())
+    rows = []
+    for size in args.sizes:
+        rows.append(measure(avatar, raster, controls, size))
+        print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in rows[-1].items()}))
+    report = {"avatar": str(args.avatar), "primitives": avatar.count, "voxels": avatar.cfg.voxels,
+              "samples": avatar.samples, "threads": torch.get_num_threads(), "cpus": os.cpu_count(), "rows": rows}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=1))
+
+
+if __name__ == "__main__":
+    main()
