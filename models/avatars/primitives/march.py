@@ -138,18 +138,36 @@ def candidate_lists(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     return CandidateLists(prim_of[by_tile], tile_start[ray_tile], tile_count[ray_tile])
 
 
+@dataclass
+class BoxFrames:
+    """The primitives' unit frames, made once per march: to_box (P,3,3), rows R^T / h, and where the rays share
+    one origin, that origin in every box's frame (P,3)."""
+
+    to_box: torch.Tensor
+    eye: torch.Tensor | None
+
+
+def box_frames(origins: torch.Tensor, prims: Primitives) -> BoxFrames:
+    to_box = prims.rotations.transpose(1, 2) / prims.half_sizes.clamp_min(1e-9)[..., None]
+    shared = len(origins) and bool((origins - origins[0]).abs().max() == 0)
+    eye = (to_box @ (origins[0] - prims.centres)[..., None])[..., 0] if shared else None
+    return BoxFrames(to_box, eye)
+
+
 def ray_box_segments(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, pair_ray: torch.Tensor,
-                     pair_prim: torch.Tensor
+                     pair_prim: torch.Tensor, frames: BoxFrames | None = None
                      ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """The slab test of each pair (Q,): t_in, t_out (metres along the unit ray, t_in >= 0), whether they meet, and
     the ray in the box's unit frame, o' = R^T (o - c) / h and d' = R^T d / h (Q,3) (a point at t is o' + d' t
-    there). An axis the ray runs parallel to (|d'| < 1e-9) is met everywhere or nowhere, by the sign of 1 - |o'|."""
-    to_box = prims.rotations.transpose(1, 2) / prims.half_sizes.clamp_min(1e-9)[..., None]  # (P,3,3) rows R^T / h
-    if len(origins) and (origins - origins[0]).abs().max() == 0:  # one pinhole: o' once a primitive
-        o = ((to_box @ (origins[0] - prims.centres)[..., None])[..., 0])[pair_prim]
+    there). An axis the ray runs parallel to (|d'| < 1e-9) is met everywhere or nowhere, by the sign of 1 - |o'|.
+    frames: box_frames of these origins and primitives (made here if not given)."""
+    frames = frames or box_frames(origins, prims)
+    to_box = frames.to_box[pair_prim]  # (Q,3,3)
+    if frames.eye is not None:  # one pinhole: o' once a primitive
+        o = frames.eye[pair_prim]
     else:
-        o = (to_box[pair_prim] * (origins[pair_ray] - prims.centres[pair_prim])[:, None]).sum(-1)
-    d = (to_box[pair_prim] * directions[pair_ray][:, None]).sum(-1)
+        o = (to_box * (origins[pair_ray] - prims.centres[pair_prim])[:, None]).sum(-1)
+    d = (to_box * directions[pair_ray][:, None]).sum(-1)
     parallel = d.abs() < 1e-9
     safe = torch.where(parallel, torch.ones_like(d), d)
     ta, tb = (-1.0 - o) / safe, (1.0 - o) / safe
@@ -240,6 +258,7 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
     depth = torch.zeros(R, dtype=dtype, device=origins.device)
     looked = used = 0
     longest = int(lists.count.max()) if R else 0
+    frames = box_frames(origins, prims)
     for k in range(longest):
         live = lists.count > k
         if stop_below > 0:
@@ -248,7 +267,7 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
         if len(r) == 0:
             break
         p = lists.prims[lists.start[r] + k]
-        t0, t1, meet, o_box, d_box = ray_box_segments(origins, directions, prims, r, p)
+        t0, t1, meet, o_box, d_box = ray_box_segments(origins, directions, prims, r, p, frames)
         hit = torch.nonzero(meet).squeeze(1)
         if len(hit) == 0:
             continue
