@@ -11,12 +11,12 @@ import pytest
 import torch
 
 from models.avatars.nerface.avatar import NerfaceAvatar, NerfaceConfig, kabsch
-from models.avatars.registry import load_avatar
 from models.capture.frames import camera_of
 from models.head.controls import Controls
 from models.training.trainer import TrainConfig, prepare_training
 from render.gl.raster import Rasterizer
 from render.rays import Rays
+from tests.models.avatars.runs import photometric_before_and_after, saved_and_reloaded
 
 pytestmark = pytest.mark.gl
 
@@ -57,17 +57,11 @@ def test_tiny_nerface_run(capture, gl, tmp_path):
     cfg = TrainConfig(dataset=capture, out=tmp_path / "nf", model="nerface", steps=100, rays_per_step=256,
                       checkpoint_seconds=1e9)
     t = prepare_training(cfg, gl, SMALL)
-    first = np.mean([t.train_step(0.0)["photometric"] for _ in range(3)])
-    for k in range(3, 97):
-        t.train_step(k / 100)
-    last = np.mean([t.train_step(1.0)["photometric"] for _ in range(3)])
+    first, last = photometric_before_and_after(t, 100)
     print("nerface photometric", first, "->", last)
     assert last < first / 2, (first, last)  # measured: 3.0x in 100 steps
-    t.save()
-    avatar, meta = load_avatar(cfg.out)
+    avatar, meta = saved_and_reloaded(t)
     assert isinstance(avatar, NerfaceAvatar) and meta["model"] == "nerface"
-    for k, v in t.avatar.state_dict().items():
-        assert torch.equal(v, avatar.state_dict()[k]), k
     f = t.split.frames[0]
     out = avatar.render_image(f.controls, camera_of(t.split, f.camera_to_world), Rasterizer(gl))
     assert out["rgb"].shape == (32, 32, 3) and np.isfinite(out["rgb"]).all()

@@ -10,12 +10,12 @@ import torch
 from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, grid_normals
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
-from models.avatars.registry import load_avatar
 from models.capture.frames import camera_of
 from models.head.flame import load_flame
 from models.head.lbs import rotation_matrix_from_axis_angle
 from models.training.trainer import TrainConfig, prepare_training
 from render.gl.raster import Rasterizer
+from tests.models.avatars.runs import photometric_before_and_after, saved_and_reloaded
 from tests.models.head.flame_files import write_flame_from_head
 
 
@@ -79,16 +79,10 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     capture = synth_capture("studio", 16, 32)
     cfg = TrainConfig(dataset=capture, out=tmp_path / "pr", model="primitives", steps=80, checkpoint_seconds=1e9)
     t = prepare_training(cfg, gl, SMALL)
-    first = np.mean([t.train_step(0.0)["photometric"] for _ in range(3)])
-    for k in range(3, 77):
-        t.train_step(k / 80)
-    last = np.mean([t.train_step(1.0)["photometric"] for _ in range(3)])
+    first, last = photometric_before_and_after(t, 80)
     assert last < first / 2, (first, last)
-    t.save()
-    avatar, meta = load_avatar(cfg.out)
+    avatar, meta = saved_and_reloaded(t)
     assert isinstance(avatar, PrimitivesAvatar) and meta["model"] == "primitives"
-    for k, v in t.avatar.state_dict().items():
-        assert torch.equal(v, avatar.state_dict()[k]), k
     f = t.split.frames[0]
     cam = camera_of(t.split, f.camera_to_world)
     r = Rasterizer(gl)
