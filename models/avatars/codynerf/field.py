@@ -59,8 +59,9 @@ class FieldConfig:
     grid_resolution: Annotated[int, Range(0, 4096)] = 0
     """Texels a side of the canonical tri-plane features that the density network reads beside its position
     encoding (components/triplane.py); 0: none. Off by default: on the tracked d3 video (`none`, 30 minutes, 256
-    texels of 8 features a plane) the field fit its training frames no better (photometric error 0.0030 against
-    0.0018 at 2500 steps) and held-out frames 2.0 dB worse (23.17 against 25.17 dB), for 11% fewer steps."""
+    texels of 8 features a plane) the field fit its training frames worse (photometric error 0.0032 against
+    0.0018 about step 2500) and held-out frames 2.0 dB worse (23.17 against 25.17 dB), with 11% fewer steps (some
+    of them lost to tests run beside it)."""
     grid_features: Annotated[int, Range(1, 256)] = 8
     """Features per plane of the tri-plane."""
     scale_m: Annotated[float, Range(0, 100, above=True)] = 0.25

@@ -26,6 +26,7 @@ from torch import nn
 from models.avatars.base import Avatar, RayOutput, TrainingBatch
 from models.avatars.components import losses
 from models.avatars.components.encoding import encoded_size, frequency_encoding
+from models.avatars.components.rigid import kabsch
 from models.head.controls import Controls
 from models.head.model import HeadModel
 from models.ranges import Range, check_config
@@ -124,15 +125,6 @@ def face_box(hit: np.ndarray, margin_px: int) -> np.ndarray:
         top, left = max(rows[0] - margin_px, 0), max(cols[0] - margin_px, 0)
         box[top:rows[-1] + margin_px + 1, left:cols[-1] + margin_px + 1] = True
     return box
-
-
-def kabsch(source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """The rotation R and translation t minimising |R source + t - target| over (V,3) point sets."""
-    cs, ct = source.mean(0), target.mean(0)
-    u, _, vh = torch.linalg.svd((source - cs).T.double() @ (target - ct).double())
-    d = torch.sign(torch.linalg.det(vh.T @ u.T))
-    r = (vh.T @ torch.diag(torch.tensor([1.0, 1.0, float(d)], dtype=torch.float64)) @ u.T).float()
-    return r, ct - r @ cs
 
 
 class NerfaceAvatar(Avatar):

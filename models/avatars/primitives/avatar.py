@@ -26,7 +26,7 @@ from torch import nn
 from models.avatars.base import Avatar, RayOutput, TrainingBatch
 from models.avatars.codynerf.avatar import key_light_dir
 from models.avatars.components import losses
-from models.avatars.nerface.avatar import kabsch
+from models.avatars.components.rigid import kabsch
 from models.avatars.primitives import march
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from models.avatars.nerface.avatar import NerfaceAvatar, NerfaceConfig, kabsch
+from models.avatars.components.rigid import kabsch
+from models.avatars.nerface.avatar import NerfaceAvatar, NerfaceConfig
 from models.capture.frames import camera_of
 from models.head.controls import Controls
 from models.training.trainer import TrainConfig, prepare_training
