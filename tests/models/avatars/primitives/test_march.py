@@ -81,6 +81,26 @@ def test_gradients_match_the_reference():
     assert grads[0][0].abs().sum() > 0
 
 
+def test_one_pass_is_the_waves_with_nothing_stopped():
+    """Training's one pass (march_all) against the waves that display uses, with a threshold no ray falls
+    below: the same images and gradients."""
+    prims = random_primitives(seed=8)
+    origins, dirs = camera_rays()
+    lists = march.candidate_lists(origins, dirs, prims, 16)
+    bg = torch.tensor([0.2, 0.3, 0.4], dtype=origins.dtype)
+    outs = []
+    for stop in (0.0, 1e-300):
+        d = prims.density.clone().requires_grad_(True)
+        p = march.Primitives(prims.centres, prims.rotations, prims.half_sizes, d, prims.colour)
+        out = march.march(origins, dirs, bg, p, lists, 5, stop_below=stop)
+        (out.rgb.square().sum() + out.depth.sum()).backward()
+        outs.append((out, d.grad))
+    (a, ga), (b, gb) = outs
+    assert a.segments == b.segments > 0
+    for x, y in ((a.rgb, b.rgb), (a.opacity, b.opacity), (a.depth, b.depth), (ga, gb)):
+        torch.testing.assert_close(x, y, atol=1e-10, rtol=0)
+
+
 def test_packed_lookup_is_the_trilinear_reference():
     g = torch.Generator().manual_seed(5)
     values = torch.rand(7, 4, 4, 4, 3, generator=g, dtype=torch.float64)
