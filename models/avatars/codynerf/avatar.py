@@ -25,6 +25,7 @@ from models.avatars.codynerf.occupancy import OccupancyGrid
 from models.avatars.codynerf.prior import deformation_prior, nearest_vertices, prior_within, vertex_tree
 from models.avatars.codynerf.training import LossWeights, consistency_weight, ray_terms
 from models.avatars.components import losses
+from models.avatars.components.codes import frame_code
 from models.avatars.quality import Quality
 from models.head.controls import Controls
 from models.head.lbs import rotation_matrix_from_axis_angle
@@ -98,10 +99,6 @@ def active_pixels(cfg: RenderConfig, camera: Camera, raster: Raster) -> np.ndarr
     if not raster.hit.any():
         return raster.hit
     return binary_dilation(raster.hit, iterations=silhouette_margin_px(cfg, camera, raster.depth))
-
-
-def mean_code(embedding: nn.Embedding) -> torch.Tensor:
-    return embedding.weight.mean(0, keepdim=True)
 
 
 class CoDyNeRFAvatar(Avatar):
@@ -270,12 +267,7 @@ class CoDyNeRFAvatar(Avatar):
     def codes(self, frame: int | None, weights: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """omega and phi (1,C) of a training frame; for new controls (frame None) the training frames' codes
         blended by `weights` (N,) (Avatar.code_weights), or without them the mean codes."""
-        if frame is None:
-            if weights is not None:
-                return weights[None] @ self.omega.weight, weights[None] @ self.phi.weight
-            return mean_code(self.omega), mean_code(self.phi)
-        idx = torch.tensor([frame], device=self.omega.weight.device)
-        return self.omega(idx), self.phi(idx)
+        return frame_code(self.omega, frame, weights), frame_code(self.phi, frame, weights)
 
     # ---- rays ------------------------------------------------------------------------------------------
     def settings(self, training: bool, create_graph: bool = False) -> render.RaySettings:

@@ -22,6 +22,15 @@ KEY_SCALE_FLOOR = 0.01
 frames never moved would otherwise blow any change of it up into a distance that outweighs all the rest."""
 
 
+def frame_code(embedding: torch.nn.Embedding, frame: int | None, weights: torch.Tensor | None = None
+               ) -> torch.Tensor:
+    """(1,C) a training frame's code; for new controls (frame None) the training frames' codes blended by
+    `weights` (N,) (nearest_code_weights), or without them their mean."""
+    if frame is None:
+        return embedding.weight.mean(0, keepdim=True) if weights is None else weights[None] @ embedding.weight
+    return embedding(torch.tensor([frame], device=embedding.weight.device))
+
+
 def control_key(controls: Controls, num_expression: int) -> np.ndarray:
     """(D,) what of a frame's controls its code may follow: rotations (root, neck, jaw, both eyes; radians) and
     expression weights. Not the translation or the shape: where the head stands and whose it is are the same in

@@ -25,6 +25,7 @@ from torch import nn
 
 from models.avatars.base import Avatar, RayOutput, TrainingBatch
 from models.avatars.components import losses
+from models.avatars.components.codes import frame_code
 from models.avatars.components.encoding import encoded_size, frequency_encoding
 from models.avatars.components.rigid import kabsch
 from models.head.controls import Controls
@@ -210,9 +211,7 @@ class NerfaceAvatar(Avatar):
     def codes(self, frame: int | None, weights: torch.Tensor | None = None) -> torch.Tensor:
         """The latent code (1,C) of a training frame; for new controls (frame None) the training frames' codes
         blended by `weights` (N,) (Avatar.code_weights), or without them the mean code."""
-        if frame is None:
-            return self.latent.weight.mean(0, keepdim=True) if weights is None else weights[None] @ self.latent.weight
-        return self.latent(torch.tensor([frame], device=self.latent.weight.device))
+        return frame_code(self.latent, frame, weights)
 
     @property
     def chunk_rays(self) -> int:

@@ -26,6 +26,7 @@ from torch import nn
 from models.avatars.base import Avatar, RayOutput, TrainingBatch
 from models.avatars.codynerf.avatar import key_light_dir
 from models.avatars.components import losses
+from models.avatars.components.codes import frame_code
 from models.avatars.components.rigid import kabsch
 from models.avatars.primitives import march
 from models.avatars.primitives.decoder import SlabDecoder
@@ -220,9 +221,7 @@ class PrimitivesAvatar(Avatar):
 
     def codes(self, frame: int | None, weights: torch.Tensor | None = None) -> torch.Tensor:
         """The per-frame code (1,C) of a training frame; new controls: the blend `weights` give, else the mean."""
-        if frame is None:
-            return self.latent.weight.mean(0, keepdim=True) if weights is None else weights[None] @ self.latent.weight
-        return self.latent(torch.tensor([frame], device=self.latent.weight.device))
+        return frame_code(self.latent, frame, weights)
 
     # ---- the decode --------------------------------------------------------------------------------------
     def decode(self, geo: PrimitivesGeometry, code: torch.Tensor, eye: torch.Tensor) -> march.Primitives:
