@@ -38,7 +38,9 @@ from models.head.model import HeadModel
 from models.ranges import Range, check_config
 from render.camera import Camera
 from render.gl.raster import Rasterizer
+from render.gl.shadow import draw_light_depth
 from render.rays import Raster, Rays
+from render.shadow_map import LightDepthMap
 
 GAZE_JOINTS = ("eye_l", "eye_r")
 
@@ -95,12 +97,14 @@ class PrimitivesGeometry:
     condition: torch.Tensor  # (1,D) expression and jaw/neck rotations
     gaze: torch.Tensor  # (1,6)
     code_weights: torch.Tensor | None = None
+    light: LightDepthMap | None = None  # the posed mesh seen from the key light, where the avatar casts shadows
     decoded: dict = field(default_factory=dict)
 
     def to(self, device: torch.device | str) -> PrimitivesGeometry:
         w = None if self.code_weights is None else self.code_weights.to(device)
         return PrimitivesGeometry(self.posed.to(device), self.rotation.to(device), self.translation.to(device),
-                                  self.condition.to(device), self.gaze.to(device), w)
+                                  self.condition.to(device), self.gaze.to(device), w,
+                                  None if self.light is None else self.light.to(device))
 
 
 class PrimitivesAvatar(Avatar):
@@ -126,7 +130,7 @@ class PrimitivesAvatar(Avatar):
         self.condition_dim = head_model.num_expression + 6
         extra = 3 if self.light_dir is not None else 0
         self.decoder = SlabDecoder(self.condition_dim + cfg.code_dim + 3 + extra, 6, cfg.grid, cfg.voxels, 3,
-                                   cfg.width)
+                                   cfg.width, map_channels=1 if self.casts_shadows else 0)
         self.latent = nn.Embedding(n_frames, cfg.code_dim)
         nn.init.zeros_(self.latent.weight)
         self.samples = cfg.samples
@@ -158,11 +162,31 @@ class PrimitivesAvatar(Avatar):
     def needs_normals(self) -> bool:
         return "shading" in self._effects or "specular" in self._effects
 
+    @property
+    def casts_shadows(self) -> bool:
+        """The decoder reads the key light's visibility of every primitive's texels (the guide mesh's shadow map):
+        `shadows` on a capture that records its key light."""
+        return "shadows" in self._effects and self.light_dir is not None
+
     def layout(self) -> dict[str, tuple[int, float | str]]:
-        return super().layout() | {"normals": (3, 0.0)}
+        return super().layout() | {"normals": (3, 0.0), "rgb_light": (3, 1.0)}
 
     def default_buffers(self) -> tuple[str, ...]:
         return ("normals",) if self.needs_normals else ()
+
+    def inspection_buffers(self) -> tuple[str, ...]:
+        """rgb_light: the key light's visibility (1: no cast shadow), grey, composited as the colour is."""
+        return ("rgb_light",) if self.casts_shadows else ()
+
+    def inspect(self, out: RayOutput, geometry: PrimitivesGeometry, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
+        unknown = set(names) - set(self.inspection_buffers())
+        if unknown:
+            raise ValueError(f"{self.name} avatars with effects {self.describe_effects()} have no buffers {unknown}")
+        if not names:
+            return {}
+        light = out.internals[2].extra[:, -1:]
+        opacity = out.buffers["opacity"][:, None]
+        return {"rgb_light": (light + (1.0 - opacity)).clamp(0, 1).expand(-1, 3)}  # lit where nothing is
 
     @property
     def effects(self) -> tuple[str, ...]:
@@ -199,8 +223,32 @@ class PrimitivesAvatar(Avatar):
         return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_weights(controls))
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> PrimitivesGeometry:
-        del rasterizer  # the primitives' own boxes say which rays meet them
-        return self.geometry(controls)
+        """The frame's geometry; where the avatar casts shadows, with the posed mesh's depth map from the key light
+        (drawn by the GL rasterizer). Rays need no raster: the primitives' own boxes say which rays meet them."""
+        geo = self.geometry(controls)
+        if not self.casts_shadows:
+            return geo
+        if rasterizer is None:
+            raise ValueError("this avatar's decoder reads the posed mesh's shadow map: pass a rasterizer")
+        light = draw_light_depth(rasterizer, geo.posed.cpu().numpy(), self.head_model.triangles, self.light_dir)
+        geo.light = light.to(geo.posed.device)
+        return geo
+
+    @torch.no_grad()
+    def slab_visibility(self, geo: PrimitivesGeometry, centres: torch.Tensor, rotations: torch.Tensor
+                        ) -> torch.Tensor:
+        """(1,1,K M,K M) the key light's visibility (render/shadow_map.py, 1: lit) of each primitive's M x M
+        texels on its surface plane (z = 0 of its box, where it sits on the mesh), in the slab's layout: rows
+        (grid row, y), columns (grid column, x); 1 in cells without a primitive."""
+        K, M = self.cfg.grid, self.cfg.voxels
+        s = torch.linspace(-1.0, 1.0, M, device=centres.device) if M > 1 else torch.zeros(1, device=centres.device)
+        y, x = torch.meshgrid(s, s, indexing="ij")
+        local = torch.stack([x, y, torch.zeros_like(x)], -1).reshape(1, M * M, 3) * self.layout_half[:, None, None]
+        points = centres[:, None] + torch.einsum("pij,pkj->pki", rotations, local)
+        vis = geo.light.visibility(points.reshape(-1, 3)).reshape(-1, M, M)
+        image = torch.ones(K * K, M, M, device=vis.device)
+        image[self.layout_cells] = vis
+        return image.reshape(K, K, M, M).permute(0, 2, 1, 3).reshape(1, 1, K * M, K * M)
 
     def image_rays(self, geometry: PrimitivesGeometry, camera: Camera, rasterizer: Rasterizer | None
                    ) -> tuple[Rays, np.ndarray]:
@@ -232,10 +280,11 @@ class PrimitivesAvatar(Avatar):
         inputs = [geo.condition, code, view[None]]
         if self.light_dir is not None:
             inputs.append((torch.as_tensor(self.light_dir, dtype=view.dtype, device=view.device) @ geo.rotation)[None])
-        density_raw, colour_raw, offsets = self.decoder(torch.cat(inputs, -1), geo.gaze)
+        centres, rotations = surface_frames(geo.posed, self.triangles, self.layout_triangles, self.layout_bary)
+        light = self.slab_visibility(geo, centres, rotations) if self.casts_shadows else None
+        density_raw, colour_raw, offsets = self.decoder(torch.cat(inputs, -1), geo.gaze, light)
         cells = self.layout_cells
         density_raw, colour_raw, offsets = density_raw[cells], colour_raw[cells], offsets[cells]
-        centres, rotations = surface_frames(geo.posed, self.triangles, self.layout_triangles, self.layout_bary)
         half = self.layout_half[:, None] * torch.exp(offsets[:, 6:9].clamp(-3.0, 3.0))
         centres = centres + (rotations @ (offsets[:, :3] * self.layout_half[:, None])[..., None])[..., 0]
         rotations = rotations @ rotation_matrix_from_axis_angle(offsets[:, 3:6])
@@ -243,6 +292,10 @@ class PrimitivesAvatar(Avatar):
         colour = torch.sigmoid(colour_raw)
         if self.needs_normals:
             colour = torch.cat([colour, grid_normals(density, rotations, half)], -1)
+        if light is not None:  # each texel's visibility through its column of voxels: the rgb_light buffer
+            K, M = self.cfg.grid, self.cfg.voxels
+            texels = light.reshape(K, M, K, M).permute(0, 2, 1, 3).reshape(K * K, 1, M, M, 1)[cells]
+            colour = torch.cat([colour, texels.expand(-1, M, -1, -1, -1)], -1)
         return march.Primitives(centres, rotations, half, density, colour), offsets
 
     def decoded(self, geo: PrimitivesGeometry, frame: int | None, eye: torch.Tensor, training: bool):
@@ -269,7 +322,7 @@ class PrimitivesAvatar(Avatar):
                           0.0 if training else self.cfg.stop_below)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
         if self.needs_normals:
-            buffers["normals"] = out.extra
+            buffers["normals"] = out.extra[:, :3]
         return RayOutput(buffers, (prims, offsets, out))
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:

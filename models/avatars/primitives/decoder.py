@@ -5,7 +5,11 @@ whose channels are the M depth layers of opacity (and of colour, 3 M) of the K x
 tile each. Gaze enters apart from expression, concatenated to the features at the 8x8 level (the seed's
 disentangled gaze). Every upsampling level adds a learnt, untied bias map (the seed's bias maps; the prior of the
 next issue generates them per identity). At the K x K level a 1x1 convolution gives each primitive's offsets: a
-move, a turn and a log-scale, zero at the start so that the primitives begin where the layout puts them."""
+move, a turn and a log-scale, zero at the start so that the primitives begin where the layout puts them.
+
+Maps in the slab's own layout (one channel per input, K M x K M: the key light's visibility of each primitive's
+texels where the capture casts shadows) join the last upsampling (averaged to its size) and the slab's
+convolution, so what a texel decodes follows what the light sees there."""
 
 from __future__ import annotations
 
@@ -18,10 +22,11 @@ from torch import nn
 
 class SlabDecoder(nn.Module):
     def __init__(self, condition_dim: int, gaze_dim: int, grid: int, voxels: int, colour_channels: int = 3,
-                 width: int = 64, min_width: int = 16):
+                 width: int = 64, min_width: int = 16, map_channels: int = 0):
         super().__init__()
         assert grid >= 8 and grid & (grid - 1) == 0 and voxels & (voxels - 1) == 0, (grid, voxels)
         self.grid, self.voxels, self.colour_channels, self.gaze_dim = grid, voxels, colour_channels, gaze_dim
+        self.map_channels = map_channels
         self.fc = nn.Linear(condition_dim, 16 * width)
         self.width = width
         levels = int(math.log2(grid * voxels // 4))
@@ -33,29 +38,34 @@ class SlabDecoder(nn.Module):
         self.biases = nn.ParameterList()
         for k in range(levels):
             c_in = chans[k] + (gaze_dim if k == 1 else 0)  # gaze joins at 8x8 (after the first upsampling)
+            c_in += map_channels if k == levels - 1 else 0  # the maps, halved, join the last upsampling
             self.ups.append(nn.ConvTranspose2d(c_in, chans[k + 1], 4, stride=2, padding=1))
             size = 4 * 2 ** (k + 1)
             self.biases.append(nn.Parameter(torch.zeros(chans[k + 1], size, size)))
         self.out_channels = voxels * (1 + colour_channels)
-        self.slab = nn.Conv2d(chans[-1], self.out_channels, 3, padding=1)
+        self.slab = nn.Conv2d(chans[-1] + map_channels, self.out_channels, 3, padding=1)
         self.slab_bias = nn.Parameter(torch.zeros(self.out_channels, grid * voxels, grid * voxels))
         self.offsets = nn.Conv2d(chans[self.offset_level + 1], 9, 1)
         nn.init.zeros_(self.offsets.weight)
         nn.init.zeros_(self.offsets.bias)
 
-    def forward(self, condition: torch.Tensor, gaze: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """condition (1,Dc), gaze (1,Dg) -> raw opacity (K*K, M,M,M), raw colour (K*K, M,M,M, C) and offsets
-        (K*K, 9), primitives in row-major grid order, voxels [z, y, x]."""
+    def forward(self, condition: torch.Tensor, gaze: torch.Tensor, maps: torch.Tensor | None = None
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """condition (1,Dc), gaze (1,Dg), maps (1, map_channels, K M, K M) -> raw opacity (K*K, M,M,M), raw colour
+        (K*K, M,M,M, C) and offsets (K*K, 9), primitives in row-major grid order, voxels [z, y, x]."""
+        assert (maps is None) == (self.map_channels == 0), "maps go with map_channels"
         K, M, C = self.grid, self.voxels, self.colour_channels
         h = F.leaky_relu(self.fc(condition).reshape(1, self.width, 4, 4), 0.2)
         offsets = None
         for k, (up, bias) in enumerate(zip(self.ups, self.biases, strict=True)):
             if k == 1:
                 h = torch.cat([h, gaze[:, :, None, None].expand(-1, -1, h.shape[2], h.shape[3])], 1)
+            if maps is not None and k == len(self.ups) - 1:
+                h = torch.cat([h, F.avg_pool2d(maps, 2)], 1)
             h = F.leaky_relu(up(h) + bias[None], 0.2)
             if k == self.offset_level:
                 offsets = self.offsets(h)
-        slab = self.slab(h) + self.slab_bias[None]  # (1, M(1+C), K M, K M)
+        slab = self.slab(h if maps is None else torch.cat([h, maps], 1)) + self.slab_bias[None]  # (1, M(1+C), K M, K M)
         slab = slab.reshape(1 + C, M, K, M, K, M)  # channel (c, z), rows (i, y), columns (j, x)
         slab = slab.permute(2, 4, 0, 1, 3, 5).reshape(K * K, 1 + C, M, M, M)  # (prim, c, z, y, x)
         offsets = offsets[0].permute(1, 2, 0).reshape(K * K, 9)

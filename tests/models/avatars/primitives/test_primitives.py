@@ -66,6 +66,15 @@ def test_gaze_enters_apart_from_expression():
     b = dec(cond, torch.tensor([[0.3, 0.0, 0.0, 0.3, 0.0, 0.0]]))
     assert a[0].shape == (64, 4, 4, 4) and a[1].shape == (64, 4, 4, 4, 3) and a[2].shape == (64, 9)
     assert (a[0] - b[0]).abs().max() > 1e-4  # gaze changes the slabs...
+    shadowed = SlabDecoder(10, 6, grid=8, voxels=4, width=16, map_channels=1)
+    with torch.no_grad():
+        for p in shadowed.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    lit, dark = torch.ones(1, 1, 32, 32), torch.ones(1, 1, 32, 32)
+    dark[..., :4, :4] = 0.0  # the first primitive's texels in shadow
+    d = (shadowed(cond, torch.zeros(1, 6), lit)[1] - shadowed(cond, torch.zeros(1, 6), dark)[1]).abs()
+    assert d[0].max() > 1e-4  # the map changes the primitive it covers...
+    assert d[63].max() == 0  # ...and not one far from it (the last upsampling's and the slab's 3x3 reach)
     dec.offsets.weight.data.zero_()
     dec.offsets.bias.data.zero_()
     assert dec(cond, torch.zeros(1, 6))[2].abs().max() == 0  # ...and offsets start at zero
@@ -94,6 +103,24 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     lengths = np.linalg.norm(out["normals"], axis=-1)[out["opacity"] > 0.99]
     assert len(lengths) and np.median(lengths) > 0.5 and lengths.max() < 1.0 + 1e-4
     np.testing.assert_array_equal(out["rgb"], again["rgb"])
+    # `shadows` on a capture with a key light: the decoder reads the light's visibility of every texel, in the slab's
+    # layout (primitive at grid cell (i, j), texel (y, x) at image pixel (i M + y, j M + x)), from the shadow map
+    geo = avatar.frame_geometry(f.controls, r)
+    assert avatar.casts_shadows and geo.light is not None
+    from models.avatars.primitives.layout import surface_frames as frames_of
+    centres, rot = frames_of(geo.posed, avatar.triangles, avatar.layout_triangles, avatar.layout_bary)
+    image = avatar.slab_visibility(geo, centres, rot)[0, 0]
+    K, M = avatar.cfg.grid, avatar.cfg.voxels
+    for p in (0, len(centres) // 2, len(centres) - 1):
+        i, j = divmod(int(avatar.layout_cells[p]), K)
+        for y, x in ((0, 0), (M - 1, 1), (2, M - 1)):
+            point = centres[p] + avatar.layout_half[p] * ((-1 + 2 * x / (M - 1)) * rot[p, :, 0]
+                                                          + (-1 + 2 * y / (M - 1)) * rot[p, :, 1])
+            assert abs(float(image[i * M + y, j * M + x]) - float(geo.light.visibility(point[None])[0])) < 1e-5
+    assert image.min() < 0.5 < image.max()  # some texels in the head's own shadow, some lit
+    inspected = avatar.render_image(f.controls, cam, r, inspect=True)["rgb_light"]
+    assert inspected.shape == (32, 32, 3) and inspected.min() >= 0 and inspected.max() <= 1
+    assert (inspected[out["opacity"] < 1e-3] == 1).all()  # no head: nothing casts a shadow there
     # Display decodes once a frame: a frame's batches of rays share its decode.
     geo = avatar.frame_geometry(f.controls, r)
     rays, _ = avatar.image_rays(geo, cam, r)
