@@ -16,7 +16,7 @@ import os
 import platform
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Annotated
 
@@ -56,6 +56,22 @@ SETTINGS = (
 )
 REFERENCE = Quality(1.0, 32, 32)
 """The most accurate setting measured: every other setting's error against it is its error against `final`."""
+
+
+def settings_for(avatar: Avatar) -> tuple[list[Quality], Quality]:
+    """The settings that differ for this avatar, and its reference: the knobs it does not read (its
+    quality_knobs besides the image size) are left at their defaults, and settings that became one are measured
+    once (a primitives avatar reads the samples alone: no second pass, no bf16)."""
+    default = Quality()
+    keep = lambda q: replace(q, **{k: getattr(default, k) for k in ("samples", "fine", "bf16")
+                                   if k not in avatar.quality_knobs})
+    return list(dict.fromkeys(keep(q) for q in SETTINGS)), keep(REFERENCE)
+
+
+def series_name(model: str, effects: str) -> str:
+    """What a bench's rows and charts call one avatar's settings: its effect set, and its model where it is not
+    CoDyNeRF (a primitives avatar of `all` beside CoDyNeRF's)."""
+    return effects if model == "codynerf" else f"{model} {effects}"
 
 PRESET_RULES = {"final": 45.0, "preview": 35.0, "draft": 25.0}
 """Each preset is the fastest setting on the Pareto front whose PSNR against the reference is at least this
@@ -238,13 +254,14 @@ def run_bench(cfg: BenchConfig) -> int:
         if not avatar.quality_knobs:
             raise UserInputError(f"{path}: a {avatar.name} avatar renders the same at every setting (a dense "
                                  "baseline); pass it with --nerface")
-        effects = effects_name(meta["effects"])
-        ref_row, ref_images = measure(avatar, REFERENCE, frames, raster)
+        effects = series_name(avatar.name, effects_name(meta["effects"]))
+        settings, reference = settings_for(avatar)
+        ref_row, ref_images = measure(avatar, reference, frames, raster)
         avatar_rows = []
-        for q in tqdm([*SETTINGS, REFERENCE], desc=f"settings {effects}", leave=False,
-                      disable=not sys.stderr.isatty()):
-            row, images = (ref_row, ref_images) if q == REFERENCE else measure(avatar, q, frames, raster)
-            avatar_rows.append({"avatar": str(path), "effects": effects, "setting": asdict(q),
+        for q in tqdm([*(q for q in settings if q != reference), reference], desc=f"settings {effects}",
+                      leave=False, disable=not sys.stderr.isatty()):
+            row, images = (ref_row, ref_images) if q == reference else measure(avatar, q, frames, raster)
+            avatar_rows.append({"avatar": str(path), "effects": effects, "model": avatar.name, "setting": asdict(q),
                                 "label": q.describe(), "image_px": size, **row,
                                 "psnr_vs_reference": mean_psnr(images, ref_images), "_images": images})
         front = pareto([(r["ms"], -r["psnr_vs_reference"]) for r in avatar_rows])

@@ -12,7 +12,8 @@ import matplotlib.pyplot as plt
 
 from models.avatars.quality import pareto
 
-COLOURS = {"none": "tab:gray", "shading+specular": "tab:blue", "all": "tab:red"}
+COLOURS = {"none": "tab:gray", "shading+specular": "tab:blue", "all": "tab:red", "primitives none": "tab:olive",
+           "primitives all": "tab:green", "primitives shading+specular": "tab:cyan"}
 
 
 def draw_charts(results: dict, out: Path) -> list[Path]:

@@ -13,10 +13,10 @@ import pytest
 import torch
 from PIL import Image
 
-from app.bench import REFERENCE, SETTINGS, BenchConfig, choose_presets, run_bench
+from app.bench import REFERENCE, SETTINGS, BenchConfig, choose_presets, run_bench, series_name, settings_for
 from app.cli import main
 from models.avatars.quality import Quality, load_presets, pareto
-from models.avatars.registry import load_avatar
+from models.avatars.registry import load_avatar, untrained_avatar
 from models.capture.dataset import load_split
 from models.capture.frames import camera_of
 from models.training.metrics import psnr
@@ -31,6 +31,18 @@ def test_pareto_front_hand_worked():
     # (time, error): (3, 4) is beaten by (2, 3); equal points are both on the front; the fastest always is.
     assert pareto([(1.0, 5.0), (2.0, 3.0), (3.0, 4.0), (2.0, 3.0), (0.5, 9.0)]) == [True, True, False, True, True]
     assert pareto([(1.0, 1.0)]) == [True]
+
+
+def test_settings_each_model_reads(builtin_model):
+    """CoDyNeRF reads every knob: all the settings, the reference as it is. Primitives read the samples alone: no
+    second pass or bf16 settings (they would render the same), each setting once, 32 samples the reference."""
+    settings, reference = settings_for(untrained_avatar("codynerf", builtin_model))
+    assert settings == list(SETTINGS) and reference == REFERENCE
+    settings, reference = settings_for(untrained_avatar("primitives", builtin_model))
+    assert all(q.fine == 0 and not q.bf16 for q in settings) and len(set(settings)) == len(settings)
+    assert {(q.scale, q.samples) for q in settings} == {(q.scale, q.samples) for q in SETTINGS}
+    assert reference == Quality(1.0, 32) and len(settings) == 13
+    assert series_name("codynerf", "all") == "all" and series_name("primitives", "all") == "primitives all"
 
 
 def test_presets_are_the_fastest_front_settings_over_their_thresholds():

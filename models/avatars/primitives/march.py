@@ -9,9 +9,9 @@ segment in order along it.
 
 Which primitives a ray may meet (`CandidateLists`): `candidate_lists` bins the primitives' projected boxes into
 screen tiles (the rays of a camera share an origin) and gives each ray its tile's list; `every_primitive` gives
-every ray every primitive (the reference). The march goes in waves, the k-th candidate of every ray at once: the
-slab test, then samples where it meets; display stops a ray once it is opaque (early termination), so what lies
-behind the first surfaces is neither tested nor sampled.
+every ray every primitive (the reference). Training marches every (ray, candidate) pair in one pass; display in
+waves of a few candidates of every live ray at once (the slab test, then samples where they meet) and stops a ray
+once it is opaque (early termination), so what lies behind the first surfaces is neither tested nor sampled.
 """
 
 from __future__ import annotations
@@ -241,80 +241,92 @@ class MarchOutput:
     segments: int  # segments sampled
 
 
+WAVE_CANDIDATES = 8
+"""Display marches each live ray's next this many candidates at once, then drops the rays that are opaque (early
+termination by groups): fewer, larger operations than one candidate a wave, and a few more slab tests."""
+
+
 def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: Primitives,
-          lists: CandidateLists, samples: int, stop_below: float = 0.0, exact_lookup: bool = False) -> MarchOutput:
+          lists: CandidateLists, samples: int, stop_below: float = 0.0, exact_lookup: bool = False,
+          wave: int = WAVE_CANDIDATES) -> MarchOutput:
     """Composite the primitives along R rays (origins, directions (R,3), background (R,3) or (3,)), each through
-    its candidate list in order, `samples` samples a segment. Wave k takes every ray's k-th candidate: the slab
-    test, then the samples of the rays it meets. With stop_below > 0 (display) a ray takes no more candidates once
-    less than that share of its light gets through (early termination). exact_lookup: the gather-based
+    its candidate list in order, `samples` samples a segment. Without stop_below (training) every candidate in one
+    pass; with stop_below > 0 (display) in waves of `wave` candidates of every live ray, and a ray takes no more
+    once less than that share of its light gets through (early termination). exact_lookup: the gather-based
     `trilinear` instead of grid_sample (the reference)."""
-    if stop_below <= 0:
-        return march_all(origins, directions, background, prims, lists, samples, exact_lookup)
     R = len(origins)
     values = torch.cat([prims.density[..., None], prims.colour], -1)  # (P,M,M,M,1+C)
-    packed = None if exact_lookup else pack(values)
-    dtype = prims.density.dtype
-    trans = torch.ones(R, dtype=dtype, device=origins.device)
-    acc = torch.zeros(R, values.shape[-1] - 1, dtype=dtype, device=origins.device)
-    opacity = torch.zeros(R, dtype=dtype, device=origins.device)
-    depth = torch.zeros(R, dtype=dtype, device=origins.device)
-    looked = used = 0
-    longest = int(lists.count.max()) if R else 0
+    lookup_of = (lambda p, x: trilinear(values, p, x)) if exact_lookup else _packed_lookup(values)
     frames = box_frames(origins, prims)
-    for k in range(longest):
-        live = lists.count > k
+    dtype, device = prims.density.dtype, origins.device
+    trans = torch.ones(R, dtype=dtype, device=device)
+    total = Composited.empty(R, values.shape[-1] - 1, dtype, device)
+    longest = int(lists.count.max()) if R else 0
+    step = max(1, longest) if stop_below <= 0 else max(1, wave)
+    for k0 in range(0, longest, step):
+        live = lists.count > k0
         if stop_below > 0:
             live &= trans.detach() > stop_below
         r = torch.nonzero(live).squeeze(1)
         if len(r) == 0:
             break
-        p = lists.prims[lists.start[r] + k]
-        t0, t1, meet, o_box, d_box = ray_box_segments(origins, directions, prims, r, p, frames)
-        hit = torch.nonzero(meet).squeeze(1)
-        if len(hit) == 0:
-            continue
-        r, p, o_box, d_box = r[hit], p[hit], o_box[hit], d_box[hit]
-        t, delta = segment_samples(t0[hit], t1[hit], samples)  # (S,n)
-        S = len(r)
-        local = (o_box[:, None] + d_box[:, None] * t[..., None]).reshape(-1, 3)  # the box's unit frame
-        pn = p.repeat_interleave(samples)
-        v = trilinear(values, pn, local) if exact_lookup else lookup(packed, pn, local)
-        v = v.reshape(S, samples, values.shape[-1])
-        tau = (v[..., 0] * delta).clamp(0.0, MAX_OPTICAL_DEPTH)
-        inside = torch.exp(-(tau.cumsum(1) - tau))  # the light reaching each sample from the segment's start
-        w = trans[r][:, None] * inside * (1.0 - torch.exp(-tau))  # (S,n)
-        acc = acc.index_add(0, r, (w[..., None] * v[..., 1:]).sum(1))
-        opacity = opacity.index_add(0, r, w.sum(1))
-        depth = depth.index_add(0, r, (w * t).sum(1))
-        trans = trans.index_copy(0, r, trans[r] * torch.exp(-tau.sum(1)))
-        looked += S * samples
-        used += S
-    depth = torch.where(opacity > 1e-10, depth / opacity.clamp_min(1e-10), torch.zeros_like(depth))
-    return MarchOutput(acc[:, :3] + trans[:, None] * background, acc[:, 3:], opacity, depth, looked, used)
+        n = (lists.count[r] - k0).clamp(max=step)
+        ray = torch.repeat_interleave(r, n)
+        k = k0 + torch.arange(len(ray), device=device) - torch.repeat_interleave(n.cumsum(0) - n, n)
+        part = composite_pairs(origins, directions, prims, lookup_of, frames, ray,
+                               lists.prims[lists.start[ray] + k], samples, trans)
+        total = total + part
+        trans = trans * torch.exp(-part.optical_depth).to(dtype)
+    depth = torch.where(total.opacity > 1e-10, total.depth / total.opacity.clamp_min(1e-10),
+                        torch.zeros_like(total.depth))
+    return MarchOutput(total.values[:, :3] + trans[:, None] * background, total.values[:, 3:], total.opacity, depth,
+                       total.lookups, total.segments)
 
 
-def march_all(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: Primitives,
-              lists: CandidateLists, samples: int, exact_lookup: bool = False) -> MarchOutput:
-    """`march` without early termination (training), in one pass instead of waves: every (ray, candidate) pair at
-    once, already in order (ray by ray, each list front to back); the light reaching a segment is exp(-) the
-    optical depth of the ray's earlier segments (an exclusive running sum restarted at every ray). The same
-    result as the waves with nothing stopped, in fewer, larger operations (and a shorter graph to train through)."""
+def _packed_lookup(values: torch.Tensor):
+    packed = pack(values)
+    return lambda prim, local: lookup(packed, prim, local)
+
+
+@dataclass
+class Composited:
+    """What some segments of R rays add: colour channels, opacity and sum w t (each from the light that reaches
+    them), the optical depth they put in the way (float64), and the lookups and segments made."""
+
+    values: torch.Tensor  # (R,C)
+    opacity: torch.Tensor  # (R,)
+    depth: torch.Tensor  # (R,)
+    optical_depth: torch.Tensor  # (R,)
+    lookups: int = 0
+    segments: int = 0
+
+    @staticmethod
+    def empty(R: int, channels: int, dtype: torch.dtype, device: torch.device | str) -> Composited:
+        z = torch.zeros(R, dtype=dtype, device=device)
+        return Composited(torch.zeros(R, channels, dtype=dtype, device=device), z, z,
+                          torch.zeros(R, dtype=torch.float64, device=device))
+
+    def __add__(self, other: Composited) -> Composited:
+        return Composited(self.values + other.values, self.opacity + other.opacity, self.depth + other.depth,
+                          self.optical_depth + other.optical_depth, self.lookups + other.lookups,
+                          self.segments + other.segments)
+
+
+def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, lookup_of, frames: BoxFrames,
+                    ray: torch.Tensor, prim: torch.Tensor, samples: int, trans: torch.Tensor) -> Composited:
+    """The (ray, primitive) pairs (Q,) in order (ray by ray, each ray's front to back), composited over the light
+    `trans` (R,) that reaches each ray's first: the slab test, `samples` samples a segment where they meet, each
+    segment's light exp(-) the optical depth of the ray's earlier segments here (an exclusive running sum
+    restarted at every ray)."""
     R = len(origins)
-    values = torch.cat([prims.density[..., None], prims.colour], -1)  # (P,M,M,M,1+C)
-    dtype = prims.density.dtype
-    ray = torch.repeat_interleave(torch.arange(R, device=origins.device), lists.count)
-    k = torch.arange(len(ray), device=origins.device) - torch.repeat_interleave(lists.count.cumsum(0) - lists.count,
-                                                                                 lists.count)
-    prim = lists.prims[lists.start[ray] + k]
-    t0, t1, meet, o_box, d_box = ray_box_segments(origins, directions, prims, ray, prim)
+    t0, t1, meet, o_box, d_box = ray_box_segments(origins, directions, prims, ray, prim, frames)
     hit = torch.nonzero(meet).squeeze(1)
     ray, prim, o_box, d_box = ray[hit], prim[hit], o_box[hit], d_box[hit]
     t, delta = segment_samples(t0[hit], t1[hit], samples)  # (S,n)
     S = len(ray)
-    local = (o_box[:, None] + d_box[:, None] * t[..., None]).reshape(-1, 3)
-    pn = prim.repeat_interleave(samples)
-    v = trilinear(values, pn, local) if exact_lookup else lookup(pack(values), pn, local)
-    v = v.reshape(S, samples, values.shape[-1])
+    local = (o_box[:, None] + d_box[:, None] * t[..., None]).reshape(-1, 3)  # the box's unit frame
+    v = lookup_of(prim.repeat_interleave(samples), local)
+    v = v.reshape(S, samples, v.shape[-1])
     tau = (v[..., 0] * delta).clamp(0.0, MAX_OPTICAL_DEPTH)
     seg = tau.sum(1).double()
     before = seg.cumsum(0) - seg  # over all segments, then less what earlier rays took
@@ -322,13 +334,12 @@ def march_all(origins: torch.Tensor, directions: torch.Tensor, background: torch
     first[1:] = ray[1:] != ray[:-1]
     start = torch.zeros(R, dtype=before.dtype, device=origins.device)
     start[ray[first]] = before[first]
-    reach = torch.exp(-(before - start[ray])).to(dtype)  # (S,) the light reaching each segment
-    inside = torch.exp(-(tau.cumsum(1) - tau))
+    reach = trans[ray] * torch.exp(-(before - start[ray])).to(tau.dtype)  # (S,) the light reaching each segment
+    inside = torch.exp(-(tau.cumsum(1) - tau))  # within the segment
     w = reach[:, None] * inside * (1.0 - torch.exp(-tau))
-    acc = torch.zeros(R, values.shape[-1] - 1, dtype=dtype, device=origins.device).index_add(
-        0, ray, (w[..., None] * v[..., 1:]).sum(1))
-    opacity = torch.zeros(R, dtype=dtype, device=origins.device).index_add(0, ray, w.sum(1))
-    depth = torch.zeros(R, dtype=dtype, device=origins.device).index_add(0, ray, (w * t).sum(1))
-    trans = torch.exp(-torch.zeros(R, dtype=seg.dtype, device=origins.device).index_add(0, ray, seg)).to(dtype)
-    depth = torch.where(opacity > 1e-10, depth / opacity.clamp_min(1e-10), torch.zeros_like(depth))
-    return MarchOutput(acc[:, :3] + trans[:, None] * background, acc[:, 3:], opacity, depth, S * samples, S)
+    zeros = torch.zeros(R, dtype=tau.dtype, device=origins.device)
+    return Composited(torch.zeros(R, v.shape[-1] - 1, dtype=tau.dtype, device=origins.device).index_add(
+                          0, ray, (w[..., None] * v[..., 1:]).sum(1)),
+                      zeros.index_add(0, ray, w.sum(1)), zeros.index_add(0, ray, (w * t).sum(1)),
+                      torch.zeros(R, dtype=torch.float64, device=origins.device).index_add(0, ray, seg),
+                      S * samples, S)

@@ -82,23 +82,25 @@ def test_gradients_match_the_reference():
 
 
 def test_one_pass_is_the_waves_with_nothing_stopped():
-    """Training's one pass (march_all) against the waves that display uses, with a threshold no ray falls
-    below: the same images and gradients."""
+    """Training's one pass against the waves that display uses (one candidate a wave, three, eight), with a
+    threshold no ray falls below: the same images and gradients."""
     prims = random_primitives(seed=8)
     origins, dirs = camera_rays()
     lists = march.candidate_lists(origins, dirs, prims, 16)
     bg = torch.tensor([0.2, 0.3, 0.4], dtype=origins.dtype)
     outs = []
-    for stop in (0.0, 1e-300):
+    for stop, wave in ((0.0, 0), (1e-300, 1), (1e-300, 3), (1e-300, 8)):
         d = prims.density.clone().requires_grad_(True)
         p = march.Primitives(prims.centres, prims.rotations, prims.half_sizes, d, prims.colour)
-        out = march.march(origins, dirs, bg, p, lists, 5, stop_below=stop)
+        out = march.march(origins, dirs, bg, p, lists, 5, stop_below=stop, wave=wave)
         (out.rgb.square().sum() + out.depth.sum()).backward()
         outs.append((out, d.grad))
-    (a, ga), (b, gb) = outs
-    assert a.segments == b.segments > 0
-    for x, y in ((a.rgb, b.rgb), (a.opacity, b.opacity), (a.depth, b.depth), (ga, gb)):
-        torch.testing.assert_close(x, y, atol=1e-10, rtol=0)
+    (a, ga) = outs[0]
+    assert int(lists.count.max()) > 8  # the waves of eight are more than one
+    for b, gb in outs[1:]:
+        assert a.segments == b.segments > 0
+        for x, y in ((a.rgb, b.rgb), (a.opacity, b.opacity), (a.depth, b.depth), (ga, gb)):
+            torch.testing.assert_close(x, y, atol=1e-10, rtol=0)
 
 
 def test_packed_lookup_is_the_trilinear_reference():
@@ -117,9 +119,10 @@ def test_early_termination_changes_only_what_the_light_barely_reaches():
     pairs = march.candidate_lists(origins, dirs, prims, 16)
     bg = torch.tensor([0.2, 0.3, 0.4], dtype=origins.dtype)
     full = march.march(origins, dirs, bg, prims, pairs, 6)
-    cut = march.march(origins, dirs, bg, prims, pairs, 6, stop_below=1e-3)
-    assert cut.samples < 0.7 * full.samples
-    torch.testing.assert_close(cut.rgb, full.rgb, atol=2e-3, rtol=0)  # at most the light left, 1e-3, times a colour
+    for wave, saved in ((1, 0.7), (march.WAVE_CANDIDATES, 0.9)):  # the longer the waves, the later rays stop
+        cut = march.march(origins, dirs, bg, prims, pairs, 6, stop_below=1e-3, wave=wave)
+        assert cut.samples < saved * full.samples, (wave, cut.samples, full.samples)
+        torch.testing.assert_close(cut.rgb, full.rgb, atol=2e-3, rtol=0)  # at most the light left (1e-3) x a colour
 
 
 def test_one_slab_of_known_density_hand_worked():
