@@ -11,6 +11,7 @@ import numpy as np
 from PIL import Image
 
 from app.errors import UserInputError
+from models.capture.scenes import eye_attribute
 from models.files import atomic_write, atomic_write_bytes
 from models.head.controls import Controls, ControlsError, load_controls
 from models.head.head import Head, posed_mesh
@@ -106,6 +107,12 @@ def save_png(path: Path, rgb: np.ndarray) -> None:
     atomic_write(path, lambda tmp: Image.fromarray(rgb).save(tmp, format="PNG"))
 
 
+def guide_frame(head: HeadModel, verts: np.ndarray, landmarks: np.ndarray | None = None) -> MeshFrame:
+    """The posed guide mesh (V,3) as the GL preview draws it: with its rest positions and eyeballs, so the guide's
+    irises follow the gaze."""
+    return MeshFrame(verts, head.triangles, landmarks, head.template, eye_attribute(head, head.template))
+
+
 def render_head(gl: GLContext, head: HeadModel, verts: np.ndarray, lmks: np.ndarray, cfg: PreviewConfig
                 ) -> np.ndarray:
     camera = framing_camera(portrait_vertices(head), cfg.yaw_deg, cfg.pitch_deg, width_px=cfg.size[0],
@@ -113,7 +120,7 @@ def render_head(gl: GLContext, head: HeadModel, verts: np.ndarray, lmks: np.ndar
     settings = PreviewSettings(pass_name=cfg.pass_, landmarks=cfg.landmarks, shadows=cfg.shadows)
     renderer = PreviewRenderer(gl)
     try:
-        return renderer.render(MeshFrame(verts, head.triangles, lmks), camera, settings)
+        return renderer.render(guide_frame(head, verts, lmks), camera, settings)
     finally:
         renderer.release()
 

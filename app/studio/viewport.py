@@ -9,6 +9,7 @@ import numpy as np
 from imgui_bundle import imgui
 from PIL import Image
 
+from app.head_commands import guide_frame
 from app.studio import actions as a
 from app.studio.context import PanelContext
 from app.studio.neural import Result
@@ -17,7 +18,7 @@ from app.turntable import INSPECT, buffer_image
 from models.avatars.base import Avatar
 from models.head.head import posed_mesh
 from render.gl.context import GLContext
-from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
+from render.gl.preview import PreviewRenderer, PreviewSettings
 
 BUFFERS = ("rgb", "normals", "grad_normals", "depth", "opacity", "rgb_no_shadows", "rgb_light", "shadow_change",
            "shading")
@@ -91,7 +92,7 @@ class Viewport:
         settings = PreviewSettings(pass_name=d.guide_pass, wireframe_overlay=d.wireframe, landmarks=d.landmarks,
                                    samples=1, shadow_map_px=1024)
         with self.gl.current():
-            fb = self.preview.draw(MeshFrame(verts, head.triangles, lmks if d.landmarks else None), cam, settings)
+            fb = self.preview.draw(guide_frame(head, verts, lmks if d.landmarks else None), cam, settings)
             self.guide_tex = self.texture(self.guide_tex, (size, size))
             self.gl.ctx.copy_framebuffer(self.guide_tex, fb)
             self.gl.ctx.detect_framebuffer(0).use()

@@ -15,6 +15,8 @@ from render.gl.shadow import ShadowMap, bounding_sphere, light_view_projection
 from render.mesh import vertex_normals
 
 PassName = Literal["shaded", "normals", "wireframe", "shadow"]
+VERTEX_BYTES = 4 * 13
+"""A vertex in the preview's buffer: position, normal, rest position, eyeball centre and flag (float32)."""
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,10 @@ class MeshFrame:
     vertices: np.ndarray  # (V,3) metres
     triangles: np.ndarray  # (F,3)
     landmarks: np.ndarray | None = None  # (L,3)
+    canonical: np.ndarray | None = None  # (V,3) the vertices at rest, where `eyes` are given
+    eyes: np.ndarray | None = None
+    """(V,4) each eyeball vertex's eyeball centre at rest and 1, 0 elsewhere (models/capture/scenes.py
+    eye_attribute): the guide draws iris and pupil there. None: no eyes drawn."""
 
 
 class PreviewRenderer:
@@ -83,7 +89,9 @@ class PreviewRenderer:
     def _upload(self, frame: MeshFrame) -> None:
         v = np.asarray(frame.vertices, np.float32)
         n = vertex_normals(v, frame.triangles)
-        data = np.concatenate([v, n], 1).astype("f4").tobytes()
+        rest = v if frame.canonical is None or frame.eyes is None else frame.canonical
+        eyes = np.zeros((len(v), 4), np.float32) if frame.eyes is None else frame.eyes
+        data = np.concatenate([v, n, rest, eyes], 1).astype("f4").tobytes()
         if self._vbo is None or self._vbo_size != len(data):
             for b in (self._vbo, self._ibo):
                 if b is not None:
@@ -96,8 +104,8 @@ class PreviewRenderer:
             self._ibo.write(np.asarray(frame.triangles, np.int32).tobytes())
 
     def _vao(self, prog: moderngl.Program, with_normals: bool) -> moderngl.VertexArray:
-        layout = (self._vbo, "3f 3f", "in_position", "in_normal") if with_normals else \
-            (self._vbo, "3f 12x", "in_position")
+        layout = (self._vbo, "3f 3f 3f 4f", "in_position", "in_normal", "in_canonical", "in_eye") if with_normals \
+            else (self._vbo, f"3f {VERTEX_BYTES - 12}x", "in_position")
         return self.ctx.vertex_array(prog, [layout], index_buffer=self._ibo)
 
     def render(self, frame: MeshFrame, camera: Camera, settings: PreviewSettings = PreviewSettings(),
@@ -136,7 +144,8 @@ class PreviewRenderer:
             light_vp = light_view_projection(light_dir, center, radius).astype("f4")
             use_shadows = settings.shadows and settings.pass_name != "normals"
             if use_shadows:
-                shadow_tex = self._shadow.draw(self._vbo, "3f 12x", self._ibo, light_vp, settings.shadow_map_px)
+                shadow_tex = self._shadow.draw(self._vbo, f"3f {VERTEX_BYTES - 12}x", self._ibo, light_vp,
+                                               settings.shadow_map_px)
             fbo = self._framebuffer(camera.width_px, camera.height_px, settings.samples)
             fbo.use()
             fbo.clear(*settings.background, 1.0, depth=1.0)

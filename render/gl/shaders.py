@@ -15,7 +15,7 @@ OPTIONAL_STAGES = ("GEOMETRY_SHADER",)
 
 #: program -> (attributes, uniforms) that its source must declare.
 PROGRAMS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "surface": (("in_position", "in_normal"),
+    "surface": (("in_position", "in_normal", "in_canonical", "in_eye"),
                 ("u_view_projection", "u_light_view_projection", "u_light_dir", "u_albedo", "u_ambient",
                  "u_light_color", "u_shadow_bias", "u_normal_offset", "u_use_shadows", "u_mode", "u_shadow_map",
                  "u_wire_color", "u_wire_width_px")),

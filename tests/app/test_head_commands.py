@@ -168,3 +168,23 @@ def test_every_subcommand_has_a_help_that_formats(capsys):
     with pytest.raises(SystemExit):
         main(["synth", "--help"])
     assert "(about 10%)" in " ".join(capsys.readouterr().out.split())  # the docstring's own words, % and all
+
+
+@pytest.mark.gl
+def test_guide_irises_follow_the_gaze(tmp_path):
+    """The guide draws each eyeball's iris and pupil about its rest axis: gaze turned 0.4 rad about the vertical
+    (towards +x, the image's right from the front) moves both irises' blue pixels right, by pixels read back."""
+    gaze = tmp_path / "gaze.json"
+    gaze.write_text(json.dumps({"gaze": {"left": [0.0, 0.4, 0.0], "right": [0.0, 0.4, 0.0]}}))
+    centres = []
+    for extra in ([], ["--controls", str(gaze)]):
+        out = tmp_path / f"eyes{len(extra)}.png"
+        assert main(["preview", "--size", "256", "256", "--yaw-deg", "0", "--out", str(out), *extra]) == 0
+        img = np.asarray(Image.open(out)).astype(int)
+        iris = (img[..., 2] > img[..., 0] + 25) & (img[..., 2] > 60)  # blue-grey: skin and background are not
+        rows, cols = np.nonzero(iris)
+        left, right = cols < 128, cols >= 128
+        assert left.sum() > 8 and right.sum() > 8, (left.sum(), right.sum())  # an iris in each eye
+        centres.append((cols[left].mean(), cols[right].mean()))
+    (l0, r0), (l1, r1) = centres
+    assert l1 - l0 > 1 and r1 - r0 > 1 and (l1 - l0) + (r1 - r0) > 4, centres  # a lid covers part of one
