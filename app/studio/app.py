@@ -88,6 +88,8 @@ class Studio:
         self.last_submit_id = 0
         self.last_submit_time = 0.0
         self.latency_ms: float | None = None
+        self.pass_latency_ms: dict[str, float] = {}
+        """Since the last request: ms from its submission to each of its passes' pixels (draft, preview, final)."""
         self.clock = FrameClock()
         self.frame_count = 0
         self.gl: GLContext | None = None
@@ -227,8 +229,10 @@ class Studio:
         if self.script is not None:
             self.script.step(self)
         result = self.worker.result
-        if result is not None and result.request_id == self.last_submit_id and self.latency_ms is None:
-            self.latency_ms = 1e3 * (time.perf_counter() - self.last_submit_time)
+        if result is not None and result.request_id == self.last_submit_id:
+            ms = 1e3 * (time.perf_counter() - self.last_submit_time)
+            self.latency_ms = ms if self.latency_ms is None else self.latency_ms
+            self.pass_latency_ms.setdefault(result.pass_name, ms)
 
         w, h = imgui.get_io().display_size
         left, right = 330, 420
@@ -242,6 +246,7 @@ class Studio:
         self._close_dialog()
         if self.session.dirty:
             self.latency_ms = None
+            self.pass_latency_ms = {}
             self.submit_render()
         self.frame_count += 1
         if self.cfg.screenshot and self.script is None and self.frame_count >= self.cfg.frames:
@@ -306,10 +311,12 @@ class Studio:
                 "fps_loading": round(self.clock.fps("loading"), 1),
                 "gui_ms_median": round(float(np.median(self.gui_ms)), 2) if self.gui_ms else None,
                 "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 1),
+                "pass_latency_ms": {k: round(v, 1) for k, v in self.pass_latency_ms.items()},
                 "last_pass": None if r is None else {"pass": r.pass_name, "ms": round(r.ms, 1)},
                 "presets": {"ms": self.worker.figures.ms, "psnr_vs_final": self.worker.figures.psnr_vs_final},
                 "errors": list(self.session.errors),
-                "steps_run": None if self.script is None else self.script.ran}
+                "steps_run": None if self.script is None else self.script.ran,
+                "latencies": None if self.script is None else self.script.latencies}
 
     def close(self) -> None:
         """The window is gone, however it ended (closed, a script done or failed, an error): the renders stop,

@@ -38,9 +38,6 @@ class Result:
     ms: float
 
 
-INTERACTIVE_CHUNK = 1024
-"""Rays a batch in the window: a new request waits at most for the batch in flight (a quarter of the avatars'
-own 4096, whose batches are for throughput)."""
 
 
 @dataclass
@@ -149,7 +146,7 @@ class NeuralWorker:
             t0 = time.perf_counter()
             buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
                                           should_stop=lambda: self._stale(request_id), inspect=request.inspect,
-                                          chunk_rays=INTERACTIVE_CHUNK)
+                                          chunk_rays=avatar.interactive_chunk_rays)
             ms = 1e3 * (time.perf_counter() - t0)
             with self._cv:
                 if self._stale(request_id):
@@ -172,7 +169,7 @@ class NeuralWorker:
                 t0 = time.perf_counter()
                 images[name] = avatar.render_image(avatar.at_rest(Controls()), c, raster,
                                                    should_stop=lambda: self._stale(request_id),
-                                                   chunk_rays=INTERACTIVE_CHUNK)["rgb"]
+                                                   chunk_rays=avatar.interactive_chunk_rays)["rgb"]
                 times.append(1e3 * (time.perf_counter() - t0))
             figures.ms[name] = float(np.median(times))
             reference = images["final"]

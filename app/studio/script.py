@@ -11,6 +11,8 @@ pictures). Steps:
   {"timeline": FRAME}                     show a capture frame's controls (-1: the sliders)
   {"refine_to": PRESET}                   the pass the viewport refines to
   {"wait_render": PRESET}                 until the latest request's pass PRESET is on screen
+  {"record_latency": true}                the ms from the last change to each of its passes' pixels, kept for
+                                          the report's "latencies" (benchmarks/bench_studio.py)
   {"save_neural": PNG}                    the neural image as shown
   {"screenshot": PNG}                     the whole window
   {"save_viewport": PNG}                  the viewport as shown (the Export panel's "Screenshot viewport")
@@ -62,6 +64,7 @@ class Driven(Protocol):
     exporter: Exporter
     viewport: Viewport
     last_submit_id: int
+    pass_latency_ms: dict[str, float]
 
     def act(self, action: a.Action | a.Command) -> None: ...
 
@@ -94,6 +97,8 @@ class Script:
     ran: int = 0
     """Steps completed (the report's steps_run: every step runs once)."""
     log: list[str] = field(default_factory=list)
+    latencies: list[dict[str, float]] = field(default_factory=list)
+    """What each record_latency step saw."""
 
     @staticmethod
     def load(path: Path) -> Script:
@@ -209,6 +214,12 @@ def _wait_render(sc: Script, st: Driven, s: dict) -> bool:
     if sc.waiting(ok or bool(st.worker.error)):
         return False
     return sc.fail(st.worker.error) if st.worker.error else True
+
+
+@step("record_latency")
+def _record_latency(sc: Script, st: Driven, s: dict) -> bool:
+    sc.latencies.append(dict(st.pass_latency_ms))
+    return True
 
 
 @step("save_neural")

@@ -343,6 +343,12 @@ class Avatar(nn.Module, ABC):
         """Rays per batch when rendering an image (memory)."""
         return 4096
 
+    @property
+    def interactive_chunk_rays(self) -> int:
+        """Rays a batch in the studio's window: a new request waits at most for the batch in flight (a quarter of
+        chunk_rays, whose batches are for throughput: about 40 ms of CoDyNeRF's `final` here)."""
+        return 1024
+
 
 def camera_key(camera: Camera) -> np.ndarray:
     """(22,) float64: a camera's image size, pixel intrinsics and view matrix (which camera a plate belongs to)."""

@@ -23,7 +23,7 @@ import torch.nn.functional as F
 from scipy.ndimage import binary_dilation
 from torch import nn
 
-from models.avatars.base import Avatar, RayOutput, TrainingBatch
+from models.avatars.base import BACKGROUND, Avatar, RayOutput, TrainingBatch
 from models.avatars.codynerf.avatar import key_light_dir
 from models.avatars.components import losses
 from models.avatars.components.codes import frame_code
@@ -169,24 +169,29 @@ class PrimitivesAvatar(Avatar):
         return "shadows" in self._effects and self.light_dir is not None
 
     def layout(self) -> dict[str, tuple[int, float | str]]:
-        return super().layout() | {"normals": (3, 0.0), "rgb_light": (3, 1.0)}
+        return super().layout() | {"normals": (3, 0.0), "rgb_light": (3, 1.0), "rgb_no_shadows": (3, BACKGROUND)}
 
     def default_buffers(self) -> tuple[str, ...]:
         return ("normals",) if self.needs_normals else ()
 
     def inspection_buffers(self) -> tuple[str, ...]:
-        """rgb_light: the key light's visibility (1: no cast shadow), grey, composited as the colour is."""
-        return ("rgb_light",) if self.casts_shadows else ()
+        """rgb_light: the key light's visibility (1: no cast shadow), grey, composited as the colour is;
+        rgb_no_shadows: the render decoded with every texel lit (the shadow map's input at 1)."""
+        return ("rgb_no_shadows", "rgb_light") if self.casts_shadows else ()
 
     def inspect(self, out: RayOutput, geometry: PrimitivesGeometry, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
         unknown = set(names) - set(self.inspection_buffers())
         if unknown:
             raise ValueError(f"{self.name} avatars with effects {self.describe_effects()} have no buffers {unknown}")
-        if not names:
-            return {}
-        light = out.internals[2].extra[:, -1:]
-        opacity = out.buffers["opacity"][:, None]
-        return {"rgb_light": (light + (1.0 - opacity)).clamp(0, 1).expand(-1, 3)}  # lit where nothing is
+        _, _, marched, rays, frame = out.internals
+        found = {}
+        if "rgb_light" in names:
+            light, opacity = marched.extra[:, -1:], out.buffers["opacity"][:, None]
+            found["rgb_light"] = (light + (1.0 - opacity)).clamp(0, 1).expand(-1, 3)  # lit where nothing is
+        if "rgb_no_shadows" in names:
+            lit = self.render_rays(rays, geometry, frame, lit=True)
+            found["rgb_no_shadows"] = lit.buffers["rgb"]
+        return found
 
     @property
     def effects(self) -> tuple[str, ...]:
@@ -206,6 +211,12 @@ class PrimitivesAvatar(Avatar):
     @property
     def chunk_rays(self) -> int:
         return self.cfg.chunk_rays
+
+    @property
+    def interactive_chunk_rays(self) -> int:
+        """A quarter of a 256 px frame a batch in the window: a batch's candidate lists and march cost less per ray
+        in larger batches, and one batch of this takes tens of milliseconds here."""
+        return 1 << 14
 
     # ---- per frame -------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -272,16 +283,19 @@ class PrimitivesAvatar(Avatar):
         return frame_code(self.latent, frame, weights)
 
     # ---- the decode --------------------------------------------------------------------------------------
-    def decode(self, geo: PrimitivesGeometry, code: torch.Tensor, eye: torch.Tensor) -> march.Primitives:
+    def decode(self, geo: PrimitivesGeometry, code: torch.Tensor, eye: torch.Tensor, lit: bool = False
+               ) -> march.Primitives:
         """The frame's primitives, placed on its posed mesh, for a camera at `eye` (3,) (the view enters the
-        decoder as the direction to the eye in the head's frame)."""
+        decoder as the direction to the eye in the head's frame). lit: every texel lit (no cast shadows)."""
         view = (eye - geo.translation) @ geo.rotation  # R^T (eye - t)
         view = view / view.norm().clamp_min(1e-9)
         inputs = [geo.condition, code, view[None]]
         if self.light_dir is not None:
             inputs.append((torch.as_tensor(self.light_dir, dtype=view.dtype, device=view.device) @ geo.rotation)[None])
         centres, rotations = surface_frames(geo.posed, self.triangles, self.layout_triangles, self.layout_bary)
-        light = self.slab_visibility(geo, centres, rotations) if self.casts_shadows else None
+        light = None if not self.casts_shadows else torch.ones(1, 1, self.cfg.grid * self.cfg.voxels,
+                                                                 self.cfg.grid * self.cfg.voxels, device=code.device) \
+            if lit else self.slab_visibility(geo, centres, rotations)
         density_raw, colour_raw, offsets = self.decoder(torch.cat(inputs, -1), geo.gaze, light)
         cells = self.layout_cells
         density_raw, colour_raw, offsets = density_raw[cells], colour_raw[cells], offsets[cells]
@@ -298,24 +312,28 @@ class PrimitivesAvatar(Avatar):
             colour = torch.cat([colour, texels.expand(-1, M, -1, -1, -1)], -1)
         return march.Primitives(centres, rotations, half, density, colour), offsets
 
-    def decoded(self, geo: PrimitivesGeometry, frame: int | None, eye: torch.Tensor, training: bool):
-        """decode, cached on the geometry for display (one decode a frame, whatever the batches of rays)."""
+    def decoded(self, geo: PrimitivesGeometry, frame: int | None, eye: torch.Tensor, training: bool,
+                lit: bool = False):
+        """decode, cached on the geometry for display (one decode a frame, and one lit for inspection, whatever
+        the batches of rays)."""
         code = self.codes(frame, geo.code_weights)
         if training:
-            return self.decode(geo, code, eye)
+            return self.decode(geo, code, eye, lit)
         key = (frame, tuple(round(float(x), 6) for x in eye))
-        if key not in geo.decoded:
+        if geo.decoded.get("key") != key:
             geo.decoded.clear()
-            geo.decoded[key] = self.decode(geo, code, eye)
-        return geo.decoded[key]
+            geo.decoded["key"] = key
+        if lit not in geo.decoded:
+            geo.decoded[lit] = self.decode(geo, code, eye, lit)
+        return geo.decoded[lit]
 
     # ---- rays ------------------------------------------------------------------------------------------
     def render_rays(self, rays: Rays, geometry: PrimitivesGeometry, frame: int | None,
-                    generator: torch.Generator | None = None, training: bool = False) -> RayOutput:
+                    generator: torch.Generator | None = None, training: bool = False, lit: bool = False) -> RayOutput:
         """rgb, opacity and depth of R rays marched through the primitives they meet (one pinhole's rays are
-        binned in screen tiles, march.candidate_lists)."""
+        binned in screen tiles, march.candidate_lists). lit: decoded with every texel lit (inspection)."""
         del generator  # the march is deterministic
-        prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training)
+        prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit)
         lists = march.candidate_lists(rays.origins, rays.directions, prims)
         out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims, lists,
                           self.samples if not training else self.cfg.samples,
@@ -323,12 +341,12 @@ class PrimitivesAvatar(Avatar):
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
         if self.needs_normals:
             buffers["normals"] = out.extra[:, :3]
-        return RayOutput(buffers, (prims, offsets, out))
+        return RayOutput(buffers, (prims, offsets, out, rays, frame))
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
         c = self.cfg
         out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)
-        prims, offsets, _ = out.internals
+        prims, offsets = out.internals[:2]
         volume = (prims.half_sizes.prod(1) / self.layout_half.pow(3)).mean()
         return {"photometric": losses.photometric(out.buffers["rgb"], batch.target),
                 "volume": c.volume * volume,

@@ -65,8 +65,8 @@ def test_expression_slider_changes_the_face(display, avatar, tmp_path):
     steps = [
         {"refine_to": "preview"}, {"wait_render": "preview"}, {"save_neural": str(a)}, {"screenshot": str(wa)},
         {"expression": "mouthStretch", "value": 1.5}, {"jaw_open_deg": 25},
-        {"wait_render": "preview"}, {"save_neural": str(b)}, {"screenshot": str(wb)}, {"save_viewport": str(shot)},
-        {"wait_frames": 2}]
+        {"wait_render": "preview"}, {"record_latency": True}, {"save_neural": str(b)}, {"screenshot": str(wb)},
+        {"save_viewport": str(shot)}, {"wait_frames": 2}]
     report = run_script(display, tmp_path, avatar, steps)
     assert report["steps_run"] == len(steps)  # none skipped (a screenshot once ended two steps)
     na, nb = (np.asarray(Image.open(p), np.int16) for p in (a, b))
@@ -81,6 +81,8 @@ def test_expression_slider_changes_the_face(display, avatar, tmp_path):
     assert (np.abs(sa - sb).max(-1) > 10).mean() > 0.002  # the guide mesh and the render, in the window
     assert report["errors"] == [] and report["fps_idle"] + report["fps_rendering"] > 0
     assert report["latency_ms"] is not None
+    moved = report["latencies"][0]  # the move's passes: the first pixels no later than the preview's
+    assert 0 < moved["preview"] and moved.get("draft", moved["preview"]) <= moved["preview"], moved
     # "Screenshot viewport": the guide and the render beside it, as the window shows them (not the render alone).
     view = np.asarray(Image.open(shot), np.int16)
     h, w = view.shape[:2]
