@@ -6,6 +6,7 @@ pictures). Steps:
   {"expression": NAME|INDEX, "value": W}  move an expression slider
   {"jaw_open_deg": D}                     open the jaw, degrees
   {"head": [YAW, PITCH, ROLL]}            turn the head, degrees
+  {"gaze": [YAW, PITCH]}                  turn both eyes, degrees
   {"view": {"yaw_deg": ...}}              the orbit camera (yaw_deg, pitch_deg, zoom, fov_deg)
   {"buffer": NAME}                        the neural buffer on screen
   {"timeline": FRAME}                     show a capture frame's controls (-1: the sliders)
@@ -177,6 +178,13 @@ def _jaw(sc: Script, st: Driven, s: dict) -> bool:
 @step("head")
 def _head(sc: Script, st: Driven, s: dict) -> bool:
     st.act(a.SetAngles("head", tuple(float(v) for v in s["head"])))
+    return True
+
+
+@step("gaze")
+def _gaze(sc: Script, st: Driven, s: dict) -> bool:
+    for eye in ("gaze_left", "gaze_right"):
+        st.act(a.SetAngles(eye, tuple(float(v) for v in s["gaze"])))
     return True
 
 

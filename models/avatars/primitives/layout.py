@@ -85,10 +85,16 @@ def chart_directions(grid: int) -> np.ndarray:
     return np.stack([np.cos(e) * np.sin(a), np.sin(e), np.cos(e) * np.cos(a)], -1).reshape(-1, 3)
 
 
+MIN_INCIDENCE = 0.4
+"""The least cosine between a chart ray and the surface it leaves through that sizes a primitive: a ray that leaves
+at a grazing angle (the neck, below the chin) covers a patch 1/cos as long as the cell is wide, up to 2.5x."""
+
+
 def primitive_layout(model: HeadModel, grid: int, overlap: float = 1.3) -> PrimitiveLayout:
     """A primitive at each cell of the chart whose ray leaves the template somewhere; its half-size is half the
-    cell's width where it sits (the distance times the cell's angle, the larger of its two sides), times
-    `overlap` so that neighbours leave no gaps."""
+    surface patch the cell covers (the distance times the cell's angle, the larger of its two sides, over the
+    cosine at which the ray leaves the surface, at least MIN_INCIDENCE), times `overlap` so that neighbours leave
+    no gaps."""
     verts = np.asarray(model.template, np.float64)
     tris = np.asarray(model.triangles, np.int64)
     centre = 0.5 * (verts.min(0) + verts.max(0))
@@ -99,7 +105,11 @@ def primitive_layout(model: HeadModel, grid: int, overlap: float = 1.3) -> Primi
     el = np.radians(np.interp((keep // grid + 0.5) / grid, [0, 1], ELEVATION_DEG))
     d_az = np.radians(np.ptp(AZIMUTH_DEG)) / grid * np.cos(el)
     d_el = np.radians(np.ptp(ELEVATION_DEG)) / grid
-    half = 0.5 * overlap * t[keep] * np.maximum(d_az, d_el)
+    tri = verts[tris[f[keep]]]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-18)
+    incidence = np.abs((normal * chart_directions(grid)[keep]).sum(1)).clip(MIN_INCIDENCE, 1.0)
+    half = 0.5 * overlap * t[keep] * np.maximum(d_az, d_el) / incidence
     return PrimitiveLayout(grid, f[keep], b[keep], np.stack([keep // grid, keep % grid], 1),
                            half.astype(np.float32))
 
