@@ -1,6 +1,7 @@
 """Where a primitives avatar's frame time goes, at 128, 256 and 512 pixels on this machine: the decode (once a
-frame), the screen tiles' candidate lists, the march (slab tests, lookups and compositing, in waves), and the
-whole `render_image` (posing the mesh, rays, images); with the lookups made and the lookups a second.
+frame), the screen tiles' candidate lists, the march (slab tests, lookups and compositing, in waves) and within it
+the lookups (one timed march), and the whole `render_image` (posing the mesh, rays, images); with the lookups made
+and the lookups a second.
 
     .venv/bin/python -m benchmarks.bench_primitives AVATAR [--out benchmarks/results/primitives.json]
 """
@@ -10,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import time
 from pathlib import Path
 
 import torch
@@ -41,11 +43,24 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int) -> dict:
             return march.march(rays.origins, rays.directions, bg, prims, lists, avatar.samples, avatar.cfg.stop_below)
 
         march_s = median_seconds(run)
-        out = run()
+        looked = []  # the lookups' share of one march: march.lookup timed where the march calls it
+        plain = march.lookup
+
+        def timed(*args):
+            t0 = time.perf_counter()
+            v = plain(*args)
+            looked.append(time.perf_counter() - t0)
+            return v
+
+        march.lookup = timed
+        try:
+            out = run()
+        finally:
+            march.lookup = plain
     whole = median_seconds(lambda: avatar.render_image(controls, cam, raster))
     return {"size": size, "rays": len(rays), "decode_ms": 1e3 * decode, "lists_ms": 1e3 * lists_s,
-            "march_ms": 1e3 * march_s, "render_image_ms": 1e3 * whole, "candidates": lists.pairs,
-            "segments": out.segments, "lookups": out.samples, "lookups_per_s": out.samples / march_s}
+            "march_ms": 1e3 * march_s, "lookup_ms": 1e3 * sum(looked), "render_image_ms": 1e3 * whole,
+            "candidates": lists.pairs, "segments": out.segments, "lookups": out.samples, "lookups_per_s": out.samples / march_s}
 
 
 def main() -> None:
