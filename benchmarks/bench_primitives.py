@@ -60,7 +60,8 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int) -> dict:
     whole = median_seconds(lambda: avatar.render_image(controls, cam, raster))
     return {"size": size, "rays": len(rays), "decode_ms": 1e3 * decode, "lists_ms": 1e3 * lists_s,
             "march_ms": 1e3 * march_s, "lookup_ms": 1e3 * sum(looked), "render_image_ms": 1e3 * whole,
-            "candidates": lists.pairs, "segments": out.segments, "lookups": out.samples, "lookups_per_s": out.samples / march_s}
+            "candidates": lists.pairs, "segments": out.segments, "lookups": out.samples,
+            "lookups_per_s": out.samples / march_s}
 
 
 def main() -> None:

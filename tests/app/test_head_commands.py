@@ -182,7 +182,7 @@ def test_guide_irises_follow_the_gaze(tmp_path):
         assert main(["preview", "--size", "256", "256", "--yaw-deg", "0", "--out", str(out), *extra]) == 0
         img = np.asarray(Image.open(out)).astype(int)
         iris = (img[..., 2] > img[..., 0] + 25) & (img[..., 2] > 60)  # blue-grey: skin and background are not
-        rows, cols = np.nonzero(iris)
+        cols = np.nonzero(iris)[1]
         left, right = cols < 128, cols >= 128
         assert left.sum() > 8 and right.sum() > 8, (left.sum(), right.sum())  # an iris in each eye
         centres.append((cols[left].mean(), cols[right].mean()))
