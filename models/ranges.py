@@ -45,6 +45,14 @@ def ranges_of(hint: object) -> list[Range]:
     return [m for m in getattr(hint, "__metadata__", ()) if isinstance(m, Range)]
 
 
+def numeric(hint: object) -> bool:
+    """A field typed int or float (alone, Annotated, optional or as a tuple's items)."""
+    if typing.get_origin(hint) in (typing.Union, types.UnionType, tuple):
+        return any(numeric(arg) for arg in typing.get_args(hint) if arg is not type(None) and arg is not Ellipsis)
+    base = typing.get_args(hint)[0] if typing.get_origin(hint) is typing.Annotated else hint
+    return base in (int, float)
+
+
 def config_problems(cfg: object) -> list[str]:
     """Every field of a config dataclass out of its range ("--size 0: must be at least 32"); floats (alone or in
     tuples) must be finite."""
@@ -57,6 +65,9 @@ def config_problems(cfg: object) -> list[str]:
         ranges = ranges_of(hints[f.name])
         values = value if isinstance(value, tuple) else (value,)
         for v in values:
+            if isinstance(v, str) and numeric(hints[f.name]):
+                out.append(f"{option_name(f.name)} {v!r}: must be a number")
+                break
             if not isinstance(v, (int, float)) or isinstance(v, bool):
                 continue
             why = next((r.problem(v) for r in ranges if r.problem(v)), None) if ranges else \

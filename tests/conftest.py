@@ -15,6 +15,8 @@ SHARED_DATA = REPO.parent / "shared" / "data"
 ICT_NPZ = SHARED_DATA / "ict_facekit" / "ict_head.npz"
 LANDMARKER = SHARED_DATA / "mediapipe" / "face_landmarker_v2_with_blendshapes.task"
 FACE_VIDEO = SHARED_DATA / "video" / "expressions_d3.mp4"
+DEMO = REPO / "resources" / "demo_avatar"  # what the studio opens: a primitives avatar
+CODYNERF_DEMO = REPO / "resources" / "codynerf_avatar"  # the CoDyNeRF avatar shipped beside it
 
 
 @pytest.fixture(scope="session")

@@ -56,7 +56,8 @@ def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar, dict]:
     # draft/preview/final, chosen and measured by `bench` (and where: machine, image size), else built in
     avatar.presets, avatar.presets_measured = load_presets(folder)
     size = meta.get("image_px")
-    avatar.capture_px = int(size[0]) if isinstance(size, list) and size and isinstance(size[0], int) else None
+    width = size[0] if isinstance(size, list) and size else None
+    avatar.capture_px = width if isinstance(width, int) and width >= 16 else None  # else not recorded
     rest = meta.get("rest_pose", {}).get("translation") if isinstance(meta.get("rest_pose"), dict) else None
     try:
         t = np.asarray(rest if rest is not None else [0.0, 0.0, 0.0], np.float32)

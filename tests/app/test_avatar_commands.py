@@ -110,7 +110,7 @@ def test_turntable_sweeps_about_the_front(tmp_path, capsys, gl):
     cfg = TurntableConfig(avatar=demo, frames=4, sweep_deg=30.0, size=32, preset="draft")
     frames = list(turntable_frames(avatar, Rasterizer(gl), cfg))
     full = list(turntable_frames(avatar, Rasterizer(gl), TurntableConfig(avatar=demo, frames=12, size=32,
-                                                                         preset="draft")))
+                                                                         sweep_deg=0.0, preset="draft")))
     assert np.abs(frames[0].astype(int) - frames[2]).max() <= 1  # sin(pi) = 1e-16: the front again
     np.testing.assert_array_equal(frames[0], full[0])  # yaw 0 in both
     np.testing.assert_array_equal(frames[1], full[1])  # 30 degrees: the full turn's second of 12 frames

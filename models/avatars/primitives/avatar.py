@@ -149,8 +149,8 @@ class PrimitivesAvatar(Avatar):
         check_config(cfg)
         light = meta.get("light_dir")
         light = None if light is None else tuple(float(v) for v in light)
-        if light is not None and (len(light) != 3 or not np.isfinite(light).all()):
-            raise ValueError(f"light_dir {meta['light_dir']}: not a direction (three finite numbers)")
+        if light is not None and (len(light) != 3 or not np.isfinite(light).all() or np.linalg.norm(light) < 1e-6):
+            raise ValueError(f"light_dir {meta['light_dir']}: not a direction (three finite numbers, not all 0)")
         return cls(head_model, cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32),
                    tuple(meta.get("effects", ())), light)
 

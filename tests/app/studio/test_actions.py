@@ -181,7 +181,7 @@ def test_commands_carried_out_by_the_application(tmp_path, files):
         assert studio.session.avatar is None and str(tmp_path / "nothing") in studio.session.errors[-1]
         studio.act(a.OpenAvatar(DEMO))
         settle()
-        assert studio.session.folder == DEMO and studio.session.avatar.name == "codynerf"
+        assert studio.session.folder == DEMO and studio.session.avatar.name == "primitives"
         before = list(studio.session.errors)
         studio.act(a.StartTraining(str(tmp_path), str(tmp_path / "out")))
         assert str(tmp_path) in studio.session.job_message and not studio.jobs.jobs  # in the Jobs panel

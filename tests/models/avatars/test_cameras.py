@@ -3,8 +3,6 @@ off-centre crop of the same view (principal point moved, fx != fy) gives the sam
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
@@ -15,8 +13,8 @@ from models.avatars.registry import load_avatar
 from models.head.controls import Controls
 from render.camera import Camera, framing_camera
 from render.gl.raster import Rasterizer
+from tests.conftest import CODYNERF_DEMO
 
-DEMO = Path(__file__).resolve().parents[3] / "resources" / "demo_avatar"
 pytestmark = pytest.mark.gl
 LEFT, TOP, W, H = 11, 7, 38, 44
 
@@ -30,7 +28,7 @@ def cameras(template: np.ndarray) -> tuple[Camera, Camera]:
 
 
 def test_codynerf_crop_renders_the_same_pixels(gl):
-    avatar, _ = load_avatar(DEMO)
+    avatar, _ = load_avatar(CODYNERF_DEMO)
     full_cam, crop_cam = cameras(avatar.head_model.template)
     r = Rasterizer(gl)
     controls = Controls(jaw=np.array([0.2, 0.0, 0.0], np.float32))

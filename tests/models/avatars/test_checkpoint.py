@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 
 import pytest
 import torch
 
 from models.avatars.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from tests.conftest import CODYNERF_DEMO, DEMO
 
 
 def tensors(seed: int) -> dict[str, torch.Tensor]:
@@ -75,17 +75,20 @@ def test_bad_folders_name_the_problem(tmp_path):
         load_checkpoint(tmp_path)
 
 
-@pytest.mark.parametrize("change", [
-    {"background": "abc"}, {"background": [0.5, 0.5]}, {"frames": "many"}, {"frames": 0}, {"frames": 7},
-    {"render": {"chunk_rays": 0}}, {"render": {"samples_per_ray": 0}}, {"render": {"shell_m": -0.03}},
-    {"field": {"light_dir": [0, 0, 0]}}, {"field": {"width": 65}}])
-def test_a_broken_avatar_json_is_one_clear_line(change, tmp_path, capsys):
+@pytest.mark.parametrize(("demo", "change"), [
+    (CODYNERF_DEMO, c) for c in [
+        {"background": "abc"}, {"background": [0.5, 0.5]}, {"frames": "many"}, {"frames": 0}, {"frames": 7},
+        {"render": {"chunk_rays": 0}}, {"render": {"samples_per_ray": 0}}, {"render": {"shell_m": -0.03}},
+        {"field": {"light_dir": [0, 0, 0]}}, {"field": {"width": 65}}]] + [
+    (DEMO, c) for c in [
+        {"frames": 7}, {"primitives": {"grid": 0}}, {"primitives": {"samples": "many"}},
+        {"primitives": {"width": 65}}, {"light_dir": [0, 0, 0]}, {"primitives": {"voxels": 1}}]])
+def test_a_broken_avatar_json_is_one_clear_line(demo, change, tmp_path, capsys):
     """Each of these once ended in a traceback, a torch dump or a silent wrong render."""
     import shutil
 
     from app.cli import main
 
-    demo = Path(__file__).resolve().parents[3] / "resources" / "demo_avatar"
     folder = tmp_path / "av"
     shutil.copytree(demo, folder)
     meta = json.loads((folder / "avatar.json").read_text())

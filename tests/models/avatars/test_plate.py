@@ -4,7 +4,6 @@ composited behind the avatar along the capture camera's rays only, and saved wit
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,8 +14,7 @@ from models.head.controls import Controls
 from models.tracking.masks import background_plate
 from render.camera import framing_camera
 from render.gl.raster import Rasterizer
-
-DEMO = Path(__file__).resolve().parents[3] / "resources" / "demo_avatar"
+from tests.conftest import CODYNERF_DEMO
 
 
 def test_plate_is_the_room_where_the_person_leaves_it_free():
@@ -51,7 +49,7 @@ def test_plate_is_the_room_where_the_person_leaves_it_free():
 def test_plate_composites_behind_the_capture_camera_only(gl):
     """The same avatar with and without a plate: along the plate's camera, every pixel differs by exactly the light
     that passes the avatar times (plate - background colour); any other camera sees the background colour."""
-    avatar, _ = load_avatar(DEMO)
+    avatar, _ = load_avatar(CODYNERF_DEMO)
     cam = framing_camera(avatar.head_model.template, 10.0, 0.0, fov_y_deg=18.0, width_px=40, height_px=36)
     r = Rasterizer(gl)
     controls = Controls(jaw=np.array([0.15, 0.0, 0.0], np.float32))
@@ -73,7 +71,7 @@ def test_plate_composites_behind_the_capture_camera_only(gl):
 
 
 def test_plate_is_saved_with_the_avatar(tmp_path):
-    avatar, meta = load_avatar(DEMO)
+    avatar, meta = load_avatar(CODYNERF_DEMO)
     cam = framing_camera(avatar.head_model.template, 0.0, 0.0, width_px=12, height_px=10)
     plate = np.random.default_rng(2).random((10, 12, 3)).astype(np.float32)
     avatar.set_plate(plate, cam)
@@ -83,4 +81,4 @@ def test_plate_is_saved_with_the_avatar(tmp_path):
     assert again.plate_for(cam) is not None and again.plate_for(cam.resized(24, 20)).shape == (480, 3)
     assert again.plate_for(framing_camera(again.head_model.template, 5.0, 0.0, width_px=12, height_px=10)) is None
     # An avatar without a plate (the shipped demo) still loads, and has none.
-    assert load_avatar(DEMO)[0].plate_for(cam) is None
+    assert load_avatar(CODYNERF_DEMO)[0].plate_for(cam) is None

@@ -11,8 +11,7 @@ from models.avatars.registry import load_avatar
 from models.capture.dataset import CaptureSplit, Frame
 from models.capture.frames import view_range
 from models.head.controls import Controls
-
-DEMO = Path(__file__).resolve().parents[3] / "resources" / "demo_avatar"
+from tests.conftest import DEMO
 
 
 def split_of(frames: list[Frame]) -> CaptureSplit:
@@ -38,6 +37,8 @@ def test_view_range_hand_worked():
 
 def test_the_avatar_knows_which_views_it_saw():
     avatar, _ = load_avatar(DEMO)
+    assert avatar.view_range is not None and avatar.views_beyond(180.0)  # the demo's capture saw its front half
+    avatar.view_range = None  # an older avatar: its views unknown
     assert not avatar.views_beyond(150.0) and avatar.turntable_sweep_deg() in (0.0, pytest.approx(0.0))
     avatar.view_range = {"yaw_deg": [-20.0, 15.0], "pitch_deg": [-5.0, 5.0]}
     assert avatar.turntable_sweep_deg() == 30.0  # the farther side, 20, and 10 more

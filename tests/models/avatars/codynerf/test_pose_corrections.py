@@ -5,7 +5,6 @@ and they are saved with the avatar."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +17,7 @@ from models.avatars.registry import load_avatar
 from models.head.controls import Controls
 from render.gl.raster import Rasterizer
 from render.rays import Rays
-
-DEMO = Path(__file__).resolve().parents[4] / "resources" / "demo_avatar"
+from tests.conftest import CODYNERF_DEMO
 
 
 def rays_at_head(avatar, gl, n: int = 64, seed: int = 0) -> tuple[Rays, object]:
@@ -37,7 +35,7 @@ def rays_at_head(avatar, gl, n: int = 64, seed: int = 0) -> tuple[Rays, object]:
 
 @pytest.mark.gl
 def test_corrected_rays_against_an_independent_rotation(gl):
-    avatar, _ = load_avatar(DEMO)
+    avatar, _ = load_avatar(CODYNERF_DEMO)
     avatar.fit_to_tracked_video()
     rays, geo = rays_at_head(avatar, gl, 8)
     n = avatar.pose_corrections.shape[0]
@@ -56,7 +54,7 @@ def test_corrected_rays_against_an_independent_rotation(gl):
 
 @pytest.mark.gl
 def test_zero_corrections_change_nothing_and_the_loss_reaches_them(gl):
-    avatar, _ = load_avatar(DEMO)
+    avatar, _ = load_avatar(CODYNERF_DEMO)
     rays, geo = rays_at_head(avatar, gl)
     plain = avatar.render_rays(rays, geo, 0).buffers["rgb"].detach()
     avatar.fit_to_tracked_video()
@@ -71,11 +69,11 @@ def test_zero_corrections_change_nothing_and_the_loss_reaches_them(gl):
     torch.testing.assert_close(grad[0], -grad[3] / (avatar.pose_corrections.shape[0] - 1), rtol=1e-4, atol=1e-12)
     # Held-out frames and new controls (frame None) use the tracked pose as it is.
     torch.testing.assert_close(avatar.render_rays(rays, geo, None).buffers["rgb"],
-                               load_avatar(DEMO)[0].render_rays(rays, geo, None).buffers["rgb"])
+                               load_avatar(CODYNERF_DEMO)[0].render_rays(rays, geo, None).buffers["rgb"])
 
 
 def test_corrections_learn_slowly_and_are_saved(tmp_path):
-    avatar, meta = load_avatar(DEMO)
+    avatar, meta = load_avatar(CODYNERF_DEMO)
     avatar.fit_to_tracked_video()
     assert avatar.loss_weights.cauchy == 0.0  # an opaque head in front of the room
     assert not avatar.loss_weights.consistency_shapes_density  # Eq. 13 pulls the normals only

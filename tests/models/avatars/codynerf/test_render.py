@@ -6,7 +6,6 @@ compositing differentiated in float64 (gradcheck), as training takes it."""
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,15 +21,15 @@ from render.gl.raster import Rasterizer
 from render.rays import Rays
 from render.sampling import RaySamples
 from render.volume import composite
+from tests.conftest import CODYNERF_DEMO
 
-DEMO = Path(__file__).resolve().parents[4] / "resources" / "demo_avatar"
 pytestmark = pytest.mark.gl
 
 
 @pytest.fixture(scope="module")
 def scene(gl):
     """The demo avatar, a head-on frame's geometry (with its shadow map), and the rays of the pixels it renders."""
-    avatar, _ = load_avatar(DEMO)
+    avatar, _ = load_avatar(CODYNERF_DEMO)
     r = Rasterizer(gl)
     geo = avatar.frame_geometry(Controls(), r)
     cam = framing_camera(avatar.head_model.template, 20.0, 5.0, fov_y_deg=18.0, width_px=48, height_px=48)

@@ -11,7 +11,8 @@ import torch
 
 from models.avatars.codynerf.training import LossWeights, ray_terms
 from models.avatars.registry import load_avatar
-from tests.models.avatars.codynerf.test_pose_corrections import DEMO, rays_at_head
+from tests.conftest import CODYNERF_DEMO
+from tests.models.avatars.codynerf.test_pose_corrections import rays_at_head
 
 
 def rays(seed: int = 0):
@@ -41,7 +42,7 @@ def test_mesh_normals_first_renders_what_the_untrained_normals_would_without_the
     """Before Eq. 13 a tracked video's `all` avatar reads the mesh's normals (LossWeights.mesh_normals_first). N
     starts as the mesh normal (its last layer zero), so that phase renders exactly what the full path renders
     at the start, and no density gradient is taken: the density network sees no second backward."""
-    avatar, _ = load_avatar(DEMO)
+    avatar, _ = load_avatar(CODYNERF_DEMO)
     assert avatar.field_cfg.needs_normals
     last = avatar.field.normals.net[-1]
     with torch.no_grad():

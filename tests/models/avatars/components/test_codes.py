@@ -4,7 +4,6 @@ controls move, a training frame's own controls giving its own code, and the keys
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -13,8 +12,7 @@ from models.avatars.checkpoint import save_checkpoint
 from models.avatars.components.codes import nearest_code_weights
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
-
-DEMO = Path(__file__).resolve().parents[4] / "resources" / "demo_avatar"
+from tests.conftest import CODYNERF_DEMO
 
 
 def test_weights_worked_by_hand():
@@ -44,7 +42,7 @@ def test_weights_change_continuously_as_the_query_moves():
 
 
 def test_a_training_frames_own_controls_take_its_code_and_the_keys_are_saved(tmp_path):
-    avatar, meta = load_avatar(DEMO)
+    avatar, meta = load_avatar(CODYNERF_DEMO)
     n = avatar.omega.num_embeddings
     rng = np.random.default_rng(3)
     controls = [Controls(expression=rng.uniform(0, 1, 6).astype(np.float32),
