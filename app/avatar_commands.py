@@ -26,6 +26,7 @@ from models.files import FolderBusy, WriterLock, foreign_files
 from models.head.controls import Controls, load_controls
 from models.ranges import Range
 from models.training.metrics import face_mse, luminance, normal_angle_deg, pearson, psnr, ssim
+from models.training.prior import PriorTrainConfig, corpus_folders, distributed_from_env, prepare_prior
 from models.training.trainer import TrainConfig, prepare_training
 from render.camera import framing_camera
 from render.gl.context import GLContext
@@ -252,4 +253,29 @@ def run_turntable(cfg: TurntableConfig) -> int:
     n = write_video(turntable_frames(avatar, Rasterizer(gl), cfg, on_frame=lambda k: bar.update(k + 1)), cfg.out,
                     cfg.fps, pngs)
     print(f"wrote {cfg.out} ({n} frames{f', PNGs in {pngs}' if pngs else ''}) in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def run_prior_train(cfg: PriorTrainConfig) -> int:
+    """`prior-train`: the universal prior on a corpus, in this process or, under torchrun, in every process it
+    starts (rank 0 writes the folder and the progress lines)."""
+    device_of(cfg.device)
+    try:
+        parse_effects(cfg.effects)
+        corpus_folders(cfg.corpus)
+    except (ValueError, FileNotFoundError) as e:
+        raise UserInputError(str(e)) from None
+    if not cfg.resume and (cfg.out / "avatar.json").exists():
+        raise UserInputError(f"{cfg.out}: already holds a prior; pass --resume to continue it or choose a new folder")
+    rank, world = distributed_from_env()
+    gl = GLContext.headless()
+    trainer = prepare_prior(cfg, gl, rank, world)
+
+    def show(r: dict) -> None:
+        sys.stderr.write(f"step {r['step']}  loss {r['loss']:.5f}  {r['elapsed_s']:.0f} s\n")
+
+    last = trainer.run(show if rank == 0 else None)
+    if rank == 0:
+        print(f"wrote {cfg.out}: {trainer.step} steps over {len(trainer.identities)} identities in "
+              f"{trainer.elapsed / 60:.1f} min on {world} process(es), last loss {last.get('loss', 0):.5f}")
     return 0

@@ -11,6 +11,7 @@ from app.studio.config import StudioConfig
 from app.track import TrackConfig, run_track
 from app.turntable import TurntableConfig
 from models.capture.synthetic import SynthConfig
+from models.training.prior import PriorTrainConfig
 from models.training.trainer import TrainConfig
 
 
@@ -45,6 +46,9 @@ COMMANDS = (
             TrackConfig, run_track, positional=("video",)),
     Command("train", "Train an avatar on a capture (in the background of a terminal: a progress bar).",
             TrainConfig, avatar_commands.run_train, positional=("dataset",)),
+    Command("prior-train", "Train the universal prior (paper 002) on a corpus of identity captures; under torchrun, "
+            "on every process it starts (gloo on CPUs, NCCL on GPUs).", PriorTrainConfig,
+            avatar_commands.run_prior_train, positional=("corpus",)),
     Command("eval", "Measure an avatar on a capture split: metrics.json and side-by-side images.",
             avatar_commands.EvalConfig, avatar_commands.run_eval, positional=("avatar", "dataset")),
     Command("render", "Render an avatar with given controls and camera to a PNG.",

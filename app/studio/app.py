@@ -351,7 +351,8 @@ def run_studio(cfg: StudioConfig) -> int:
             studio.script.after_frame(studio)
         # The cap: no display sync here, so without it the interface would take a whole core. Counted from the
         # previous frame's swap, so that only what is left of a whole frame's time is slept.
-        spare = 1.0 / cfg.fps_cap - (time.perf_counter() - last_swap[0])
+        cap = min(cfg.fps_cap, cfg.rendering_fps_cap) if studio.worker.busy else cfg.fps_cap
+        spare = 1.0 / cap - (time.perf_counter() - last_swap[0])
         if spare > 0:
             time.sleep(spare)
         last_swap[0] = time.perf_counter()

@@ -25,3 +25,6 @@ class StudioConfig:
     height: int = 900
     fps_cap: float = 60.0
     """The interface's frame rate cap (no display sync here): what is left of the CPU goes to rendering."""
+    rendering_fps_cap: float = 20.0
+    """The cap while the neural render works: on a software GL each of the window's frames takes the cores the
+    render needs (measured by benchmarks/bench_studio.py: slider to first pixels against the frame rate)."""

@@ -13,6 +13,7 @@ from models.avatars.checkpoint import CheckpointError, load_checkpoint
 from models.avatars.codynerf.avatar import CoDyNeRFAvatar
 from models.avatars.nerface.avatar import NerfaceAvatar
 from models.avatars.primitives.avatar import PrimitivesAvatar
+from models.avatars.prior.avatar import PriorAvatar
 from models.avatars.quality import load_presets
 from models.device import device_of
 from models.head.sources import load_head
@@ -21,6 +22,7 @@ AVATARS: dict[str, type[Avatar]] = {cls.name: cls for cls in (
     CoDyNeRFAvatar,
     NerfaceAvatar,
     PrimitivesAvatar,
+    PriorAvatar,
 )}
 ModelName = Literal[tuple(AVATARS)]  # the choices of --model
 DEFAULT_MODEL = "codynerf"

@@ -283,8 +283,14 @@ class PrimitivesAvatar(Avatar):
         return frame_code(self.latent, frame, weights)
 
     # ---- the decode --------------------------------------------------------------------------------------
-    def decode(self, geo: PrimitivesGeometry, code: torch.Tensor, eye: torch.Tensor, lit: bool = False
-               ) -> march.Primitives:
+    def decode_slabs(self, geo: PrimitivesGeometry, condition: torch.Tensor, light: torch.Tensor | None,
+                     training: bool) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The decoder's raw opacity, colour and offsets for every cell of the grid (SlabDecoder.forward)."""
+        del training  # the decoder is deterministic
+        return self.decoder(condition, geo.gaze, light)
+
+    def decode(self, geo: PrimitivesGeometry, code: torch.Tensor, eye: torch.Tensor, lit: bool = False,
+               training: bool = False) -> march.Primitives:
         """The frame's primitives, placed on its posed mesh, for a camera at `eye` (3,) (the view enters the
         decoder as the direction to the eye in the head's frame). lit: every texel lit (no cast shadows)."""
         view = (eye - geo.translation) @ geo.rotation  # R^T (eye - t)
@@ -296,7 +302,7 @@ class PrimitivesAvatar(Avatar):
         light = None if not self.casts_shadows else torch.ones(1, 1, self.cfg.grid * self.cfg.voxels,
                                                                  self.cfg.grid * self.cfg.voxels, device=code.device) \
             if lit else self.slab_visibility(geo, centres, rotations)
-        density_raw, colour_raw, offsets = self.decoder(torch.cat(inputs, -1), geo.gaze, light)
+        density_raw, colour_raw, offsets = self.decode_slabs(geo, torch.cat(inputs, -1), light, training)
         cells = self.layout_cells
         density_raw, colour_raw, offsets = density_raw[cells], colour_raw[cells], offsets[cells]
         half = self.layout_half[:, None] * torch.exp(offsets[:, 6:9].clamp(-3.0, 3.0))
@@ -318,7 +324,7 @@ class PrimitivesAvatar(Avatar):
         the batches of rays)."""
         code = self.codes(frame, geo.code_weights)
         if training:
-            return self.decode(geo, code, eye, lit)
+            return self.decode(geo, code, eye, lit, training=True)
         key = (frame, tuple(round(float(x), 6) for x in eye))
         if geo.decoded.get("key") != key:
             geo.decoded.clear()
@@ -344,11 +350,12 @@ class PrimitivesAvatar(Avatar):
         return RayOutput(buffers, (prims, offsets, out, rays, frame))
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
-        c = self.cfg
         out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)
+        return {"photometric": losses.photometric(out.buffers["rgb"], batch.target), **self.regularisers(out),
+                "codes": self.cfg.codes * losses.code_l2(self.codes(batch.frame))}
+
+    def regularisers(self, out: RayOutput) -> dict[str, torch.Tensor]:
+        """MVP's volume prior (the primitives' mean volume over their starting volume) and the offsets' L2."""
         prims, offsets = out.internals[:2]
         volume = (prims.half_sizes.prod(1) / self.layout_half.pow(3)).mean()
-        return {"photometric": losses.photometric(out.buffers["rgb"], batch.target),
-                "volume": c.volume * volume,
-                "offsets": c.offsets * offsets.square().sum(1).mean(),
-                "codes": c.codes * losses.code_l2(self.codes(batch.frame))}
+        return {"volume": self.cfg.volume * volume, "offsets": self.cfg.offsets * offsets.square().sum(1).mean()}

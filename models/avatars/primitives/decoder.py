@@ -22,12 +22,16 @@ from torch import nn
 
 class SlabDecoder(nn.Module):
     def __init__(self, condition_dim: int, gaze_dim: int, grid: int, voxels: int, colour_channels: int = 3,
-                 width: int = 64, min_width: int = 16, map_channels: int = 0):
+                 width: int = 64, min_width: int = 16, map_channels: int = 0, latent_channels: int = 0):
+        """latent_channels > 0: the frame's expression is a spatial 4x4 code of that many channels (the prior's,
+        paper 002 Section 3.1.1), joined by the condition vector (view, light) at every cell through a 1x1
+        convolution, instead of the condition vector alone through a linear layer."""
         super().__init__()
         assert grid >= 8 and grid & (grid - 1) == 0 and voxels & (voxels - 1) == 0, (grid, voxels)
         self.grid, self.voxels, self.colour_channels, self.gaze_dim = grid, voxels, colour_channels, gaze_dim
-        self.map_channels = map_channels
-        self.fc = nn.Linear(condition_dim, 16 * width)
+        self.map_channels, self.latent_channels = map_channels, latent_channels
+        self.fc = nn.Linear(condition_dim, 16 * width) if not latent_channels else \
+            nn.Conv2d(latent_channels + condition_dim, width, 1)
         self.width = width
         levels = int(math.log2(grid * voxels // 4))
         self.offset_level = int(math.log2(grid // 4)) - 1  # the upsampling after which the map is K x K
@@ -49,23 +53,38 @@ class SlabDecoder(nn.Module):
         nn.init.zeros_(self.offsets.weight)
         nn.init.zeros_(self.offsets.bias)
 
-    def forward(self, condition: torch.Tensor, gaze: torch.Tensor, maps: torch.Tensor | None = None
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def bias_shapes(self) -> list[tuple[int, int, int]]:
+        """(C,H,W) of the bias map after each upsampling, then of the slab's: what the prior's identity encoder
+        writes (forward's bias_maps)."""
+        return [tuple(b.shape) for b in self.biases] + [tuple(self.slab_bias.shape)]
+
+    def forward(self, condition: torch.Tensor, gaze: torch.Tensor, maps: torch.Tensor | None = None,
+                latent: torch.Tensor | None = None, bias_maps: list[torch.Tensor] | None = None,
+                gaze_mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """condition (1,Dc), gaze (1,Dg), maps (1, map_channels, K M, K M) -> raw opacity (K*K, M,M,M), raw colour
-        (K*K, M,M,M, C) and offsets (K*K, 9), primitives in row-major grid order, voxels [z, y, x]."""
+        (K*K, M,M,M, C) and offsets (K*K, 9), primitives in row-major grid order, voxels [z, y, x].
+        latent (1, latent_channels, 4, 4): the spatial expression code, where the decoder takes one; bias_maps
+        (bias_shapes, each with a leading 1): added to the decoder's own biases (an identity's, from the prior);
+        gaze_mask (1,1,8,8): where on the 8x8 features gaze may act (1 everywhere if not given)."""
         assert (maps is None) == (self.map_channels == 0), "maps go with map_channels"
+        assert (latent is None) == (self.latent_channels == 0), "a latent goes with latent_channels"
         K, M, C = self.grid, self.voxels, self.colour_channels
-        h = F.leaky_relu(self.fc(condition).reshape(1, self.width, 4, 4), 0.2)
+        if latent is None:
+            h = F.leaky_relu(self.fc(condition).reshape(1, self.width, 4, 4), 0.2)
+        else:
+            h = F.leaky_relu(self.fc(torch.cat([latent, condition[:, :, None, None].expand(-1, -1, 4, 4)], 1)), 0.2)
+        extra = bias_maps or [0.0] * (len(self.biases) + 1)
         offsets = None
         for k, (up, bias) in enumerate(zip(self.ups, self.biases, strict=True)):
             if k == 1:
-                h = torch.cat([h, gaze[:, :, None, None].expand(-1, -1, h.shape[2], h.shape[3])], 1)
+                g = gaze[:, :, None, None].expand(-1, -1, h.shape[2], h.shape[3])
+                h = torch.cat([h, g if gaze_mask is None else g * gaze_mask], 1)
             if maps is not None and k == len(self.ups) - 1:
                 h = torch.cat([h, F.avg_pool2d(maps, 2)], 1)
-            h = F.leaky_relu(up(h) + bias[None], 0.2)
+            h = F.leaky_relu(up(h) + bias[None] + extra[k], 0.2)
             if k == self.offset_level:
                 offsets = self.offsets(h)
-        slab = self.slab(h if maps is None else torch.cat([h, maps], 1)) + self.slab_bias[None]  # (1, M(1+C), K M, K M)
+        slab = self.slab(h if maps is None else torch.cat([h, maps], 1)) + self.slab_bias[None] + extra[-1]
         slab = slab.reshape(1 + C, M, K, M, K, M)  # channel (c, z), rows (i, y), columns (j, x)
         slab = slab.permute(2, 4, 0, 1, 3, 5).reshape(K * K, 1 + C, M, M, M)  # (prim, c, z, y, x)
         offsets = offsets[0].permute(1, 2, 0).reshape(K * K, 9)

@@ -1,0 +1,188 @@
+"""The universal prior model (paper 002, Section 3.1, Eq. 1-3) on the volumetric primitives of
+models/avatars/primitives: the same layout, march and effects; the decoder takes a spatial 4x4x16 expression code
+from the expression encoder and adds the bias maps the identity encoder makes from a person's neutral texture and
+geometry. One class is both the prior (trained on many identities, each frame's geometry carrying its identity's
+maps) and a person's avatar (the maps of one person in its buffers, `personalize`).
+
+The expression encoder reads the frame's geometry as the guide mesh gives it, less the neutral's (Delta G, in the
+chart), so sliders drive it as they drive every avatar; Delta T, the texture's change, is zero in this version
+(no frame's unprojected texture reaches the encoder yet): what a mesh cannot show (wrinkles, the mouth's inside)
+comes from the identity's bias maps and the decoder alone. Gaze joins the decoder's 8x8 features only over the
+chart's eye cells (the seed's masked gaze)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, ClassVar
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from models.avatars.base import TrainingBatch
+from models.avatars.components import losses
+from models.avatars.primitives.avatar import GAZE_JOINTS, PrimitivesAvatar, PrimitivesConfig, PrimitivesGeometry
+from models.avatars.primitives.decoder import SlabDecoder
+from models.avatars.prior.encoders import ExpressionEncoder, IdentityEncoder, kl_divergence
+from models.avatars.prior.maps import chart_sampler, geometry_map
+from models.head.controls import Controls
+from models.head.model import HeadModel
+from models.ranges import Range, check_config
+
+
+@dataclass(frozen=True)
+class PriorConfig(PrimitivesConfig):
+    """The primitives' sizes, and the prior's."""
+
+    latent: Annotated[int, Range(1, 256)] = 16
+    """Channels of the 4x4 expression code."""
+    kl: Annotated[float, Range(0)] = 1e-3
+    """The expression code's KL weight (the variational encoder's)."""
+    code_dim: Annotated[int, Range(0, 1024)] = 0
+    """No per-frame code: a frame is its identity's maps and its guide mesh."""
+
+
+@dataclass
+class PriorGeometry(PrimitivesGeometry):
+    """A primitives frame, with its expression maps (1,3,S,S: Delta G) and, for a corpus frame, its identity's
+    neutral texture and geometry maps (else the avatar's own)."""
+
+    delta_geometry: torch.Tensor | None = None
+    identity: tuple[torch.Tensor, torch.Tensor] | None = None
+
+    def to(self, device: torch.device | str) -> PriorGeometry:
+        base = super().to(device)
+        ident = None if self.identity is None else tuple(m.to(device) for m in self.identity)
+        return PriorGeometry(**{k: getattr(base, k) for k in PrimitivesGeometry.__dataclass_fields__},
+                             delta_geometry=self.delta_geometry.to(device), identity=ident)
+
+
+def eye_cells(model: HeadModel, size: int, cells: int = 8) -> torch.Tensor:
+    """(1,1,cells,cells): 1 on the chart's cells whose texels lie on an eyeball (and their neighbours), where the
+    seed lets gaze act; ones everywhere for a head without eye joints."""
+    names = [j for j in GAZE_JOINTS if j in model.joint_names]
+    if not names:
+        return torch.ones(1, 1, cells, cells)
+    on_eye = np.zeros(model.num_vertices, bool)
+    for name in names:
+        on_eye |= model.weights[:, model.joint_names.index(name)] > 0.5
+    s = chart_sampler(model, size)
+    texel = np.zeros(size * size, np.float32)
+    ok = s.valid
+    texel[ok] = on_eye[np.asarray(model.triangles)[s.triangles[ok]]].any(1)
+    grid = F.adaptive_max_pool2d(torch.as_tensor(texel).reshape(1, 1, size, size), cells)
+    return F.max_pool2d(grid, 3, stride=1, padding=1)
+
+
+class PriorAvatar(PrimitivesAvatar):
+    name: ClassVar[str] = "prior"
+
+    def __init__(self, head_model: HeadModel, cfg: PriorConfig, n_frames: int, background: np.ndarray,
+                 effects: tuple[str, ...] = (), light_dir: tuple[float, float, float] | None = None):
+        super().__init__(head_model, cfg, n_frames, background, effects, light_dir)
+        S = cfg.grid * cfg.voxels
+        extra = 3 if self.light_dir is not None else 0
+        self.decoder = SlabDecoder(cfg.code_dim + 3 + extra, 6, cfg.grid, cfg.voxels, 3, cfg.width,
+                                   map_channels=1 if self.casts_shadows else 0, latent_channels=cfg.latent)
+        self.identity_encoder = IdentityEncoder(S, self.decoder.bias_shapes())
+        self.expression_encoder = ExpressionEncoder(S, cfg.latent)
+        self.register_buffer("neutral_texture", torch.zeros(1, 3, S, S))
+        self.register_buffer("neutral_geometry", torch.zeros(1, 3, S, S))
+        self.register_buffer("gaze_mask", eye_cells(head_model, S), persistent=False)
+        self.sampler = chart_sampler(head_model, S)
+        self._kl: torch.Tensor | None = None
+        self._noise: torch.Generator | None = None
+        self._own_biases: list[torch.Tensor] | None = None
+
+    @classmethod
+    def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
+                    lighting: dict | None, config: PriorConfig | None = None) -> PriorAvatar:
+        from models.avatars.codynerf.avatar import key_light_dir
+
+        return cls(head_model, config or PriorConfig(), n_frames, background, effects, key_light_dir(lighting))
+
+    @classmethod
+    def from_meta(cls, head_model: HeadModel, meta: dict) -> PriorAvatar:
+        cfg = PriorConfig(**meta["prior"])
+        check_config(cfg)
+        light = meta.get("light_dir")
+        light = None if light is None else tuple(float(v) for v in light)
+        if light is not None and (len(light) != 3 or not np.isfinite(light).all() or np.linalg.norm(light) < 1e-6):
+            raise ValueError(f"light_dir {meta['light_dir']}: not a direction (three finite numbers, not all 0)")
+        return cls(head_model, cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32),
+                   tuple(meta.get("effects", ())), light)
+
+    def meta(self) -> dict:
+        out = super().meta()
+        out["prior"] = out.pop("primitives")
+        return out
+
+    # ---- the person --------------------------------------------------------------------------------------
+    def personalize(self, texture: torch.Tensor, geometry: torch.Tensor) -> None:
+        """Make this avatar the person whose neutral texture and geometry maps (1,3,S,S) these are (Eq. 2)."""
+        self.neutral_texture.copy_(texture.reshape(self.neutral_texture.shape))
+        self.neutral_geometry.copy_(geometry.reshape(self.neutral_geometry.shape))
+        self._own_biases = None
+
+    def neutral_geometry_of(self, shape: np.ndarray) -> torch.Tensor:
+        """(1,3,S,S) the geometry map of the head model's neutral face with these identity coefficients."""
+        v, _, _ = self.head.pose([Controls(shape=shape)])
+        return geometry_map(self.sampler, self.triangles, v[0])[None]
+
+    def codes(self, frame: int | None, weights: torch.Tensor | None = None) -> torch.Tensor:
+        return self.background.new_zeros(1, self.cfg.code_dim)
+
+    # ---- per frame -------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def geometry(self, controls: Controls) -> PriorGeometry:
+        base = super().geometry(controls)
+        head_frame = (base.posed - base.translation) @ base.rotation  # R^T (v - t): the rigid pose taken out
+        v0, _, _ = self.head.pose([Controls(shape=controls.shape)])
+        delta = geometry_map(self.sampler, self.triangles, head_frame) - \
+            geometry_map(self.sampler, self.triangles, v0[0])
+        return PriorGeometry(**{k: getattr(base, k) for k in PrimitivesGeometry.__dataclass_fields__},
+                             delta_geometry=delta[None])
+
+    def identity_biases(self, geo: PriorGeometry) -> list[torch.Tensor]:
+        """E_id's bias maps (Eq. 2) for the frame's identity: a corpus frame's own maps, else this avatar's (made
+        once and kept while the weights do not train: compute once, use often)."""
+        if geo.identity is not None:
+            return self.identity_encoder(*geo.identity)
+        if self.training or torch.is_grad_enabled():
+            return self.identity_encoder(self.neutral_texture, self.neutral_geometry)
+        if self._own_biases is None:
+            self._own_biases = self.identity_encoder(self.neutral_texture, self.neutral_geometry)
+        return self._own_biases
+
+    def train(self, mode: bool = True):
+        self._own_biases = None
+        return super().train(mode)
+
+    def decode_slabs(self, geo: PriorGeometry, condition: torch.Tensor, light: torch.Tensor | None,
+                     training: bool) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Eq. 1 and 3: the expression code from Delta G (sampled while training: the variational encoder's
+        reparameterisation, with its KL kept for the loss), the decoder with the identity's bias maps."""
+        condition = condition[:, self.condition_dim:]  # the controls' expression reaches the prior as Delta G only
+        delta_t = torch.zeros_like(geo.delta_geometry)
+        mean, log_var = self.expression_encoder(delta_t, geo.delta_geometry)
+        if training:
+            noise = torch.randn(mean.shape, generator=self._noise).to(mean) if self._noise is not None else \
+                torch.randn_like(mean)
+            code = mean + noise * (0.5 * log_var).exp()
+            self._kl = kl_divergence(mean, log_var)
+        else:
+            code = mean
+        return self.decoder(condition, geo.gaze, light, latent=code, bias_maps=self.identity_biases(geo),
+                            gaze_mask=self.gaze_mask)
+
+    def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
+        """The primitives' photometric (l2) and regularisers, l1 beside them (the seed's Section 4.1.1; its VGG
+        and GAN terms need downloaded weights or a discriminator's hours), and the expression code's KL."""
+        self._kl, self._noise = None, batch.generator  # the sample's own draws, wherever it runs
+        out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)
+        rgb = out.buffers["rgb"]
+        return {"photometric": losses.photometric(rgb, batch.target), "l1": (rgb - batch.target).abs().mean(),
+                **self.regularisers(out), "kl": self.cfg.kl * self._kl}
+
+    def describe_rendering(self) -> str:
+        return "prior: " + super().describe_rendering()

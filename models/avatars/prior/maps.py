@@ -1,0 +1,122 @@
+"""The prior's conditioning maps (paper 002, Section 3.1, Eq. 1-2): a head's geometry (an xyz position image) and
+texture (RGB) in the primitives' chart (models/avatars/primitives/layout.py), S x S texels, so that the identity
+encoder's maps line up pixel for pixel with the decoder's slabs (S = K M). Every head model gets the same chart.
+
+- geometry: each texel's surface point (where the chart's ray leaves the template, carried by the mesh as it moves),
+  in the head's frame, centred and in decimetres (values of order 1);
+- texture: the colours of a capture's frames where they see the texel, unprojected (a depth test against the
+  posed mesh's raster, weighted by how squarely the camera sees the surface), averaged over frames."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from models.avatars.primitives.layout import chart_directions, outermost_hits
+from models.head.model import HeadModel
+from render.camera import Camera
+from render.rays import Raster
+
+GEOMETRY_SCALE_M = 0.1
+"""Geometry maps are in units of this many metres about the head's centre."""
+VISIBLE_WITHIN_M = 0.004
+"""A texel is seen by a pixel whose raster depth is at most this much in front of it."""
+
+
+@dataclass(frozen=True)
+class ChartSampler:
+    """Where each of the chart's S x S texels lies on the template: its triangle (-1: the ray misses the head) and
+    barycentric point, rows top (crown) first."""
+
+    size: int
+    triangles: np.ndarray  # (S*S,)
+    bary: np.ndarray  # (S*S,3)
+    centre: np.ndarray  # (3,) the template's centre, the maps' origin
+
+    @property
+    def valid(self) -> np.ndarray:
+        return self.triangles >= 0
+
+
+_SAMPLERS: dict[tuple, ChartSampler] = {}
+
+
+def chart_sampler(model: HeadModel, size: int) -> ChartSampler:
+    """The chart at S = size for a head model (computed once per model and size: a ray per texel)."""
+    key = (model.name, model.num_vertices, len(model.triangles), size)
+    if key not in _SAMPLERS:
+        verts = np.asarray(model.template, np.float64)
+        tris = np.asarray(model.triangles, np.int64)
+        centre = 0.5 * (verts.min(0) + verts.max(0))
+        f, b, _ = outermost_hits(centre, chart_directions(size), verts[tris], chunk=64)
+        _SAMPLERS[key] = ChartSampler(size, f, b.astype(np.float32), centre.astype(np.float32))
+    return _SAMPLERS[key]
+
+
+def texel_points(sampler: ChartSampler, triangles: torch.Tensor, vertices: torch.Tensor) -> torch.Tensor:
+    """(S*S,3) each texel's point on a mesh (V,3) with the template's triangles (F,3); the centre where invalid."""
+    f = torch.as_tensor(np.maximum(sampler.triangles, 0), device=vertices.device)
+    b = torch.as_tensor(sampler.bary, device=vertices.device, dtype=vertices.dtype)
+    points = (vertices[triangles[f]] * b[:, :, None]).sum(1)
+    centre = torch.as_tensor(sampler.centre, device=vertices.device, dtype=vertices.dtype)
+    return torch.where(torch.as_tensor(sampler.valid, device=vertices.device)[:, None], points, centre)
+
+
+def geometry_map(sampler: ChartSampler, triangles: torch.Tensor, head_vertices: torch.Tensor) -> torch.Tensor:
+    """(3,S,S) the texels' points of a mesh given in the head's frame (unposed by the head's rigid pose), about the
+    template's centre in GEOMETRY_SCALE_M units; 0 off the head."""
+    S = sampler.size
+    p = texel_points(sampler, triangles, head_vertices)
+    p = (p - torch.as_tensor(sampler.centre, device=p.device, dtype=p.dtype)) / GEOMETRY_SCALE_M
+    return p.T.reshape(3, S, S)
+
+
+def texture_map(sampler: ChartSampler, triangles: torch.Tensor, vertices: torch.Tensor, camera: Camera,
+                image: np.ndarray, raster: Raster) -> tuple[np.ndarray, np.ndarray]:
+    """One frame's colours unprojected onto the chart: (S,S,3) colours and (S,S) weights (the cosine between the
+    surface's normal and the ray to the camera where the texel is seen, else 0). vertices (V,3) world, posed as the
+    frame shows them; image (H,W,3) in [0,1]; raster: the posed mesh from the camera."""
+    S = sampler.size
+    with torch.no_grad():
+        p = texel_points(sampler, triangles, vertices.float()).cpu().numpy().astype(np.float64)
+        tri = vertices.float()[triangles[torch.as_tensor(np.maximum(sampler.triangles, 0))]].cpu().numpy()
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    cam_pos = np.linalg.inv(camera.view)[:3, 3]
+    to_cam = cam_pos - p
+    to_cam /= np.maximum(np.linalg.norm(to_cam, axis=1, keepdims=True), 1e-12)
+    facing = (n * to_cam).sum(1)
+    clip = (camera.projection @ camera.view @ np.c_[p, np.ones(len(p))].T).T
+    ndc = clip[:, :2] / np.where(np.abs(clip[:, 3:4]) > 1e-12, clip[:, 3:4], 1e-12)
+    H, W = image.shape[:2]
+    x, y = (ndc[:, 0] + 1) / 2 * W, (1 - ndc[:, 1]) / 2 * H
+    depth = -(camera.view[:3, :3] @ p.T + camera.view[:3, 3:4])[2]
+    inside = (x >= 0) & (x < W) & (y >= 0) & (y < H) & (depth > 0)
+    xi, yi = np.clip(x.astype(int), 0, W - 1), np.clip(y.astype(int), 0, H - 1)
+    seen = inside & sampler.valid & (facing > 0.1) & (depth <= raster.depth[yi, xi] + VISIBLE_WITHIN_M)
+    grid = torch.as_tensor(np.stack([x / W * 2 - 1, y / H * 2 - 1], 1), dtype=torch.float32)[None, None]
+    rgb = F.grid_sample(torch.as_tensor(image, dtype=torch.float32).permute(2, 0, 1)[None], grid,
+                        align_corners=False)[0, :, 0].T.numpy()
+    weight = np.where(seen, facing, 0.0)
+    return rgb.reshape(S, S, 3), weight.reshape(S, S).astype(np.float32)
+
+
+def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The weighted mean of frames' unprojected colours (S,S,3) and where any frame saw the texel (S,S) bool;
+    texels none saw take `fill` (the seen texels' mean colour if not given, as the seed fills unobserved parts)."""
+    w = np.stack(weights)[..., None]
+    total = w.sum(0)
+    seen = total[..., 0] > 1e-6
+    mean = (np.stack(colours) * w).sum(0) / np.maximum(total, 1e-6)
+    if fill is None:
+        fill = mean[seen].mean(0) if seen.any() else np.full(3, 0.5)
+    return np.where(seen[..., None], mean, fill).astype(np.float32), seen
+
+
+def texture_tensor(texture: np.ndarray) -> torch.Tensor:
+    """(3,S,S) from (S,S,3) colours in [0,1], centred on grey (the encoders' input range)."""
+    return torch.as_tensor(texture, dtype=torch.float32).permute(2, 0, 1) * 2.0 - 1.0

@@ -1,0 +1,273 @@
+"""Training the universal prior (paper 002, Section 3.3) on a corpus of identities, in one process or several
+through torch.distributed (DistributedDataParallel; `torchrun --nproc-per-node N avatar-studio prior-train ...`:
+CPU processes talk over gloo, GPUs over NCCL).
+
+Every process holds the whole corpus and draws the same samples (the same seeded generator): a step's global
+list of (identity, frame) samples, each with its pixels, is dealt round the processes (sample k to rank
+k mod N); each process's loss is the mean over its share and DDP averages the gradients, so N processes take the
+step one process takes on the whole list (the test holds them equal). Each sample's random draws (the expression
+code's noise) come from its own generator, seeded by the step and the sample, wherever it runs. Rank 0 writes the
+checkpoints (safetensors + JSON, atomic, resumable, as every avatar's)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from torch import nn
+
+from models.avatars.base import TrainingBatch
+from models.avatars.checkpoint import load_checkpoint, save_checkpoint
+from models.avatars.effects import parse_effects
+from models.avatars.prior.avatar import PriorAvatar, PriorConfig
+from models.avatars.prior.maps import average_texture, texture_map, texture_tensor
+from models.capture.dataset import CaptureSplit, load_split
+from models.capture.frames import camera_of, load_rgb
+from models.device import device_of
+from models.head.sources import load_head
+from models.ranges import Range
+from models.training.data import FrameSet, build_frames
+from models.training.trainer import _adam_state_tensors, _load_adam_state, trim_progress
+from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
+from render.rays import Rays
+
+NEUTRAL_FRAMES = 8
+"""The frames of least expression whose colours make an identity's neutral texture."""
+
+
+@dataclass(frozen=True)
+class PriorTrainConfig:
+    corpus: Path
+    """A folder of captures, one folder per identity, all of one head model (`avatar-studio synth --identity K`)."""
+    out: Path = Path("out/prior")
+    """The prior's folder: avatar.json, weights, progress.jsonl."""
+    minutes: Annotated[float, Range(0, 1e6, above=True)] | None = None
+    steps: Annotated[int, Range(1)] | None = None
+    """Step budget (with neither, 2000 steps)."""
+    resume: bool = False
+    effects: str = "none"
+    """Lighting effects the prior models (the corpus's captures must record the key light for more than none)."""
+    device: Literal["cpu", "cuda"] = "cpu"
+    seed: int = 0
+    frames_per_step: Annotated[int, Range(1, 4096)] = 4
+    """Samples a step over all processes (dealt round them: a multiple of their number)."""
+    rays_per_frame: Annotated[int, Range(1, 1 << 20)] = 512
+    lr: Annotated[float, Range(0, 1, above=True)] = 2e-3
+    """Adam's learning rate at the start; it decays tenfold over the run."""
+    grid: Annotated[int, Range(8, 256)] = 16
+    voxels: Annotated[int, Range(2, 64)] = 8
+    width: Annotated[int, Range(8, 1024)] = 64
+    checkpoint_seconds: Annotated[float, Range(0, above=True)] = 120.0
+    grad_clip: Annotated[float, Range(0, above=True)] = 1.0
+
+
+@dataclass
+class Identity:
+    """One person of the corpus: their frames and neutral conditioning maps (1,3,S,S each)."""
+
+    name: str
+    frames: FrameSet
+    texture: torch.Tensor
+    geometry: torch.Tensor
+
+
+def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frames: int = NEUTRAL_FRAMES
+                    ) -> torch.Tensor:
+    """(1,3,S,S) the colours of the split's `frames` least expressive frames, unprojected onto the chart and
+    averaged (the seed's view-averaged neutral texture; texels none sees take the seen ones' mean)."""
+    amount = [float(np.abs(f.controls.expression).sum() + np.abs(f.controls.rotation("jaw")).sum())
+              for f in split.frames]
+    raster = Rasterizer(gl)
+    colours, weights = [], []
+    bg = avatar.background.numpy()
+    for k in np.argsort(amount)[:frames]:
+        f = split.frames[int(k)]
+        geo = avatar.geometry(f.controls)
+        cam = camera_of(split, f.camera_to_world)
+        posed = geo.posed.cpu().numpy()
+        r = raster.rasterize(posed, avatar.head_model.triangles, cam)
+        c, w = texture_map(avatar.sampler, avatar.triangles.cpu(), geo.posed.cpu(), cam, load_rgb(f.image_path, bg), r)
+        colours.append(c)
+        weights.append(w)
+    raster.release()
+    texture, _ = average_texture(colours, weights)
+    return texture_tensor(texture)[None]
+
+
+def load_identity(folder: Path, avatar: PriorAvatar, gl: GLContext) -> Identity:
+    split = load_split(folder, "train")
+    frames = build_frames(split, avatar, gl)
+    shape = split.frames[0].controls.shape
+    ident = Identity(folder.name, frames, neutral_texture(split, avatar, gl),
+                     avatar.neutral_geometry_of(shape).detach())
+    for geo in frames.geometry:
+        geo.identity = (ident.texture, ident.geometry)
+    return ident
+
+
+def corpus_folders(corpus: Path) -> list[Path]:
+    found = sorted(p for p in Path(corpus).iterdir() if (p / "transforms_train.json").is_file()) \
+        if Path(corpus).is_dir() else []
+    if not found:
+        raise FileNotFoundError(f"{corpus}: no captures (folders with transforms_train.json) in it")
+    return found
+
+
+class PriorLoss(nn.Module):
+    """The prior's loss over a list of samples, as one module's forward (what DDP wraps)."""
+
+    def __init__(self, avatar: PriorAvatar):
+        super().__init__()
+        self.avatar = avatar
+
+    def forward(self, batches: list[TrainingBatch]) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        total = torch.zeros((), device=self.avatar.background.device)
+        terms: dict[str, torch.Tensor] = {}
+        for b in batches:
+            for k, v in self.avatar.loss_terms(b).items():
+                terms[k] = terms.get(k, 0.0) + v.detach() / len(batches)
+                total = total + v / len(batches)
+        return total, terms
+
+
+class PriorTrainer:
+    def __init__(self, cfg: PriorTrainConfig, avatar: PriorAvatar, identities: list[Identity], rank: int = 0,
+                 world: int = 1):
+        if cfg.frames_per_step % world:
+            raise ValueError(f"--frames-per-step {cfg.frames_per_step}: not a multiple of the {world} processes")
+        self.cfg, self.avatar, self.identities, self.rank, self.world = cfg, avatar, identities, rank, world
+        self.device = device_of(cfg.device)
+        avatar.to(self.device)
+        for ident in identities:
+            ident.frames.geometry = [g.to(self.device) for g in ident.frames.geometry]
+        self.loss = PriorLoss(avatar)
+        self.module = self.loss if world == 1 else nn.parallel.DistributedDataParallel(
+            self.loss, find_unused_parameters=True)
+        self.opt = torch.optim.Adam(avatar.parameters(), lr=cfg.lr)
+        self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.step = 0
+        self.elapsed = 0.0
+
+    def samples(self) -> list[TrainingBatch]:
+        """The step's samples this process takes (every process draws them all, in the same order)."""
+        g, out = self.generator, []
+        for k in range(self.cfg.frames_per_step):
+            ident = self.identities[int(torch.randint(len(self.identities), (1,), generator=g))]
+            fs = ident.frames
+            fid = int(torch.randint(len(fs), (1,), generator=g))
+            idx = fs.active_index[fid]
+            pick = idx[torch.randint(len(idx), (self.cfg.rays_per_frame,), generator=g)] if len(idx) else idx
+            if k % self.world != self.rank or len(pick) == 0:
+                continue
+            rays = Rays(fs.origins[fid].expand(len(pick), 3), fs.directions[fid].reshape(-1, 3)[pick],
+                        fs.surface_t[fid].reshape(-1)[pick]).to(self.device)
+            own = torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + self.step * 4096 + k)
+            out.append(TrainingBatch(fid, rays, fs.images[fid].reshape(-1, 3)[pick].to(self.device),
+                                     fs.geometry[fid], 0.0, own))
+        return out
+
+    def train_step(self, progress: float) -> dict[str, float]:
+        for group in self.opt.param_groups:
+            group["lr"] = self.cfg.lr * 0.1 ** min(max(progress, 0.0), 1.0)
+        total, terms = self.module(self.samples())
+        self.opt.zero_grad(set_to_none=True)
+        total.backward()
+        torch.nn.utils.clip_grad_norm_(self.avatar.parameters(), self.cfg.grad_clip)
+        self.opt.step()
+        self.step += 1
+        return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}
+
+    # ---- state -----------------------------------------------------------------------------------------
+    def meta(self) -> dict:
+        split = self.identities[0].frames.split
+        return {**self.avatar.meta(), "head_model": split.head_model, "frames": len(self.avatar.latent.weight),
+                "image_px": [split.width, split.height], "background": self.avatar.background.tolist(),
+                "corpus": {"folder": str(self.cfg.corpus), "identities": [i.name for i in self.identities]},
+                "provenance": {"steps": self.step, "seconds": round(self.elapsed, 1), "processes": self.world,
+                               "config": {k: str(v) for k, v in asdict(self.cfg).items()}}}
+
+    def save(self) -> None:
+        if self.rank != 0:
+            return
+        state = _adam_state_tensors(self.opt)
+        state["generator"] = self.generator.get_state()
+        state["elapsed"] = torch.tensor(self.elapsed, dtype=torch.float64)
+        save_checkpoint(self.cfg.out, self.meta(), self.avatar.state_dict(), self.step, state)
+
+    def resume(self) -> None:
+        ck = load_checkpoint(self.cfg.out, with_train_state=True)
+        self.avatar.load_state_dict(ck.weights)
+        _load_adam_state(self.opt, ck.train_state)
+        self.generator.set_state(ck.train_state["generator"])
+        self.elapsed = float(ck.train_state["elapsed"])
+        self.step = ck.step
+
+    def run(self, on_progress: Callable[[dict], None] | None = None) -> dict:
+        cfg = self.cfg
+        budget_s = cfg.minutes * 60 if cfg.minutes else math.inf
+        budget_steps = cfg.steps or (2000 if budget_s == math.inf else math.inf)
+        log = Path(cfg.out) / "progress.jsonl"
+        if self.rank == 0:
+            Path(cfg.out).mkdir(parents=True, exist_ok=True)
+            trim_progress(log, self.step)
+        last_ck, start, t0 = time.perf_counter(), self.elapsed, time.perf_counter()
+        record: dict = {}
+        while self.step < budget_steps and self.elapsed < budget_s:
+            progress = max(self.step / budget_steps if budget_steps != math.inf else 0.0,
+                           self.elapsed / budget_s if budget_s != math.inf else 0.0)
+            terms = self.train_step(progress)
+            self.elapsed = start + time.perf_counter() - t0
+            if self.world > 1:  # every process stops on the same step: rank 0's clock decides
+                clock = torch.tensor([self.elapsed], dtype=torch.float64)
+                dist.broadcast(clock, 0)
+                self.elapsed = float(clock)
+            finished = self.step >= budget_steps or self.elapsed >= budget_s
+            if self.rank == 0 and (self.step % 50 == 0 or self.step == 1 or finished):
+                record = {"step": self.step, **{k: round(v, 6) for k, v in terms.items()},
+                          "elapsed_s": round(self.elapsed, 1)}
+                with open(log, "a") as f:
+                    f.write(json.dumps(record) + "\n")
+                if on_progress:
+                    on_progress(record)
+            if time.perf_counter() - last_ck > cfg.checkpoint_seconds:
+                self.save()
+                last_ck = time.perf_counter()
+        self.save()
+        return record
+
+
+def distributed_from_env() -> tuple[int, int]:
+    """(rank, world size) under torchrun (RANK, WORLD_SIZE in the environment; the process group started with
+    gloo on the CPU, NCCL on GPUs), else (0, 1)."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return 0, 1
+    if not dist.is_initialized():
+        dist.init_process_group("nccl" if torch.cuda.is_available() and os.environ.get("AVATAR_DEVICE") == "cuda"
+                                else "gloo")
+    return dist.get_rank(), dist.get_world_size()
+
+
+def prepare_prior(cfg: PriorTrainConfig, gl: GLContext, rank: int = 0, world: int = 1) -> PriorTrainer:
+    """The prior and its corpus read from disk (every process reads it all)."""
+    folders = corpus_folders(cfg.corpus)
+    first = load_split(folders[0], "train")
+    head = load_head(first.head_model)
+    torch.manual_seed(cfg.seed)
+    pcfg = PriorConfig(grid=cfg.grid, voxels=cfg.voxels, width=cfg.width)
+    avatar = PriorAvatar.for_capture(head, 1, first.background, parse_effects(cfg.effects), first.lighting, pcfg)
+    identities = [load_identity(f, avatar, gl) for f in folders]
+    trainer = PriorTrainer(cfg, avatar, identities, rank, world)
+    if cfg.resume:
+        trainer.resume()
+    return trainer

@@ -1,0 +1,157 @@
+"""The universal prior: its conditioning maps checked by hand, its encoders' start and gradients, the masked
+gaze, and training in two gloo processes against one."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from models.avatars.prior.avatar import PriorAvatar, PriorConfig, eye_cells
+from models.avatars.prior.maps import GEOMETRY_SCALE_M, chart_sampler, geometry_map, texel_points, texture_map
+from models.capture.synthetic import SynthConfig, synthesize
+from models.head.controls import Controls
+from models.head.sources import load_builtin
+from render.gl.raster import Rasterizer
+
+SMALL = PriorConfig(grid=8, voxels=2, width=16, latent=4)
+
+
+@pytest.fixture(scope="module")
+def builtin():
+    return load_builtin()
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory, gl) -> Path:
+    """Two identities of the built-in head, 10 frames of 32 px each."""
+    root = tmp_path_factory.mktemp("corpus")
+    for k in (1, 2):
+        synthesize(SynthConfig(scene="ambient", frames=10, size=32, identity=k, out=root / f"id{k:04d}"),
+                   load_builtin(), gl)
+    return root
+
+
+def test_geometry_map_is_the_texels_points(builtin):
+    s = chart_sampler(builtin, 16)
+    v = torch.as_tensor(builtin.template, dtype=torch.float64)
+    tris = torch.as_tensor(np.asarray(builtin.triangles))
+    g = geometry_map(s, tris, v).reshape(3, -1).T
+    # a texel's point is its triangle's barycentric point, about the template's centre in decimetres
+    k = int(np.nonzero(s.valid)[0][len(np.nonzero(s.valid)[0]) // 2])
+    corners = builtin.template[builtin.triangles[s.triangles[k]]]
+    expect = (s.bary[k] @ corners - s.centre) / GEOMETRY_SCALE_M
+    np.testing.assert_allclose(g[k].numpy(), expect, atol=1e-5)
+    # moving the mesh 1 cm along x moves every texel on the head by 0.1 in the map's x, and none off it
+    g2 = geometry_map(s, tris, v + torch.tensor([0.01, 0.0, 0.0], dtype=torch.float64)).reshape(3, -1).T
+    d = (g2 - g).numpy()
+    np.testing.assert_allclose(d[s.valid], np.tile([0.1, 0.0, 0.0], (int(s.valid.sum()), 1)), atol=1e-9)
+    assert np.abs(d[~s.valid]).max(initial=0.0) == 0.0
+    assert s.valid.mean() > 0.6  # most of the chart's rays leave the head
+
+
+def test_texture_map_unprojects_what_the_camera_sees(builtin, gl):
+    """A uniform image unprojects to its colour wherever a frontal camera sees the head, and to weight 0 on the
+    back of the head."""
+    from render.camera import framing_camera
+
+    s = chart_sampler(builtin, 32)
+    v = torch.as_tensor(builtin.template, dtype=torch.float32)
+    cam = framing_camera(builtin.template, width_px=64, height_px=64)
+    r = Rasterizer(gl)
+    raster = r.rasterize(builtin.template, builtin.triangles, cam)
+    r.release()
+    image = np.ones((64, 64, 3), np.float32) * np.array([0.2, 0.5, 0.7], np.float32)
+    rgb, w = texture_map(s, torch.as_tensor(np.asarray(builtin.triangles)), v, cam, image, raster)
+    seen = w > 0
+    assert 0.15 < seen.mean() < 0.6, seen.mean()
+    np.testing.assert_allclose(rgb[seen], np.tile([0.2, 0.5, 0.7], (int(seen.sum()), 1)), atol=1e-6)
+    points = texel_points(s, torch.as_tensor(np.asarray(builtin.triangles)), v).numpy().reshape(32, 32, 3)
+    behind = (points[..., 2] < s.centre[2] - 0.03) & s.valid.reshape(32, 32)
+    assert behind.any() and not seen[behind].any()  # the back of the head is never seen from the front
+
+
+def test_an_untrained_prior_decodes_as_its_shared_decoder_and_learns_identity(builtin):
+    torch.manual_seed(0)
+    avatar = PriorAvatar(builtin, SMALL, 1, np.full(3, 0.5, np.float32))
+    geo = avatar.geometry(Controls())
+    S = SMALL.grid * SMALL.voxels
+    a = avatar.decode(geo, avatar.codes(None), torch.tensor([0.0, 0.0, 1.0]))[0]
+    avatar.personalize(torch.randn(1, 3, S, S), torch.randn(1, 3, S, S))
+    b = avatar.decode(geo, avatar.codes(None), torch.tensor([0.0, 0.0, 1.0]))[0]
+    torch.testing.assert_close(a.density, b.density)  # the identity heads start at zero
+    # a loss on the decode reaches both encoders
+    avatar.train()
+    prims = avatar.decode(geo, avatar.codes(None), torch.tensor([0.0, 0.0, 1.0]), training=True)[0]
+    prims.colour.square().mean().backward()
+    assert all(h.weight.grad is not None and h.weight.grad.abs().sum() > 0 for h in avatar.identity_encoder.heads)
+    assert avatar.expression_encoder.mean.weight.grad.abs().sum() > 0
+
+
+def test_expression_maps_see_the_jaw_not_the_head_turn(builtin):
+    avatar = PriorAvatar(builtin, SMALL, 1, np.full(3, 0.5, np.float32))
+    turned = avatar.geometry(Controls(root=np.array([0.0, 0.5, 0.0], np.float32)))
+    assert float(turned.delta_geometry.abs().max()) < 1e-4  # a rigid turn is not an expression
+    opened = avatar.geometry(Controls(jaw=np.array([0.3, 0.0, 0.0], np.float32)))
+    assert float(opened.delta_geometry.abs().max()) > 0.05  # more than 5 mm somewhere: the chin moved
+
+
+def test_gaze_reaches_only_the_eyes_cells(builtin):
+    mask = eye_cells(builtin, 64)
+    assert mask.shape == (1, 1, 8, 8)
+    assert 0 < mask.sum() < 0.4 * 64  # the eyes and their neighbours, not the head
+
+
+def _train(rank: int, world: int, corpus: str, out: str, port: int, steps: int) -> None:
+    import torch.distributed as dist
+
+    from models.training.prior import PriorTrainConfig, prepare_prior
+    from render.gl.context import GLContext
+
+    torch.set_num_threads(1)
+    if world > 1:
+        dist.init_process_group("gloo", init_method=f"tcp://127.0.0.1:{port}", rank=rank, world_size=world)
+    gl = GLContext.headless()
+    cfg = PriorTrainConfig(corpus=Path(corpus), out=Path(out), steps=steps, frames_per_step=4, rays_per_frame=64,
+                           grid=8, voxels=2, width=16)
+    trainer = prepare_prior(cfg, gl, rank, world)
+    torch.save({k: v.detach().clone() for k, v in trainer.avatar.state_dict().items()}, Path(out) / "init.pt")
+    losses = [trainer.train_step(k / steps)["loss"] for k in range(steps)]
+    weights = {k: v.detach().clone() for k, v in trainer.avatar.state_dict().items()}
+    torch.save(weights, Path(out) / f"weights-rank{rank}.pt")
+    (Path(out) / f"losses-rank{rank}.json").write_text(json.dumps(losses))
+    if world > 1:
+        dist.destroy_process_group()
+    gl.release()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_two_gloo_processes_take_the_step_one_takes(corpus, tmp_path):
+    """DistributedDataParallel over two CPU processes: their weights stay identical, and the loss of each step (the
+    mean of the two halves) and the weights after three steps match one process on the same samples."""
+    import torch.multiprocessing as mp
+
+    one, two = tmp_path / "one", tmp_path / "two"
+    one.mkdir()
+    two.mkdir()
+    _train(0, 1, str(corpus), str(one), 0, 3)
+    mp.spawn(_train, args=(2, str(corpus), str(two), _free_port(), 3), nprocs=2, join=True)
+    w0, w1 = (torch.load(two / f"weights-rank{r}.pt") for r in (0, 1))
+    single = torch.load(one / "weights-rank0.pt")
+    for k in single:
+        assert torch.equal(w0[k], w1[k]), k
+        torch.testing.assert_close(w0[k], single[k], atol=2e-5, rtol=1e-4)
+    halves = [json.loads((two / f"losses-rank{r}.json").read_text()) for r in (0, 1)]
+    whole = json.loads((one / "losses-rank0.json").read_text())
+    np.testing.assert_allclose(0.5 * (np.array(halves[0]) + np.array(halves[1])), whole, rtol=1e-4)
+    init = torch.load(one / "init.pt")
+    assert sum(float((single[k] - init[k]).abs().sum()) for k in init) > 0  # the three steps moved the weights
