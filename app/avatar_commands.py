@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
+import torch
 
 from app.errors import UserInputError
 from app.head_commands import save_png
@@ -278,4 +279,69 @@ def run_prior_train(cfg: PriorTrainConfig) -> int:
     if rank == 0:
         print(f"wrote {cfg.out}: {trainer.step} steps over {len(trainer.identities)} identities in "
               f"{trainer.elapsed / 60:.1f} min on {world} process(es), last loss {last.get('loss', 0):.5f}")
+    return 0
+
+
+@dataclass(frozen=True)
+class PersonalizeConfig:
+    scan: Path
+    """A short capture of one new person (a synthetic capture, or a video through `track`): a neutral head turn and
+    a few expressions."""
+    prior: Path = Path("resources/prior")
+    """The universal prior's folder (`prior-train`)."""
+    out: Path = Path("out/personal")
+    """The person's avatar folder to create."""
+    minutes: Annotated[float, Range(0, 1e6)] = 3.0
+    """Fine-tuning on the scan's frames (0: the avatar the neutral maps alone make, at once)."""
+    steps: Annotated[int, Range(1)] | None = None
+    """A step budget instead of (or as well as) --minutes."""
+    lr: Annotated[float, Range(0, 1, above=True)] = 1e-3
+    """Adam's learning rate (the seed's Section 4.2.5: 1e-3), decaying tenfold."""
+    tune: Literal["all", "decoder"] = "all"
+    """What fine-tuning changes: every weight, or the decoder alone (the encoders kept as the prior has them)."""
+    device: Literal["cpu", "cuda"] = "cpu"
+    seed: int = 0
+
+
+def run_personalize(cfg: PersonalizeConfig) -> int:
+    """`personalize`: the prior's avatar of one person: the neutral maps from the scan (the head model's fitted shape,
+    the colours of its least expressive frames unprojected), the identity encoder's bias maps from them, then
+    fine-tuning on the scan's frames. The result is an ordinary avatar folder."""
+    from models.avatars.prior.avatar import PriorAvatar
+    from models.training.data import build_frames, validation_frame
+    from models.training.prior import neutral_texture
+    from models.training.trainer import Trainer
+
+    device_of(cfg.device)
+    if cfg.out.exists() and (not cfg.out.is_dir() or any(cfg.out.iterdir())):
+        raise UserInputError(f"{cfg.out}: already exists and is not empty; choose a new folder")
+    avatar, meta = load_avatar(cfg.prior)
+    if not isinstance(avatar, PriorAvatar):
+        raise UserInputError(f"{cfg.prior}: a {avatar.name} avatar, not a universal prior (`prior-train` makes one)")
+    split = load_split(cfg.scan, "train")
+    check_images(split)
+    if (split.head_model or "").split(":")[0] != str(meta["head_model"]).split(":")[0]:
+        raise UserInputError(f"{cfg.scan}: its head model is {split.head_model!r}, the prior's {meta['head_model']!r}")
+    gl = GLContext.headless()
+    t0 = time.perf_counter()
+    with torch.no_grad():
+        avatar.background.copy_(torch.as_tensor(np.asarray(split.background, np.float32)))
+        shape = split.frames[0].controls.shape
+        avatar.personalize(neutral_texture(split, avatar, gl), avatar.neutral_geometry_of(shape))
+    if cfg.tune == "decoder":
+        for module in (avatar.identity_encoder, avatar.expression_encoder):
+            module.requires_grad_(False)
+    maps_s = time.perf_counter() - t0
+    tcfg = TrainConfig(dataset=cfg.scan, out=cfg.out, model="prior", minutes=cfg.minutes or None,
+                       steps=cfg.steps or (None if cfg.minutes else 1), device=cfg.device, seed=cfg.seed, lr=cfg.lr)
+    avatar.train()
+    frames = build_frames(split, avatar, gl)
+    val = load_split(cfg.scan, "val")
+    trainer = Trainer(tcfg, avatar, frames, validation_frame(val, avatar.background.numpy()) if val.frames else None)
+    if cfg.minutes or cfg.steps:
+        trainer.run(gl)
+    else:
+        trainer.save()
+    print(f"wrote {cfg.out}: maps in {maps_s:.1f} s, then {trainer.step} fine-tuning steps in "
+          f"{trainer.elapsed / 60:.1f} min ({cfg.tune}, lr {cfg.lr:g}) from the prior {cfg.prior}")
     return 0

@@ -40,6 +40,8 @@ COMMANDS = (
             head_commands.MeshConfig, head_commands.run_mesh),
     Command("synth", "Render a synthetic capture of a head model under a lighting scene, with ground truth.",
             SynthConfig, capture_commands.run_synth),
+    Command("corpus", "Render many people's synthetic multi-view captures: the universal prior's training corpus.",
+            capture_commands.CorpusConfig, capture_commands.run_corpus),
     Command("dataset", "Validate a capture dataset (ours, NerFACE's or IMavatar's) and summarise its splits.",
             capture_commands.DatasetConfig, capture_commands.run_dataset, positional=("dataset",)),
     Command("track", "Turn a video of one face into a capture dataset: landmarks, head-model fit, masks, report.",
@@ -49,6 +51,9 @@ COMMANDS = (
     Command("prior-train", "Train the universal prior (paper 002) on a corpus of identity captures; under torchrun, "
             "on every process it starts (gloo on CPUs, NCCL on GPUs).", PriorTrainConfig,
             avatar_commands.run_prior_train, positional=("corpus",)),
+    Command("personalize", "Make a person's avatar from a short scan with the universal prior: neutral maps, "
+            "then minutes of fine-tuning.", avatar_commands.PersonalizeConfig, avatar_commands.run_personalize,
+            positional=("scan",)),
     Command("eval", "Measure an avatar on a capture split: metrics.json and side-by-side images.",
             avatar_commands.EvalConfig, avatar_commands.run_eval, positional=("avatar", "dataset")),
     Command("render", "Render an avatar with given controls and camera to a PNG.",

@@ -83,6 +83,7 @@ def main() -> None:
                 for avatar in avatars:
                     r = studio_run(display, avatar, latency_steps(a.moves), work, size)
                     row = {"latency_ms": {name: summary(r["latencies"], name) for name in PRESET_NAMES},
+                           "render_ms": {name: summary(r["latencies"], f"{name} render") for name in PRESET_NAMES},
                            "presets_measured_in_window": r["presets"]}
                     steps = [{"refine_to": "final"}, {"wait_render": "final"}, {"wait_frames": 180}, *orbit,
                              {"wait_render": "final"}]

@@ -89,6 +89,8 @@ class Studio:
         self.last_submit_time = 0.0
         self.latency_ms: float | None = None
         self.pass_latency_ms: dict[str, float] = {}
+        self.pass_render_ms: dict[str, float] = {}
+        """Each pass's own render time (of those latencies, what the renderer took)."""
         """Since the last request: ms from its submission to each of its passes' pixels (draft, preview, final)."""
         self.clock = FrameClock()
         self.frame_count = 0
@@ -233,6 +235,7 @@ class Studio:
             ms = 1e3 * (time.perf_counter() - self.last_submit_time)
             self.latency_ms = ms if self.latency_ms is None else self.latency_ms
             self.pass_latency_ms.setdefault(result.pass_name, ms)
+            self.pass_render_ms.setdefault(result.pass_name, result.ms)
 
         w, h = imgui.get_io().display_size
         left, right = 330, 420
@@ -247,6 +250,7 @@ class Studio:
         if self.session.dirty:
             self.latency_ms = None
             self.pass_latency_ms = {}
+            self.pass_render_ms = {}
             self.submit_render()
         self.frame_count += 1
         if self.cfg.screenshot and self.script is None and self.frame_count >= self.cfg.frames:
@@ -353,8 +357,9 @@ def run_studio(cfg: StudioConfig) -> int:
         # previous frame's swap, so that only what is left of a whole frame's time is slept.
         cap = min(cfg.fps_cap, cfg.rendering_fps_cap) if studio.worker.busy else cfg.fps_cap
         spare = 1.0 / cap - (time.perf_counter() - last_swap[0])
-        if spare > 0:
-            time.sleep(spare)
+        if spare > 0:  # a pass's new pixels end the wait: the next frame shows them
+            studio.worker.arrived.wait(spare)
+        studio.worker.arrived.clear()
         last_swap[0] = time.perf_counter()
 
     params.callbacks.before_swap = before_swap

@@ -12,8 +12,9 @@ pictures). Steps:
   {"timeline": FRAME}                     show a capture frame's controls (-1: the sliders)
   {"refine_to": PRESET}                   the pass the viewport refines to
   {"wait_render": PRESET}                 until the latest request's pass PRESET is on screen
-  {"record_latency": true}                the ms from the last change to each of its passes' pixels, kept for
-                                          the report's "latencies" (benchmarks/bench_studio.py)
+  {"record_latency": true}                the ms from the last change to each of its passes' pixels (and as
+                                          "PASS render" the pass's own render time), kept for the report's
+                                          "latencies" (benchmarks/bench_studio.py)
   {"save_neural": PNG}                    the neural image as shown
   {"screenshot": PNG}                     the whole window
   {"save_viewport": PNG}                  the viewport as shown (the Export panel's "Screenshot viewport")
@@ -66,6 +67,7 @@ class Driven(Protocol):
     viewport: Viewport
     last_submit_id: int
     pass_latency_ms: dict[str, float]
+    pass_render_ms: dict[str, float]
 
     def act(self, action: a.Action | a.Command) -> None: ...
 
@@ -226,7 +228,7 @@ def _wait_render(sc: Script, st: Driven, s: dict) -> bool:
 
 @step("record_latency")
 def _record_latency(sc: Script, st: Driven, s: dict) -> bool:
-    sc.latencies.append(dict(st.pass_latency_ms))
+    sc.latencies.append({**st.pass_latency_ms, **{f"{k} render": v for k, v in st.pass_render_ms.items()}})
     return True
 
 

@@ -54,6 +54,18 @@ class SynthConfig:
     """Background colour, linear RGB in [0, 1]."""
     fov_y_deg: Annotated[float, Range(1, 170)] = 18.0
     """Camera field of view, degrees (a portrait lens)."""
+    views: Annotated[int, Range(1, 16)] = 1
+    """Cameras at once: every frame of the script is drawn from this many cameras (the script's, then 35, 70, ...
+    degrees to either side), as a multi-view rig would (--frames counts the script's frames)."""
+
+
+def view_offsets_deg(views: int) -> list[float]:
+    """The rig's cameras about the script's: 0, then +35, -35, +70, -70, ...
+
+    >>> view_offsets_deg(4)
+    [0.0, 35.0, -35.0, 70.0]
+    """
+    return [0.0] + [s * 35.0 * (1 + k // 2) for k, s in zip(range(views - 1), [1, -1] * views, strict=False)]
 
 
 def absolute_head_spec(spec: str) -> str:
@@ -181,12 +193,14 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
         "head_model": absolute_head_spec(cfg.head), "shape": shape.tolist(), "background": bg.tolist(),
         "lighting": lighting_record(cfg.scene, lighting, cfg.light_deg),
         "depth_scale_m": DEPTH_SCALE_M,
-        "protocol": {"frames": cfg.frames, "seed": cfg.seed, "identity": cfg.identity,
+        "protocol": {"frames": cfg.frames, "seed": cfg.seed, "identity": cfg.identity, "views": cfg.views,
                      "expression_channels": {c: d.tolist() for c, d in rig.directions.items()},
                      "jaw_joint": rig.jaw_joint},
     }
     splits: dict[str, list[dict]] = {"train": [], "val": [], "test": []}
     jobs = [("val" if k in val_ids else "train", s) for k, s in enumerate(script)] + [("test", s) for s in test]
+    jobs = [(split, replace(s, camera_yaw_deg=s.camera_yaw_deg + off)) for split, s in jobs
+            for off in view_offsets_deg(cfg.views)]
     with torch.inference_mode():
         for k, (split, spec) in enumerate(jobs):
             controls = frame_controls(rig, spec, shape)

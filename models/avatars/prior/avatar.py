@@ -79,7 +79,8 @@ class PriorAvatar(PrimitivesAvatar):
 
     def __init__(self, head_model: HeadModel, cfg: PriorConfig, n_frames: int, background: np.ndarray,
                  effects: tuple[str, ...] = (), light_dir: tuple[float, float, float] | None = None):
-        super().__init__(head_model, cfg, n_frames, background, effects, light_dir)
+        del n_frames  # no per-frame codes: a frame is its identity's maps and its guide mesh
+        super().__init__(head_model, cfg, 1, background, effects, light_dir)
         S = cfg.grid * cfg.voxels
         extra = 3 if self.light_dir is not None else 0
         self.decoder = SlabDecoder(cfg.code_dim + 3 + extra, 6, cfg.grid, cfg.voxels, 3, cfg.width,
