@@ -23,7 +23,7 @@ from models.capture.dataset import check_images, load_split
 from models.capture.frames import camera_of, load_rgb
 from models.capture.synthetic import read_png16
 from models.device import device_of
-from models.files import FolderBusy, WriterLock, foreign_files
+from models.files import FolderBusy, WriterLock, atomic_write_bytes, foreign_files
 from models.head.controls import Controls, load_controls
 from models.ranges import Range
 from models.training.metrics import face_mse, luminance, normal_angle_deg, pearson, psnr, ssim
@@ -315,11 +315,11 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
     device_of(cfg.device)
     if cfg.out.exists() and (not cfg.out.is_dir() or any(cfg.out.iterdir())):
         raise UserInputError(f"{cfg.out}: already exists and is not empty; choose a new folder")
+    split = load_split(cfg.scan, "train")
+    check_images(split)
     avatar, meta = load_avatar(cfg.prior)
     if not isinstance(avatar, PriorAvatar):
         raise UserInputError(f"{cfg.prior}: a {avatar.name} avatar, not a universal prior (`prior-train` makes one)")
-    split = load_split(cfg.scan, "train")
-    check_images(split)
     if (split.head_model or "").split(":")[0] != str(meta["head_model"]).split(":")[0]:
         raise UserInputError(f"{cfg.scan}: its head model is {split.head_model!r}, the prior's {meta['head_model']!r}")
     gl = GLContext.headless()
@@ -338,10 +338,126 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
     frames = build_frames(split, avatar, gl)
     val = load_split(cfg.scan, "val")
     trainer = Trainer(tcfg, avatar, frames, validation_frame(val, avatar.background.numpy()) if val.frames else None)
+    # The scan saw the face; the prior saw heads from every side (its corpus's cameras go round them): turntables and
+    # the studio's orbit go all the way round.
+    trainer.view_range = {"yaw_deg": [-180.0, 180.0], "pitch_deg": trainer.view_range["pitch_deg"]}
     if cfg.minutes or cfg.steps:
         trainer.run(gl)
     else:
         trainer.save()
     print(f"wrote {cfg.out}: maps in {maps_s:.1f} s, then {trainer.step} fine-tuning steps in "
           f"{trainer.elapsed / 60:.1f} min ({cfg.tune}, lr {cfg.lr:g}) from the prior {cfg.prior}")
+    return 0
+
+
+@dataclass(frozen=True)
+class AnimateConfig:
+    avatar: Path
+    """Avatar folder."""
+    animation: Path
+    """An animation file (JSON: app/animation.py; the studio's Export panel saves one)."""
+    out: Path = Path("out/animation.mp4")
+    """The mp4 to write (H.264); PNG frames go to a folder beside it unless --no-pngs."""
+    size: Annotated[int, Range(8, 4096)] = 256
+    """Frame width and height, pixels (at the preview and final presets; draft halves it)."""
+    preset: Literal["draft", "preview", "final"] = "preview"
+    pngs: bool = True
+    meshes: Literal["none", "obj", "ply"] = "none"
+    """Also write the posed guide mesh of every frame (FOLDER_meshes/frame_0000.obj ...), for other tools."""
+
+
+def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, on_frame=None, should_stop=None,
+                     on_pose=None):
+    """(size,size,3) uint8 frames of an animation played on an avatar, from its rest sliders; on_pose(k, controls)
+    before each frame is rendered."""
+    from app.animation import animation_poses, rest_sliders
+    from app.studio.session import View
+
+    px = avatar.apply_preset(preset, size)
+    for k, (sliders, view) in enumerate(animation_poses(anim, rest_sliders(avatar.head_model), View(),
+                                                        avatar.head_model)):
+        cam = view.camera(avatar.rest_vertices(), px, px)
+        controls = avatar.at_rest(sliders.controls())
+        if on_pose:
+            on_pose(k, controls)
+        yield buffer_image(avatar.render_image(controls, cam, raster, should_stop=should_stop), "rgb")
+        if on_frame:
+            on_frame(k)
+
+
+def run_animate(cfg: AnimateConfig) -> int:
+    from app.animation import AnimationError, check_channels, load_animation
+
+    avatar, _ = load_avatar(cfg.avatar)
+    try:
+        anim = load_animation(cfg.animation)
+        check_channels(anim, avatar.head_model, str(cfg.animation))
+    except AnimationError as e:
+        raise UserInputError(str(e)) from None
+    if cfg.out.suffix.lower() != ".mp4":
+        raise UserInputError(f"{cfg.out}: the animation is written as an .mp4")
+    pngs = cfg.out.with_suffix("") if cfg.pngs else None
+    if pngs is not None and (pngs.is_file() or foreign_files(pngs, r"frame_\d{4}\.png")):
+        raise UserInputError(f"{pngs}: the animation's PNG frames go there, and it holds other files; choose another "
+                             "--out or pass --no-pngs")
+    meshes = cfg.out.with_name(cfg.out.stem + "_meshes") if cfg.meshes != "none" else None
+    if meshes is not None and (meshes.is_file() or foreign_files(meshes, r"frame_\d{4}\.(obj|ply)")):
+        raise UserInputError(f"{meshes}: the guide meshes go there, and it holds other files; choose another --out")
+
+    def write_mesh(k: int, controls: Controls) -> None:
+        from models.head.meshio import mesh_bytes
+
+        if meshes is None:
+            return
+        meshes.mkdir(parents=True, exist_ok=True)
+        with torch.no_grad():
+            verts = avatar.head.pose([controls])[0][0].cpu().numpy()
+        atomic_write_bytes(meshes / f"frame_{k:04d}.{cfg.meshes}",
+                           mesh_bytes(f".{cfg.meshes}", verts, avatar.head_model.triangles))
+
+    gl = GLContext.headless()
+    t0 = time.perf_counter()
+    bar = Progress("animate", anim.frames)
+    n = write_video(animation_frames(avatar, Rasterizer(gl), anim, cfg.size, cfg.preset,
+                                     on_frame=lambda k: bar.update(k + 1), on_pose=write_mesh), cfg.out, anim.fps,
+                    pngs)
+    seconds = time.perf_counter() - t0
+    print(f"wrote {cfg.out} ({n} frames at {anim.fps:g} fps{f', PNGs in {pngs}' if pngs else ''}) in {seconds:.1f} s "
+          f"({1e3 * seconds / max(n, 1):.0f} ms a frame, {cfg.preset})")
+    return 0
+
+
+@dataclass(frozen=True)
+class ExportMeshConfig:
+    avatar: Path
+    """Avatar folder (a primitives or prior avatar: their density grids make the surface)."""
+    out: Path = Path("out/avatar.ply")
+    """The mesh to write: .ply (binary, vertex colours) or .obj (vertex colours as "v x y z r g b")."""
+    resolution: Annotated[int, Range(8, 512)] = 96
+    """Grid points along the head's longest side (the mesh's detail; time and size grow with its cube)."""
+    controls: Path | None = None
+    """A controls JSON to pose the avatar with (default: at rest)."""
+
+
+def run_export_mesh(cfg: ExportMeshConfig) -> int:
+    """`export-mesh`: the avatar as a coloured mesh (models/avatars/primitives/mesh.py)."""
+    from app.head_commands import _check_out
+    from models.avatars.primitives.avatar import PrimitivesAvatar
+    from models.avatars.primitives.mesh import avatar_mesh
+    from models.head.meshio import mesh_bytes
+
+    _check_out(cfg.out, (".obj", ".ply"))
+    avatar, _ = load_avatar(cfg.avatar)
+    if not isinstance(avatar, PrimitivesAvatar):
+        raise UserInputError(f"{cfg.avatar}: a {avatar.name} avatar; mesh export reads a primitives or prior avatar's "
+                             "density grids (CoDyNeRF's field is not exported yet)")
+    controls = load_controls(cfg.controls, avatar.head_model) if cfg.controls else None
+    t0 = time.perf_counter()
+    try:
+        verts, tris, colours = avatar_mesh(avatar, controls, cfg.resolution)
+    except ValueError as e:
+        raise UserInputError(f"{cfg.avatar}: {e}") from None
+    atomic_write_bytes(cfg.out, mesh_bytes(cfg.out.suffix, verts, tris, colours))
+    print(f"wrote {cfg.out} ({len(verts)} vertices, {len(tris)} triangles, {cfg.out.stat().st_size / 1e6:.1f} MB) in "
+          f"{time.perf_counter() - t0:.1f} s")
     return 0

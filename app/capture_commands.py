@@ -81,8 +81,9 @@ class CorpusConfig:
     """Lighting scenes, a comma list; the K-th person is captured under the (K mod n)-th."""
     frames: Annotated[int, Range(10, 100000)] = 60
     """Frames of each person's range-of-motion script (held-out frames included)."""
-    views: Annotated[int, Range(1, 16)] = 3
-    """Cameras at once on every frame (the seed's multi-view capture)."""
+    views: Annotated[int, Range(1, 16)] = 4
+    """Cameras at once on every frame, evenly round the head (the seed's multi-view capture: the prior learns the
+    whole head, back and top included, which a monocular scan never shows)."""
     size: Annotated[int, Range(16, 2048)] = 128
 
 
@@ -100,7 +101,7 @@ def run_corpus(cfg: CorpusConfig) -> int:
         raise UserInputError(f"{cfg.out}: already exists and is not empty; choose a new folder")
     head = load_head(cfg.head)
     gl = GLContext.headless()
-    bar = Progress("corpus", cfg.identities)
+    bar = Progress("corpus", cfg.identities, unit="people")
     for n, k in enumerate(range(cfg.first, last + 1)):
         synthesize(SynthConfig(head=cfg.head, scene=scenes[k % len(scenes)], frames=cfg.frames, size=cfg.size,
                                seed=k, identity=k, views=cfg.views, out=cfg.out / f"id{k:04d}"), head, gl)

@@ -60,6 +60,12 @@ COMMANDS = (
             avatar_commands.RenderCommandConfig, avatar_commands.run_render, positional=("avatar",)),
     Command("turntable", "Render an avatar from a camera circling it to an H.264 mp4 and PNG frames.",
             TurntableConfig, avatar_commands.run_turntable, positional=("avatar",)),
+    Command("animate", "Render a keyframed animation (sliders and camera, JSON) of an avatar to an H.264 mp4 and PNG "
+            "frames.", avatar_commands.AnimateConfig, avatar_commands.run_animate,
+            positional=("avatar", "animation")),
+    Command("export-mesh", "Write a primitives avatar as a coloured mesh (PLY or OBJ with vertex colours) for "
+            "Blender and game engines.", avatar_commands.ExportMeshConfig, avatar_commands.run_export_mesh,
+            positional=("avatar",)),
     Command("bench", "Measure what accuracy costs in time: render settings, effect sets, training curves, the "
             "dense NerFACE renderer; charts, and presets chosen from the Pareto front.", BenchConfig, run_bench),
 )

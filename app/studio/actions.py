@@ -5,12 +5,21 @@ application's machinery (threads, job processes, exports) and are carried out by
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from app.animation import (
+    AnimationError,
+    all_channels,
+    channel_value,
+    check_channels,
+    load_animation,
+    rest_sliders,
+    save_animation,
+)
 from app.studio.session import AvatarFiles, Session, Sliders, View
 from app.turntable import INSPECT, TurntableConfig
 
@@ -331,3 +340,105 @@ class CancelExport(Command):
 @dataclass(frozen=True)
 class SaveViewport(Command):
     path: Path
+
+
+# ---- the animation -------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class KeyPose(Action):
+    """Key, at the animation's time, every channel that is keyed already or is away from rest (a channel's first
+    key after the start also keys its rest value at the start, so it moves from rest to the pose)."""
+
+    def apply(self, s: Session) -> None:
+        if s.avatar is None:
+            return
+        head = s.avatar.head_model
+        rest_s, rest_v = rest_sliders(head, s.sliders.shape), View()
+        anim, t = s.animation, s.anim_time
+        for ch in all_channels(head):
+            value, rest = channel_value(s.sliders, s.view, head, ch), channel_value(rest_s, rest_v, head, ch)
+            if ch not in anim.tracks and abs(value - rest) <= 1e-6:
+                continue
+            if ch not in anim.tracks and t > 0:
+                anim = anim.with_key(ch, 0.0, rest)
+            anim = anim.with_key(ch, t, value)
+        s.animation = anim
+
+
+@dataclass(frozen=True)
+class DeleteKeys(Action):
+    """Remove every channel's key at the animation's time."""
+
+    def apply(self, s: Session) -> None:
+        anim = s.animation
+        for ch in list(anim.tracks):
+            anim = anim.without_key(ch, s.anim_time)
+        s.animation = anim
+
+
+@dataclass(frozen=True)
+class SeekAnimation(Action):
+    """Go to time t: the keyed channels take their values there (the rest keep the sliders')."""
+
+    t: float
+
+    def apply(self, s: Session) -> None:
+        s.anim_time = float(np.clip(self.t, 0.0, s.animation.duration_s))
+        if s.avatar is not None and s.animation.tracks:
+            s.sliders, s.view = s.animation.pose_at(s.anim_time, s.sliders, s.view, s.avatar.head_model)
+            controls_moved(s)
+
+
+@dataclass(frozen=True)
+class PlayAnimation(Action):
+    playing: bool
+
+    def apply(self, s: Session) -> None:
+        s.playing = self.playing and bool(s.animation.tracks)
+
+
+@dataclass(frozen=True)
+class AnimationTiming(Action):
+    duration_s: float
+    fps: float
+    interpolation: str
+
+    def apply(self, s: Session) -> None:
+        s.animation = replace(s.animation, duration_s=float(np.clip(self.duration_s, 0.1, 3600.0)),
+                              fps=float(np.clip(self.fps, 1.0, 240.0)),
+                              interpolation="linear" if self.interpolation == "linear" else "smooth")
+        s.anim_time = min(s.anim_time, s.animation.duration_s)
+
+
+@dataclass(frozen=True)
+class SaveAnimation(Action):
+    path: Path
+
+    def apply(self, s: Session) -> None:
+        try:
+            save_animation(s.animation, self.path)
+        except OSError as e:
+            s.report(f"{self.path}: cannot save the animation ({e.strerror})")
+
+
+@dataclass(frozen=True)
+class LoadAnimation(Action):
+    path: Path
+
+    def apply(self, s: Session) -> None:
+        try:
+            anim = load_animation(self.path)
+            if s.avatar is not None:
+                check_channels(anim, s.avatar.head_model, str(self.path))
+        except AnimationError as e:
+            s.report(str(e))
+            return
+        s.animation, s.anim_time, s.playing = anim, 0.0, False
+
+
+@dataclass(frozen=True)
+class ExportAnimation(Command):
+    """The session's animation of the open avatar to an mp4 (and PNG frames beside it)."""
+
+    out: Path
+    size: int = 256
+    preset: str = "preview"

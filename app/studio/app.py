@@ -35,11 +35,12 @@ DEMO_AVATAR = REPO / "resources" / "demo_avatar"
 
 
 class FrameClock:
-    """Interface frame rates, kept apart for idle, rendering and training."""
+    """Interface frame rates, kept apart for idle, rendering, training, loading and playing an animation."""
 
     def __init__(self):
         self.last = time.perf_counter()
-        self.times: dict[str, deque] = {k: deque(maxlen=240) for k in ("idle", "rendering", "training", "loading")}
+        states = ("idle", "rendering", "training", "loading", "playing")
+        self.times: dict[str, deque] = {k: deque(maxlen=240) for k in states}
         """Frame times by what the studio was doing ("loading": while an avatar is read in the background)."""
         self.started = False
         self.recent: deque = deque(maxlen=60)
@@ -99,6 +100,7 @@ class Studio:
         self.script = Script.load(cfg.script) if cfg.script else None
         self.confirm_close = False
         self.keep_jobs = False
+        self.last_play_tick: float | None = None
         self.pending_viewport_shot: Path | None = None
         """The user chose to keep training after the window closes (otherwise closing stops the jobs)."""
 
@@ -128,6 +130,14 @@ class Studio:
                     self.session.report(f"{cfg.out}: the turntable is written as an .mp4")
                 else:
                     self.exporter.start(cfg, self.session.controls())
+            case a.ExportAnimation(out, size, preset):
+                s = self.session
+                if out.suffix.lower() != ".mp4":
+                    s.report(f"{out}: the animation is written as an .mp4")
+                elif s.folder is None or not s.animation.tracks:
+                    s.report("nothing to export: key a pose first")
+                else:
+                    self.exporter.start_animation(s.folder, s.animation, out, max(16, size - size % 2), preset)
             case a.CancelExport():
                 self.exporter.cancel()
             case a.SaveViewport(path):
@@ -166,7 +176,7 @@ class Studio:
             return
         self.act(a.AvatarOpened(o.files))
         remember_recent(o.folder)
-        self.worker.set_avatar(o.files.avatar)
+        self.worker.set_avatar(o.files.folder)
 
     def save_viewport(self, path: Path) -> None:
         """The viewport as shown (the guide and the render, beside or over each other), as a PNG: read from the
@@ -225,8 +235,15 @@ class Studio:
             if job.video is not None and job.state == "done" and not job.opened:
                 job.opened = True
                 self.open_avatar(job.out)
+        if self.session.playing:  # the animation's time follows the clock, round and round
+            now = time.perf_counter()
+            dt, self.last_play_tick = now - (self.last_play_tick or now), now
+            s = self.session
+            self.act(a.SeekAnimation((s.anim_time + dt) % max(s.animation.duration_s, 1e-3)))
+        else:
+            self.last_play_tick = None
         state = "training" if self.jobs.running() else "loading" if self.opening else \
-            "rendering" if self.worker.busy else "idle"
+            "playing" if self.session.playing else "rendering" if self.worker.busy else "idle"
         self.clock.tick(state)
         if self.script is not None:
             self.script.step(self)
@@ -310,6 +327,8 @@ class Studio:
         r = self.worker.result
         return {"fps_idle": round(self.clock.fps("idle"), 1), "fps_rendering": round(self.clock.fps("rendering"), 1),
                 "fps_training": round(self.clock.fps("training"), 1),
+                "fps_playing": round(self.clock.fps("playing"), 1),
+                "animation": self.session.animation.to_json(), "anim_time": round(self.session.anim_time, 3),
                 "frames": {k: len(v) for k, v in self.clock.times.items()},
                 "loading_s": [round(x, 2) for x in self.loading_s],
                 "fps_loading": round(self.clock.fps("loading"), 1),

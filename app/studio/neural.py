@@ -1,25 +1,26 @@
-"""The neural render off the window's thread: progressive passes (draft at once, then finer while the
-controls rest), the latest request wins (a newer one cancels the pass in flight between ray batches), each
-pass's time measured. The worker owns a headless GL context for the rasterizer: the window's context stays
-on the window's thread."""
+"""The neural render off the window's thread, in a process of its own: progressive passes (draft at once, then
+finer while the controls rest), the latest request wins (a newer one cancels the pass in flight between ray
+batches), each pass's time measured. The renderer is a separate process (spawned) so that it and the window do
+not share Python's interpreter lock: in a thread, the window's frames held it while the render waited, and a
+128 px draft of the demo took 173 ms in the window against 115 ms alone on one thread. The renderer reads the
+avatar from its folder itself and owns a headless GL context for its rasterizer; the window's context stays on
+the window's thread."""
 
 from __future__ import annotations
 
 import contextlib
+import multiprocessing as mp
 import os
+import queue
 import threading
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
-import torch
 
-from models.avatars.base import Avatar, RenderCancelled
 from models.head.controls import Controls
-from models.training.metrics import psnr
 from render.camera import Camera, framing_camera
-from render.gl.context import GLContext
-from render.gl.raster import Rasterizer
 
 
 @dataclass(frozen=True)
@@ -39,8 +40,6 @@ class Result:
     ms: float
 
 
-
-
 @dataclass
 class PresetFigures:
     """A quality preset measured on the loaded avatar: time per frame and error against `final`."""
@@ -56,133 +55,193 @@ def scaled(camera: Camera, scale: float) -> Camera:
 
 
 class NeuralWorker:
-    """One background thread that renders the latest request."""
+    """The window's side of the renderer process: requests go out, pixels come back (read by a thread that sets
+    `result` and wakes the window's frame pacing through `arrived`)."""
 
     def __init__(self):
-        self._cv = threading.Condition()
-        self._avatar: Avatar | None = None
-        self._request: Request | None = None
+        ctx = mp.get_context("spawn")  # a fresh interpreter: no copy of the window's GL or threads
+        self._latest = ctx.Value("q", 0, lock=False)
+        """The newest request's id, in shared memory: the renderer's passes stop between batches once it moves."""
+        self._requests = ctx.Queue()
+        self._results = ctx.Queue()
         self._id = 0
-        self._measure = False
+        self._avatar_id = 0
         self.result: Result | None = None
         self.arrived = threading.Event()
         """Set when a pass's pixels are stored: the window's frame pacing wakes on it, so they show at once."""
         self.busy = False
         self.error = ""
         self.figures = PresetFigures()
-        self._quit = False
-        self._thread = threading.Thread(target=self._run, name="neural-render", daemon=True)
-        self._thread.start()
+        self._proc = ctx.Process(target=serve, args=(self._requests, self._results, self._latest),
+                                 name="neural-render", daemon=True)
+        self._proc.start()
+        self._reader = threading.Thread(target=self._read, name="neural-results", daemon=True)
+        self._reader.start()
 
     # ---- the window's side -----------------------------------------------------------------------------
-    def set_avatar(self, avatar: Avatar | None, measure: bool = True) -> None:
-        with self._cv:
-            self._avatar = avatar
-            self._id += 1
-            self._request = None
-            self.result = None
-            self.figures = PresetFigures()
-            self._measure = measure and avatar is not None
-            self._cv.notify()
+    def _next_id(self) -> int:
+        self._id += 1
+        self._latest.value = self._id
+        return self._id
+
+    def set_avatar(self, folder: Path | None, measure: bool = True) -> None:
+        """Render the avatar in this folder from now on (None: nothing); measure its presets when the controls
+        rest."""
+        self._avatar_id = self._next_id()
+        self.result = None
+        self.figures = PresetFigures()
+        self._requests.put(("avatar", self._avatar_id, None if folder is None else str(folder), measure))
 
     def submit(self, request: Request) -> int:
-        with self._cv:
-            self._id += 1
-            self._request = request
-            self._cv.notify()
-            return self._id
+        rid = self._next_id()
+        self.busy = True
+        self._requests.put(("render", rid, request))
+        return rid
 
     def close(self) -> None:
-        with self._cv:
-            self._quit = True
-            self._id += 1
-            self._cv.notify()
-        self._thread.join(timeout=10)
+        self._next_id()
+        with contextlib.suppress(OSError, ValueError):
+            self._requests.put(("quit",))
+        self._proc.join(timeout=10)
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(timeout=5)
 
-    # ---- the worker's side -----------------------------------------------------------------------------
-    def _run(self) -> None:
-        # Below the window's thread: the interface keeps its frame rate; rendering takes what is left. (Linux
-        # gives each thread its own nice value; the thread pools torch starts from here inherit it.)
-        with contextlib.suppress(OSError, AttributeError):
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
-        torch.set_num_threads(1)  # the window keeps the other core (measured: draft 196 -> 173 ms in the window)
-        gl = GLContext.headless()
-        raster = Rasterizer(gl)
+    def _read(self) -> None:
         while True:
-            with self._cv:
-                while not self._quit and self._request is None and not self._measure:
-                    self._cv.wait()
-                if self._quit:
-                    break
-                # Pixels first: a pending request is rendered before the presets are measured, and a new
-                # request interrupts a measurement (which then starts again once the controls rest).
-                avatar, request_id = self._avatar, self._id
-                request, self._request = self._request, None
-                measure = request is None and self._measure
-            if avatar is None:
-                continue
-            self.busy = True
             try:
-                if request is not None:
-                    self._render(avatar, raster, request, request_id)
-                elif measure:
-                    self._measure_presets(avatar, raster, request_id)
-            except RenderCancelled:
-                pass
-            except Exception as e:  # shown in the window; the studio keeps running
-                self.error = f"render failed: {type(e).__name__}: {e}"
-            finally:
+                msg = self._results.get()
+            except (EOFError, OSError, ValueError):
+                return
+            kind = msg[0]
+            if kind == "result":
+                _, rid, name, buffers, ms = msg
+                if rid == self._id:  # a pass of the newest request
+                    self.result = Result(rid, name, buffers, ms)
+                    self.error = ""
+                    self.arrived.set()
+            elif kind == "idle":
+                if msg[1] == self._id:
+                    self.busy = False
+            elif kind == "figures":
+                if msg[1] == self._avatar_id:
+                    self.figures = msg[2]
+            elif kind == "error":
+                self.error = msg[1]
                 self.busy = False
+                self.arrived.set()
+            elif kind == "closed":
+                return
+
+
+# ---- the renderer process ----------------------------------------------------------------------------------
+def serve(requests, results, latest) -> None:
+    """The renderer's loop: the newest render request first, then (controls at rest) the presets' measurement;
+    anything newer stops either between batches of rays."""
+    import torch
+
+    from models.avatars.base import RenderCancelled
+    from models.avatars.registry import load_avatar
+    from render.gl.context import GLContext
+    from render.gl.raster import Rasterizer
+
+    # Below the window: the interface keeps its frame rate; rendering takes what is left, on one core (the window
+    # keeps the other: measured, draft 196 -> 173 ms in the window with two threads against one).
+    with contextlib.suppress(OSError, AttributeError):
+        os.setpriority(os.PRIO_PROCESS, 0, 10)
+    torch.set_num_threads(1)
+    gl = GLContext.headless()
+    raster = Rasterizer(gl)
+    avatar, avatar_id, measure = None, 0, False
+    stale = lambda rid: latest.value != rid
+    try:
+        while True:
+            msgs = [requests.get()] if not measure else []
+            with contextlib.suppress(queue.Empty):
+                while True:
+                    msgs.append(requests.get_nowait())
+            render = None
+            for msg in msgs:
+                if msg[0] == "quit":
+                    return
+                if msg[0] == "avatar":
+                    _, avatar_id, folder, measure = msg
+                    render = None
+                    try:
+                        avatar = None if folder is None else load_avatar(folder)[0]
+                    except Exception as e:  # the window read the same folder: this is rare
+                        avatar, measure = None, False
+                        results.put(("error", f"render failed: {type(e).__name__}: {e}"))
+                elif msg[0] == "render":
+                    render = msg
+            if avatar is None:
+                measure = False
+                if render is not None:
+                    results.put(("idle", render[1]))
+                continue
+            try:
+                if render is not None:
+                    _, rid, request = render
+                    render_passes(avatar, raster, request, rid, stale, results)
+                    results.put(("idle", rid))
+                elif measure:
+                    figures = measure_presets(avatar, raster, lambda since=latest.value: stale(since))
+                    results.put(("figures", avatar_id, figures))
+                    measure = False
+            except RenderCancelled:
+                if render is not None:
+                    results.put(("idle", render[1]))
+            except Exception as e:  # shown in the window; the studio keeps running
+                results.put(("error", f"render failed: {type(e).__name__}: {e}"))
+    except (EOFError, OSError, KeyboardInterrupt):  # the window is gone
+        return
+    finally:
         raster.release()
         gl.release()
+        with contextlib.suppress(OSError, ValueError):
+            results.put(("closed",))
 
-    def _stale(self, request_id: int) -> bool:
-        """A newer request (or avatar) arrived since request_id."""
-        return self._id != request_id
 
-    def _render(self, avatar, raster: Rasterizer, request: Request, request_id: int) -> None:
-        qualities = [avatar.presets[name].quality for name in request.passes]
-        for i, name in enumerate(request.passes):
-            if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:
-                continue  # the bench may choose one setting for two presets: render it once, as the finer
-            avatar.apply_preset(name, request.camera.width_px)
-            cam = scaled(request.camera, avatar.presets[name].quality.scale)
+def render_passes(avatar, raster, request: Request, rid: int, stale, results) -> None:
+    """Each pass of the request, coarse to fine, its pixels sent as soon as they are made."""
+    qualities = [avatar.presets[name].quality for name in request.passes]
+    for i, name in enumerate(request.passes):
+        if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:
+            continue  # the bench may choose one setting for two presets: render it once, as the finer
+        avatar.apply_preset(name, request.camera.width_px)
+        cam = scaled(request.camera, avatar.presets[name].quality.scale)
+        t0 = time.perf_counter()
+        buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
+                                      should_stop=lambda: stale(rid), inspect=request.inspect,
+                                      chunk_rays=avatar.interactive_chunk_rays)
+        ms = 1e3 * (time.perf_counter() - t0)
+        if stale(rid):
+            return
+        results.put(("result", rid, name, buffers, ms))
+
+
+def measure_presets(avatar, raster, should_stop) -> PresetFigures:
+    """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`, at the size of
+    the avatar's capture (a tracked video's 256 px costs four times a synthetic capture's 128)."""
+    from models.training.metrics import psnr
+
+    size = min(avatar.capture_px or 128, 256)
+    cam = framing_camera(avatar.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
+    figures = PresetFigures(size_px=size)
+    images = {}
+    for name in ("final", "preview", "draft"):
+        avatar.apply_preset(name, size)
+        c = scaled(cam, avatar.presets[name].quality.scale)
+        times = []
+        for _ in range(3):
             t0 = time.perf_counter()
-            buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
-                                          should_stop=lambda: self._stale(request_id), inspect=request.inspect,
-                                          chunk_rays=avatar.interactive_chunk_rays)
-            ms = 1e3 * (time.perf_counter() - t0)
-            with self._cv:
-                if self._stale(request_id):
-                    return
-                self.result = Result(request_id, name, buffers, ms)
-                self.error = ""
-            self.arrived.set()
-
-    def _measure_presets(self, avatar, raster: Rasterizer, request_id: int) -> None:
-        """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`, at the size of
-        the avatar's capture (a tracked video's 256 px costs four times a synthetic capture's 128)."""
-        size = min(avatar.capture_px or 128, 256)
-        cam = framing_camera(avatar.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
-        figures = PresetFigures(size_px=size)
-        images = {}
-        for name in ("final", "preview", "draft"):
-            avatar.apply_preset(name, size)
-            c = scaled(cam, avatar.presets[name].quality.scale)
-            times = []
-            for _ in range(3):
-                t0 = time.perf_counter()
-                images[name] = avatar.render_image(avatar.at_rest(Controls()), c, raster,
-                                                   should_stop=lambda: self._stale(request_id),
-                                                   chunk_rays=avatar.interactive_chunk_rays)["rgb"]
-                times.append(1e3 * (time.perf_counter() - t0))
-            figures.ms[name] = float(np.median(times))
-            reference = images["final"]
-            if images[name].shape != reference.shape:  # compare at the final size (nearest upsampling)
-                k = reference.shape[0] // images[name].shape[0]
-                images[name] = images[name].repeat(k, 0).repeat(k, 1)
-            figures.psnr_vs_final[name] = float("inf") if name == "final" else psnr(images[name], reference)
-        with self._cv:
-            if not self._stale(request_id):
-                self.figures = figures
-                self._measure = False
+            images[name] = avatar.render_image(avatar.at_rest(Controls()), c, raster, should_stop=should_stop,
+                                               chunk_rays=avatar.interactive_chunk_rays)["rgb"]
+            times.append(1e3 * (time.perf_counter() - t0))
+        figures.ms[name] = float(np.median(times))
+        reference = images["final"]
+        if images[name].shape != reference.shape:  # compare at the final size (nearest upsampling)
+            k = reference.shape[0] // images[name].shape[0]
+            images[name] = images[name].repeat(k, 0).repeat(k, 1)
+        figures.psnr_vs_final[name] = float("inf") if name == "final" else psnr(images[name], reference)
+    return figures

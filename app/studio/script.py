@@ -15,6 +15,11 @@ pictures). Steps:
   {"record_latency": true}                the ms from the last change to each of its passes' pixels (and as
                                           "PASS render" the pass's own render time), kept for the report's
                                           "latencies" (benchmarks/bench_studio.py)
+  {"key": true}                           key the pose at the animation's time (Animation tab's "Key pose")
+  {"seek": SECONDS}                       move along the animation (its keyed channels set the sliders)
+  {"play": BOOL}                          play or stop the animation
+  {"save_animation": JSON} / {"load_animation": JSON}
+  {"export_animation": {"out": MP4, "size": 64, "preset": "draft"}}   (then {"wait_export": true})
   {"save_neural": PNG}                    the neural image as shown
   {"screenshot": PNG}                     the whole window
   {"save_viewport": PNG}                  the viewport as shown (the Export panel's "Screenshot viewport")
@@ -322,6 +327,43 @@ def _wait_export(sc: Script, st: Driven, s: dict) -> bool:
 @step("orbit")
 def _orbit(sc: Script, st: Driven, s: dict) -> bool:  # a mouse drag of dx pixels, as the viewport applies it
     st.act(a.Orbit(float(s["orbit"])))
+    return True
+
+
+@step("key")
+def _key(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.KeyPose())
+    return True
+
+
+@step("seek")
+def _seek(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.SeekAnimation(float(s["seek"])))
+    return True
+
+
+@step("play")
+def _play(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.PlayAnimation(bool(s["play"])))
+    return True
+
+
+@step("save_animation")
+def _save_animation(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.SaveAnimation(Path(s["save_animation"])))
+    return True
+
+
+@step("load_animation")
+def _load_animation(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.LoadAnimation(Path(s["load_animation"])))
+    return True
+
+
+@step("export_animation")
+def _export_animation(sc: Script, st: Driven, s: dict) -> bool:
+    x = s["export_animation"]
+    st.act(a.ExportAnimation(Path(x["out"]), int(x.get("size", 64)), x.get("preset", "draft")))
     return True
 
 

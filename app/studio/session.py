@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from app.animation import Animation
 from models.avatars.base import Avatar
 from models.avatars.registry import load_avatar
 from models.capture.dataset import CaptureSplit, DatasetError, load_split
@@ -179,6 +180,12 @@ class Session:
     errors: list[str] = field(default_factory=list)
     job_message: str = ""
     """Why the Jobs panel's last request was refused (shown there, beside the form); "" once one is queued."""
+    animation: Animation = field(default_factory=Animation)
+    """The keyframes of the sliders and the camera (app/animation.py): keyed, played and exported in the Export
+    panel's Animation tab."""
+    anim_time: float = 0.0
+    """Where on the animation the sliders are, seconds."""
+    playing: bool = False
 
     @property
     def avatar(self) -> Avatar | None:

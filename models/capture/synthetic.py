@@ -55,17 +55,18 @@ class SynthConfig:
     fov_y_deg: Annotated[float, Range(1, 170)] = 18.0
     """Camera field of view, degrees (a portrait lens)."""
     views: Annotated[int, Range(1, 16)] = 1
-    """Cameras at once: every frame of the script is drawn from this many cameras (the script's, then 35, 70, ...
-    degrees to either side), as a multi-view rig would (--frames counts the script's frames)."""
+    """Cameras at once: every frame of the script is drawn from this many cameras spaced evenly round the head (the
+    script's first), as a capture dome would (--frames counts the script's frames)."""
 
 
 def view_offsets_deg(views: int) -> list[float]:
-    """The rig's cameras about the script's: 0, then +35, -35, +70, -70, ...
+    """The rig's cameras' yaw about the script's camera, evenly round the head, in (-180, 180].
 
-    >>> view_offsets_deg(4)
-    [0.0, 35.0, -35.0, 70.0]
+    >>> view_offsets_deg(3), view_offsets_deg(4)
+    ([0.0, 120.0, -120.0], [0.0, 90.0, 180.0, -90.0])
     """
-    return [0.0] + [s * 35.0 * (1 + k // 2) for k, s in zip(range(views - 1), [1, -1] * views, strict=False)]
+    return [float((360.0 * k / views + 180.0) % 360.0 - 180.0) or 0.0 if k * 2 != views else 180.0
+            for k in range(views)]
 
 
 def absolute_head_spec(spec: str) -> str:

@@ -54,24 +54,35 @@ def read_npz(path: str | Path, required: tuple[str, ...], kind: str, missing_hin
         raise HeadModelError(f"{path}: not a readable npz ({type(e).__name__}: {e})") from None
 
 
-def mesh_bytes(suffix: str, vertices: np.ndarray, triangles: np.ndarray) -> bytes:
+def mesh_bytes(suffix: str, vertices: np.ndarray, triangles: np.ndarray, colours: np.ndarray | None = None) -> bytes:
     """(V,3) vertices and (F,3) triangles as the bytes of an OBJ or a binary PLY file (suffix ".obj" or ".ply"),
-    vertex order kept. The caller writes them (atomically: models/files.py)."""
+    vertex order kept; colours (V,3) uint8: vertex colours (PLY's red/green/blue, OBJ's "v x y z r g b" in [0,1],
+    which Blender and MeshLab read). The caller writes them (atomically: models/files.py)."""
     v = np.asarray(vertices, np.float64)
     f = np.asarray(triangles, np.int64)
+    c = None if colours is None else np.asarray(colours, np.uint8).reshape(-1, 3)
     suffix = suffix.lower()
     if suffix == ".obj":
-        body = "".join(f"v {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in v)
-        body += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f)
+        if c is None:
+            body = "".join(f"v {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in v)
+        else:
+            body = "".join(f"v {x:.7g} {y:.7g} {z:.7g} {r / 255:.4g} {g / 255:.4g} {b / 255:.4g}\n"
+                           for (x, y, z), (r, g, b) in zip(v, c, strict=True))
+        body += "".join(f"f {a + 1} {b + 1} {c_ + 1}\n" for a, b, c_ in f)
         data = body.encode()
     elif suffix == ".ply":
+        colour_props = "property uchar red\nproperty uchar green\nproperty uchar blue\n" if c is not None else ""
         header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n"
-                  "property float x\nproperty float y\nproperty float z\n"
+                  f"property float x\nproperty float y\nproperty float z\n{colour_props}"
                   f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
+        vert_rec = np.zeros(len(v), dtype=[("p", "<f4", (3,))] + ([("c", "u1", (3,))] if c is not None else []))
+        vert_rec["p"] = v
+        if c is not None:
+            vert_rec["c"] = c
         face_rec = np.zeros(len(f), dtype=[("n", "u1"), ("idx", "<i4", (3,))])
         face_rec["n"] = 3
         face_rec["idx"] = f
-        data = header.encode() + v.astype("<f4").tobytes() + face_rec.tobytes()
+        data = header.encode() + vert_rec.tobytes() + face_rec.tobytes()
     else:
         raise ValueError(f"mesh output must end in .obj or .ply, not {suffix!r}")
     return data

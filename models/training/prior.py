@@ -67,6 +67,8 @@ class PriorTrainConfig:
     grid: Annotated[int, Range(8, 256)] = 16
     voxels: Annotated[int, Range(2, 64)] = 8
     width: Annotated[int, Range(8, 1024)] = 64
+    kl: Annotated[float, Range(0)] = 1e-5
+    """The expression code's KL weight."""
     checkpoint_seconds: Annotated[float, Range(0, above=True)] = 120.0
     grad_clip: Annotated[float, Range(0, above=True)] = 1.0
 
@@ -264,7 +266,7 @@ def prepare_prior(cfg: PriorTrainConfig, gl: GLContext, rank: int = 0, world: in
     first = load_split(folders[0], "train")
     head = load_head(first.head_model)
     torch.manual_seed(cfg.seed)
-    pcfg = PriorConfig(grid=cfg.grid, voxels=cfg.voxels, width=cfg.width)
+    pcfg = PriorConfig(grid=cfg.grid, voxels=cfg.voxels, width=cfg.width, kl=cfg.kl)
     avatar = PriorAvatar.for_capture(head, 1, first.background, parse_effects(cfg.effects), first.lighting, pcfg)
     identities = [load_identity(f, avatar, gl) for f in folders]
     trainer = PriorTrainer(cfg, avatar, identities, rank, world)

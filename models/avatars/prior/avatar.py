@@ -36,8 +36,10 @@ class PriorConfig(PrimitivesConfig):
 
     latent: Annotated[int, Range(1, 256)] = 16
     """Channels of the 4x4 expression code."""
-    kl: Annotated[float, Range(0)] = 1e-3
-    """The expression code's KL weight (the variational encoder's)."""
+    kl: Annotated[float, Range(0)] = 1e-5
+    """The expression code's KL weight (the variational encoder's; summed over the code's 256 numbers). At 1e-3
+    the code collapsed (25 minutes on 12 people: an open jaw moved it by about its own size, the decoder read the
+    expression from the primitives' places alone)."""
     code_dim: Annotated[int, Range(0, 1024)] = 0
     """No per-frame code: a frame is its identity's maps and its guide mesh."""
 

@@ -192,3 +192,28 @@ def test_screenshot_option(display, avatar, tmp_path):
            "--height", "700")
     img = np.asarray(Image.open(shot))
     assert img.shape == (700, 1024, 3) and img.std() > 10
+
+
+def test_keyframes_play_and_export(display, avatar, tmp_path):
+    """The Animation tab through the window: a smile keyed at 0 s (rest) and 1 s (0.8) with the jaw open, the
+    sliders in between at the smooth curve's value, the file saved and loaded back, playback moving the time on,
+    and the export an mp4 of the animation's frames."""
+    anim_file, mp4 = tmp_path / "anim.json", tmp_path / "anim.mp4"
+    report = run_script(display, tmp_path, avatar, [
+        {"wait_render": "draft"}, {"seek": 1.0}, {"expression": 0, "value": 0.8}, {"jaw_open_deg": 20},
+        {"key": True}, {"seek": 0.25}, {"save_animation": str(anim_file)}, {"load_animation": str(anim_file)},
+        {"play": True}, {"wait_frames": 30}, {"play": False},
+        {"export_animation": {"out": str(mp4), "size": 32, "preset": "draft"}}, {"wait_export": True}])
+    assert report["errors"] == [], report["errors"]
+    saved = json.loads(anim_file.read_text())
+    tracks = saved["tracks"]
+    smile = [c for c in tracks if c.startswith("expression.")]
+    assert len(smile) == 1 and tracks[smile[0]] == [[0.0, 0.0], [1.0, 0.8]]  # keyed from rest at 0 s
+    assert tracks["jaw.open"] == [[0.0, 0.0], [1.0, 20.0]] and set(tracks) == {smile[0], "jaw.open"}
+    assert report["animation"] == saved  # loaded back as saved
+    assert report["anim_time"] != 0.25 and report["fps_playing"] > 0  # playback moved on, the window drew
+    cap = cv2.VideoCapture(str(mp4))
+    n = 0
+    while cap.read()[0]:
+        n += 1
+    assert n == round(saved["duration_s"] * saved["fps"])  # the animation's frames, at its rate

@@ -17,6 +17,7 @@ from models.capture.synthetic import SynthConfig, synthesize
 from models.head.controls import Controls
 from models.head.sources import load_builtin
 from render.gl.raster import Rasterizer
+from tests.conftest import DEMO
 
 SMALL = PriorConfig(grid=8, voxels=2, width=16, latent=4)
 
@@ -168,18 +169,21 @@ def test_corpus_prior_and_personalize_from_the_command_line(tmp_path, capsys):
     assert main(["corpus", "--identities", "2", "--frames", "10", "--views", "2", "--size", "32",
                  "--out", str(corpus)]) == 0
     split = json.loads((corpus / "id0001" / "transforms_train.json").read_text())
-    yaws = sorted({round(f["script"]["camera_yaw_deg"] - split["frames"][0]["script"]["camera_yaw_deg"], 3)
-                   for f in split["frames"][:2]})
-    assert yaws == [0.0, 35.0]  # each script frame from the rig's two cameras, one after the other
+    yaws = [round(f["script"]["camera_yaw_deg"] - split["frames"][0]["script"]["camera_yaw_deg"], 3)
+            for f in split["frames"][:2]]
+    assert yaws == [0.0, 180.0]  # each script frame from the rig's two cameras, in front and behind
     assert main(["corpus", "--first", "999", "--identities", "2", "--out", str(tmp_path / "c2")]) == 2
     assert "held-out" in capsys.readouterr().err
     assert main(["prior-train", str(corpus), "--out", str(prior), "--steps", "3", "--grid", "8", "--voxels", "2",
                  "--width", "16", "--rays-per-frame", "64", "--frames-per-step", "2"]) == 0
     assert main(["synth", "--identity", "1000", "--frames", "10", "--size", "32", "--scene", "ambient",
                  "--out", str(scan)]) == 0
+    assert main(["personalize", str(scan), "--prior", str(DEMO), "--out", str(person)]) == 2
+    assert "not a universal prior" in capsys.readouterr().err and not person.exists()
     assert main(["personalize", str(scan), "--prior", str(prior), "--out", str(person), "--steps", "2"]) == 0
     avatar, meta = load_avatar(person)
     assert meta["model"] == "prior" and meta["provenance"]["steps"] == 2
+    assert meta["view_range"]["yaw_deg"] == [-180.0, 180.0]  # the prior saw heads all round: turntables go round
     assert float(avatar.neutral_texture.abs().sum()) > 0 and float(avatar.neutral_geometry.abs().sum()) > 0
     prior_avatar, _ = load_avatar(prior)
     assert float(prior_avatar.neutral_texture.abs().sum()) == 0  # the prior itself is no one
@@ -191,3 +195,53 @@ def test_corpus_prior_and_personalize_from_the_command_line(tmp_path, capsys):
                               Rasterizer(gl))["rgb"]
     gl.release()
     assert np.isfinite(img).all() and img.shape == (32, 32, 3)
+
+
+PRIOR = Path(__file__).resolve().parents[4] / "resources" / "prior"
+
+
+@pytest.mark.gl
+def test_one_persons_expression_drives_another(gl):
+    """The shared expression space (the seed's Fig. 9) on the shipped prior: the code of person A's open jaw is
+    person B's (Delta G takes the identity out), and driving B with it opens B's mouth: the render changes about the
+    lips far more than on the forehead."""
+    from models.capture.synthetic import identity_coefficients
+    from models.training.metrics import psnr
+
+    if not (PRIOR / "avatar.json").is_file():
+        pytest.skip(f"no shipped prior at {PRIOR}")
+    from models.avatars.registry import load_avatar
+    from render.camera import framing_camera
+
+    avatar, _ = load_avatar(PRIOR)
+    head = avatar.head_model
+    a_shape, b_shape = identity_coefficients(head, 1001), identity_coefficients(head, 1002)
+    jaw = np.array([0.35, 0.0, 0.0], np.float32)
+
+    def code(controls):
+        g = avatar.geometry(controls)
+        return avatar.expression_encoder(torch.zeros_like(g.delta_geometry), g.delta_geometry)[0]
+
+    with torch.no_grad():
+        a_open, b_open, b_rest = (code(Controls(shape=a_shape, jaw=jaw)), code(Controls(shape=b_shape, jaw=jaw)),
+                                  code(Controls(shape=b_shape)))
+    assert float((a_open - b_open).norm()) < 0.1 * float((b_open - b_rest).norm())
+    avatar.personalize(torch.zeros(1, 3, *avatar.neutral_texture.shape[2:]), avatar.neutral_geometry_of(b_shape))
+    cam = framing_camera(head.template, width_px=96, height_px=96)
+    r = Rasterizer(gl)
+    rest = avatar.render_image(Controls(shape=b_shape), cam, r)["rgb"]
+    opened = avatar.render_image(Controls(shape=b_shape, jaw=jaw), cam, r)["rgb"]
+    r.release()
+    lips = head.landmarks.as_barycentric(head.triangles)
+    ids, bary = lips
+    lm = (head.template[ids] * bary[..., None]).sum(1)
+    px = np.stack([(cam.projection @ cam.view @ np.r_[p, 1.0]) for p in lm])
+    xy = np.stack([(px[:, 0] / px[:, 3] + 1) / 2 * 96, (1 - px[:, 1] / px[:, 3]) / 2 * 96], 1)
+    mouth, brow = xy[48:68], xy[17:27]
+    box = lambda pts, pad: (slice(max(0, int(pts[:, 1].min()) - pad), int(pts[:, 1].max()) + pad + 1),
+                            slice(max(0, int(pts[:, 0].min()) - pad), int(pts[:, 0].max()) + pad + 1))
+    change = np.abs(opened - rest).mean(-1)
+    near_mouth = change[box(mouth, 3)].mean()
+    forehead = change[box(brow - [0, 10], 2)].mean()
+    assert near_mouth > 0.03 and near_mouth > 4 * forehead, (near_mouth, forehead)
+    assert psnr(opened, rest) < 40

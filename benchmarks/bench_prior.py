@@ -1,0 +1,105 @@
+"""What the universal prior buys (paper 002, Fig. 14 and Section 4.2): on a held-out person's scan, the held-out
+PSNR of the prior's avatar after 0, 1, 3 ... minutes of personalisation, beside a person-specific primitives
+avatar trained from scratch on the same frames for the same minutes; one run at a time, nothing else running.
+
+    .venv/bin/python -m benchmarks.bench_prior --prior resources/prior --scan out/scan1000 \
+        [--minutes 0 1 3] [--scratch-minutes 1 3 10] [--out benchmarks/results/prior.json]
+
+The scan: `avatar-studio synth --identity 1000 --frames 60 --size 128 --scene ambient --out out/scan1000` (seeds
+from 1000 up are never in a corpus). Writes the JSON and a chart beside it (PNG)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+CLI = [sys.executable, "-m", "app.cli"]
+
+
+def run(args: list[str]) -> float:
+    t0 = time.perf_counter()
+    subprocess.run(CLI + args, check=True, cwd=REPO, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def evaluate(avatar: Path, scan: Path, round_views: Path | None) -> dict:
+    """Held-out metrics on the scan's test frames, and where given on a capture of the same person from cameras
+    all round the head (views the scan never had)."""
+    row = {"steps": json.loads((avatar / "avatar.json").read_text()).get("step")}
+    for key, data in (("", scan), ("round_", round_views)):
+        if data is None:
+            continue
+        out = avatar / f"eval_{key or 'scan'}"
+        run(["eval", str(avatar), str(data), "--split", "test", "--out", str(out)])
+        m = json.loads((out / "metrics.json").read_text())
+        row |= {f"{key}psnr": round(m["metrics"]["psnr"], 2), f"{key}ssim": round(m["metrics"]["ssim"], 4),
+                f"{key}test_frames": m["frames"]}
+    return row
+
+
+def chart(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for key, label, colour in (("prior", "prior, personalised", "tab:green"), ("scratch", "primitives from scratch",
+                                                                                  "tab:red")):
+        rows = results[key]
+        ax.plot([r["minutes"] for r in rows], [r["psnr"] for r in rows], "o-", color=colour, label=label)
+        if rows and "round_psnr" in rows[0]:
+            ax.plot([r["minutes"] for r in rows], [r["round_psnr"] for r in rows], "s--", color=colour,
+                    label=label + ": cameras all round")
+    ax.set_xlabel("minutes of training on the scan (2 CPU cores)")
+    ax.set_ylabel("held-out PSNR (dB)")
+    ax.set_title(f"A held-out person ({results['scan_frames']} scan frames): what the prior buys", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--prior", type=Path, default=REPO / "resources" / "prior")
+    p.add_argument("--scan", type=Path, required=True)
+    p.add_argument("--minutes", type=float, nargs="+", default=[0.0, 1.0, 3.0])
+    p.add_argument("--scratch-minutes", type=float, nargs="+", default=[1.0, 3.0, 10.0])
+    p.add_argument("--round-views", type=Path, help="a capture of the same person from cameras all round the head "
+                   "(synth --views 4): each avatar is measured on its test frames too")
+    p.add_argument("--keep", type=Path, help="keep the avatars in this folder (default: a temporary one)")
+    p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "prior.json")
+    a = p.parse_args()
+    train = json.loads((a.scan / "transforms_train.json").read_text())
+    results: dict = {"prior": [], "scratch": [], "scan": str(a.scan), "scan_frames": len(train["frames"])}
+    with tempfile.TemporaryDirectory() as scratch_dir:
+        tmp = a.keep or Path(scratch_dir)
+        for m in a.minutes:
+            out = Path(tmp) / f"prior_{m:g}"
+            seconds = run(["personalize", str(a.scan), "--prior", str(a.prior), "--out", str(out), "--minutes",
+                           str(m)])
+            results["prior"].append({"minutes": m, "seconds": round(seconds, 1),
+                                     **evaluate(out, a.scan, a.round_views)})
+            print("prior", results["prior"][-1], flush=True)
+        for m in a.scratch_minutes:
+            out = Path(tmp) / f"scratch_{m:g}"
+            seconds = run(["train", str(a.scan), "--model", "primitives", "--effects", "none", "--minutes", str(m),
+                           "--out", str(out)])
+            results["scratch"].append({"minutes": m, "seconds": round(seconds, 1),
+                                       **evaluate(out, a.scan, a.round_views)})
+            print("scratch", results["scratch"][-1], flush=True)
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    a.out.write_text(json.dumps(results, indent=1))
+    chart(results, a.out.with_suffix(".png"))
+    print(f"wrote {a.out} and {a.out.with_suffix('.png')}")
+
+
+if __name__ == "__main__":
+    main()
