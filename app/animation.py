@@ -80,7 +80,8 @@ class Animation:
 
     def with_key(self, channel: str, t: float, value: float) -> Animation:
         """A copy with a key at t (replacing one at the same time)."""
-        keys = [k for k in self.tracks.get(channel, ()) if abs(k[0] - t) > 1e-6] + [(float(t), float(value))]
+        key = (round(float(t), 6), round(float(value), 6))  # the sliders' float32, as a person would type it
+        keys = [k for k in self.tracks.get(channel, ()) if abs(k[0] - t) > 1e-6] + [key]
         return replace(self, tracks={**self.tracks, channel: tuple(sorted(keys))},
                        duration_s=max(self.duration_s, float(t)))
 

@@ -95,6 +95,11 @@ def main() -> None:
                     {"train": {"dataset": str(a.dataset), "out": str(work / "job"), "minutes": 10, "effects": "all"}},
                     {"wait_frames": 600}, *orbit, {"cancel_jobs": True}, {"wait_job": True}], work, size)
                 window["fps_training"] = r["fps_training"]
+                r = studio_run(display, avatars[0], [
+                    {"wait_render": "draft"}, {"seek": 1.0}, {"expression": 0, "value": 0.8}, {"jaw_open_deg": 20},
+                    {"view": {"yaw_deg": -20.0}}, {"key": True}, {"play": True}, {"wait_frames": 240},
+                    {"play": False}], work, size)
+                window["fps_playing"] = r["fps_playing"]
                 results["windows"][f"{size[0]}x{size[1]}"] = window
         for preset in ("draft", "preview", "final") if a.turntable_frames else ():
             with tempfile.TemporaryDirectory() as tmp:
