@@ -18,7 +18,8 @@ pictures). Steps:
   {"key": true}                           key the pose at the animation's time (Animation tab's "Key pose")
   {"seek": SECONDS}                       move along the animation (its keyed channels set the sliders)
   {"play": BOOL}                          play or stop the animation
-  {"save_animation": JSON} / {"load_animation": JSON}
+  {"save_animation": JSON}                save the animation's keys
+  {"load_animation": JSON}                load an animation's keys
   {"export_animation": {"out": MP4, "size": 64, "preset": "draft"}}   (then {"wait_export": true})
   {"save_neural": PNG}                    the neural image as shown
   {"screenshot": PNG}                     the whole window
