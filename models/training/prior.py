@@ -11,7 +11,6 @@ checkpoints (safetensors + JSON, atomic, resumable, as every avatar's)."""
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -36,7 +35,7 @@ from models.device import device_of
 from models.head.sources import load_head
 from models.ranges import Range
 from models.training.data import FrameSet, build_frames
-from models.training.trainer import _adam_state_tensors, _load_adam_state, trim_progress
+from models.training.trainer import _adam_state_tensors, _load_adam_state, log_progress, trim_progress
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 from render.rays import Rays
@@ -237,10 +236,7 @@ class PriorTrainer:
             if self.rank == 0 and (self.step % 50 == 0 or self.step == 1 or finished):
                 record = {"step": self.step, **{k: round(v, 6) for k, v in terms.items()},
                           "elapsed_s": round(self.elapsed, 1)}
-                with open(log, "a") as f:
-                    f.write(json.dumps(record) + "\n")
-                if on_progress:
-                    on_progress(record)
+                log_progress(log, record, on_progress)
             if time.perf_counter() - last_ck > cfg.checkpoint_seconds:
                 self.save()
                 last_ck = time.perf_counter()

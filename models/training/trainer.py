@@ -256,12 +256,17 @@ class Trainer:
                           "elapsed_s": round(self.elapsed, 1), "eta_s": round(eta, 1)}
                 if self.validation is not None and (self.step % 250 == 0 or finished):
                     record["val_psnr"] = round(self.validation_psnr(gl), 2)
-                with open(log, "a") as f:
-                    f.write(json.dumps(record) + "\n")
-                if on_progress:
-                    on_progress(record)
+                log_progress(log, record, on_progress)
             if time.perf_counter() - last_ck > cfg.checkpoint_seconds:
                 self.save()
                 last_ck = time.perf_counter()
         self.save()
         return record
+
+
+def log_progress(log: Path, record: dict, on_progress: Callable[[dict], None] | None) -> None:
+    """One record appended to progress.jsonl, and shown."""
+    with open(log, "a") as f:
+        f.write(json.dumps(record) + "\n")
+    if on_progress:
+        on_progress(record)

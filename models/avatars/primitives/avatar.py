@@ -111,6 +111,9 @@ class PrimitivesAvatar(Avatar):
     name: ClassVar[str] = "primitives"
     rays_per_step: ClassVar[int] = 2048
     quality_knobs: ClassVar[tuple[str, ...]] = ("samples",)
+    config_class: ClassVar[type] = PrimitivesConfig
+    config_key: ClassVar[str] = "primitives"
+    """avatar.json's entry for the sizes."""
 
     def __init__(self, head_model: HeadModel, cfg: PrimitivesConfig, n_frames: int, background: np.ndarray,
                  effects: tuple[str, ...] = (), light_dir: tuple[float, float, float] | None = None):
@@ -141,11 +144,11 @@ class PrimitivesAvatar(Avatar):
                     lighting: dict | None, config: PrimitivesConfig | None = None) -> PrimitivesAvatar:
         """`none` decodes colour alone; with effects the decoder reads the key light's direction (where the capture
         records one) and, with shading or specular, the normals buffer comes from the opacity grids' gradients."""
-        return cls(head_model, config or PrimitivesConfig(), n_frames, background, effects, key_light_dir(lighting))
+        return cls(head_model, config or cls.config_class(), n_frames, background, effects, key_light_dir(lighting))
 
     @classmethod
     def from_meta(cls, head_model: HeadModel, meta: dict) -> PrimitivesAvatar:
-        cfg = PrimitivesConfig(**meta["primitives"])
+        cfg = cls.config_class(**meta[cls.config_key])
         check_config(cfg)
         light = meta.get("light_dir")
         light = None if light is None else tuple(float(v) for v in light)
@@ -155,7 +158,7 @@ class PrimitivesAvatar(Avatar):
                    tuple(meta.get("effects", ())), light)
 
     def meta(self) -> dict:
-        return {"model": self.name, "effects": list(self._effects), "primitives": asdict(self.cfg),
+        return {"model": self.name, "effects": list(self._effects), self.config_key: asdict(self.cfg),
                 "light_dir": None if self.light_dir is None else list(self.light_dir)}
 
     @property

@@ -27,7 +27,7 @@ from models.avatars.prior.encoders import ExpressionEncoder, IdentityEncoder, kl
 from models.avatars.prior.maps import chart_sampler, geometry_map
 from models.head.controls import Controls
 from models.head.model import HeadModel
-from models.ranges import Range, check_config
+from models.ranges import Range
 
 
 @dataclass(frozen=True)
@@ -78,6 +78,8 @@ def eye_cells(model: HeadModel, size: int, cells: int = 8) -> torch.Tensor:
 
 class PriorAvatar(PrimitivesAvatar):
     name: ClassVar[str] = "prior"
+    config_class: ClassVar[type] = PriorConfig
+    config_key: ClassVar[str] = "prior"
 
     def __init__(self, head_model: HeadModel, cfg: PriorConfig, n_frames: int, background: np.ndarray,
                  effects: tuple[str, ...] = (), light_dir: tuple[float, float, float] | None = None):
@@ -96,29 +98,6 @@ class PriorAvatar(PrimitivesAvatar):
         self._kl: torch.Tensor | None = None
         self._noise: torch.Generator | None = None
         self._own_biases: list[torch.Tensor] | None = None
-
-    @classmethod
-    def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
-                    lighting: dict | None, config: PriorConfig | None = None) -> PriorAvatar:
-        from models.avatars.codynerf.avatar import key_light_dir
-
-        return cls(head_model, config or PriorConfig(), n_frames, background, effects, key_light_dir(lighting))
-
-    @classmethod
-    def from_meta(cls, head_model: HeadModel, meta: dict) -> PriorAvatar:
-        cfg = PriorConfig(**meta["prior"])
-        check_config(cfg)
-        light = meta.get("light_dir")
-        light = None if light is None else tuple(float(v) for v in light)
-        if light is not None and (len(light) != 3 or not np.isfinite(light).all() or np.linalg.norm(light) < 1e-6):
-            raise ValueError(f"light_dir {meta['light_dir']}: not a direction (three finite numbers, not all 0)")
-        return cls(head_model, cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32),
-                   tuple(meta.get("effects", ())), light)
-
-    def meta(self) -> dict:
-        out = super().meta()
-        out["prior"] = out.pop("primitives")
-        return out
 
     # ---- the person --------------------------------------------------------------------------------------
     def personalize(self, texture: torch.Tensor, geometry: torch.Tensor) -> None:
