@@ -268,7 +268,7 @@ def run_prior_train(cfg: PriorTrainConfig) -> int:
         raise UserInputError(str(e)) from None
     if not cfg.resume and (cfg.out / "avatar.json").exists():
         raise UserInputError(f"{cfg.out}: already holds a prior; pass --resume to continue it or choose a new folder")
-    rank, world = distributed_from_env()
+    rank, world = distributed_from_env(cfg.device)
     gl = GLContext.headless()
     trainer = prepare_prior(cfg, gl, rank, world)
 

@@ -35,7 +35,7 @@ from models.device import device_of
 from models.head.sources import load_head
 from models.ranges import Range
 from models.training.data import FrameSet, build_frames
-from models.training.trainer import _adam_state_tensors, _load_adam_state, log_progress, trim_progress
+from models.training.trainer import _adam_state_tensors, _load_adam_state, log_progress, optimiser_step, trim_progress
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 from render.rays import Rays
@@ -181,12 +181,8 @@ class PriorTrainer:
         for group in self.opt.param_groups:
             group["lr"] = self.cfg.lr * 0.1 ** min(max(progress, 0.0), 1.0)
         total, terms = self.module(self.samples())
-        self.opt.zero_grad(set_to_none=True)
-        total.backward()
-        torch.nn.utils.clip_grad_norm_(self.avatar.parameters(), self.cfg.grad_clip)
-        self.opt.step()
         self.step += 1
-        return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}
+        return optimiser_step(self.opt, self.avatar, total, terms, self.cfg.grad_clip)
 
     # ---- state -----------------------------------------------------------------------------------------
     def meta(self) -> dict:
@@ -244,15 +240,14 @@ class PriorTrainer:
         return record
 
 
-def distributed_from_env() -> tuple[int, int]:
+def distributed_from_env(device: str = "cpu") -> tuple[int, int]:
     """(rank, world size) under torchrun (RANK, WORLD_SIZE in the environment; the process group started with
-    gloo on the CPU, NCCL on GPUs), else (0, 1)."""
+    gloo for --device cpu, NCCL for --device cuda), else (0, 1)."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world <= 1:
         return 0, 1
     if not dist.is_initialized():
-        dist.init_process_group("nccl" if torch.cuda.is_available() and os.environ.get("AVATAR_DEVICE") == "cuda"
-                                else "gloo")
+        dist.init_process_group("nccl" if device == "cuda" else "gloo")
     return dist.get_rank(), dist.get_world_size()
 
 

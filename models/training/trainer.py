@@ -212,13 +212,8 @@ class Trainer:
             for k, v in parts.items():
                 terms[k] = terms.get(k, 0.0) + v.detach() / len(frame_ids)
                 total = total + v / len(frame_ids)
-        self.opt.zero_grad(set_to_none=True)
-        total.backward()
-        # Second derivatives (density-gradient normals) can spike; a bounded step keeps the field alive.
-        torch.nn.utils.clip_grad_norm_(self.avatar.parameters(), self.cfg.grad_clip)
-        self.opt.step()
         self.step += 1
-        return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}
+        return optimiser_step(self.opt, self.avatar, total, terms, self.cfg.grad_clip)
 
     # ---- validation ------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -262,6 +257,17 @@ class Trainer:
                 last_ck = time.perf_counter()
         self.save()
         return record
+
+
+def optimiser_step(opt: torch.optim.Optimizer, model: torch.nn.Module, total: torch.Tensor, terms: dict,
+                   grad_clip: float) -> dict[str, float]:
+    """Backward, the gradient clipped to grad_clip (second derivatives, density-gradient normals, can spike; a
+    bounded step keeps the field alive), Adam's step; the step's loss terms as numbers."""
+    opt.zero_grad(set_to_none=True)
+    total.backward()
+    torch.nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
+    opt.step()
+    return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}
 
 
 def log_progress(log: Path, record: dict, on_progress: Callable[[dict], None] | None) -> None:

@@ -131,12 +131,17 @@ class PrimitivesAvatar(Avatar):
         self.register_buffer("triangles", torch.as_tensor(np.asarray(head_model.triangles), dtype=torch.long),
                              persistent=False)
         self.condition_dim = head_model.num_expression + 6
-        extra = 3 if self.light_dir is not None else 0
-        self.decoder = SlabDecoder(self.condition_dim + cfg.code_dim + 3 + extra, 6, cfg.grid, cfg.voxels, 3,
-                                   cfg.width, map_channels=1 if self.casts_shadows else 0)
+        self.decoder = self.make_decoder()
         self.latent = nn.Embedding(n_frames, cfg.code_dim)
         nn.init.zeros_(self.latent.weight)
         self.samples = cfg.samples
+
+    def make_decoder(self) -> SlabDecoder:
+        """The decoder of the frame's condition (expression and jaw/neck, code, view, the light's direction where
+        the capture records one) and gaze; with cast shadows, the shadow map's channel."""
+        extra = 3 if self.light_dir is not None else 0
+        return SlabDecoder(self.condition_dim + self.cfg.code_dim + 3 + extra, 6, self.cfg.grid, self.cfg.voxels, 3,
+                           self.cfg.width, map_channels=1 if self.casts_shadows else 0)
 
     # ---- making and describing -------------------------------------------------------------------------
     @classmethod

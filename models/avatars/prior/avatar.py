@@ -86,9 +86,6 @@ class PriorAvatar(PrimitivesAvatar):
         del n_frames  # no per-frame codes: a frame is its identity's maps and its guide mesh
         super().__init__(head_model, cfg, 1, background, effects, light_dir)
         S = cfg.grid * cfg.voxels
-        extra = 3 if self.light_dir is not None else 0
-        self.decoder = SlabDecoder(cfg.code_dim + 3 + extra, 6, cfg.grid, cfg.voxels, 3, cfg.width,
-                                   map_channels=1 if self.casts_shadows else 0, latent_channels=cfg.latent)
         self.identity_encoder = IdentityEncoder(S, self.decoder.bias_shapes())
         self.expression_encoder = ExpressionEncoder(S, cfg.latent)
         self.register_buffer("neutral_texture", torch.zeros(1, 3, S, S))
@@ -98,6 +95,13 @@ class PriorAvatar(PrimitivesAvatar):
         self._kl: torch.Tensor | None = None
         self._noise: torch.Generator | None = None
         self._own_biases: list[torch.Tensor] | None = None
+
+    def make_decoder(self) -> SlabDecoder:
+        """The primitives' decoder with the spatial expression code in place of the controls' expression (which
+        reaches it as Delta G): its condition is the view (and the light where the capture records one)."""
+        extra = 3 if self.light_dir is not None else 0
+        return SlabDecoder(self.cfg.code_dim + 3 + extra, 6, self.cfg.grid, self.cfg.voxels, 3, self.cfg.width,
+                           map_channels=1 if self.casts_shadows else 0, latent_channels=self.cfg.latent)
 
     # ---- the person --------------------------------------------------------------------------------------
     def personalize(self, texture: torch.Tensor, geometry: torch.Tensor) -> None:
@@ -119,11 +123,9 @@ class PriorAvatar(PrimitivesAvatar):
     def geometry(self, controls: Controls) -> PriorGeometry:
         base = super().geometry(controls)
         head_frame = (base.posed - base.translation) @ base.rotation  # R^T (v - t): the rigid pose taken out
-        v0, _, _ = self.head.pose([Controls(shape=controls.shape)])
-        delta = geometry_map(self.sampler, self.triangles, head_frame) - \
-            geometry_map(self.sampler, self.triangles, v0[0])
+        delta = geometry_map(self.sampler, self.triangles, head_frame)[None] - self.neutral_geometry_of(controls.shape)
         return PriorGeometry(**{k: getattr(base, k) for k in PrimitivesGeometry.__dataclass_fields__},
-                             delta_geometry=delta[None])
+                             delta_geometry=delta)
 
     def identity_biases(self, geo: PriorGeometry) -> list[torch.Tensor]:
         """E_id's bias maps (Eq. 2) for the frame's identity: a corpus frame's own maps, else this avatar's (made
