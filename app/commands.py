@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from app import avatar_commands, capture_commands, head_commands
 from app.bench import BenchConfig, run_bench
+from app.reenact import ReenactConfig, run_reenact
 from app.studio.config import StudioConfig
 from app.track import TrackConfig, run_track
 from app.turntable import TurntableConfig
@@ -63,7 +64,10 @@ COMMANDS = (
     Command("animate", "Render a keyframed animation (sliders and camera, JSON) of an avatar to an H.264 mp4 and PNG "
             "frames.", avatar_commands.AnimateConfig, avatar_commands.run_animate,
             positional=("avatar", "animation")),
-    Command("export-mesh", "Write a primitives avatar as a coloured mesh (PLY or OBJ with vertex colours) for "
+    Command("reenact", "Drive an avatar from a performance video: track it, carry its expressions, jaw, gaze and head "
+            "turns (relative to the driver's neutral frame) onto the avatar; an mp4 side by side and the animation.",
+            ReenactConfig, run_reenact, positional=("avatar", "video")),
+    Command("export-mesh", "Write an avatar as a coloured mesh (PLY or OBJ with vertex colours) for "
             "Blender and game engines.", avatar_commands.ExportMeshConfig, avatar_commands.run_export_mesh,
             positional=("avatar",)),
     Command("bench", "Measure what accuracy costs in time: render settings, effect sets, training curves, the "

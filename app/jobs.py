@@ -1,12 +1,15 @@
 """Background training jobs: each a separate `avatar-studio train` process, queued and run one at a time,
 their progress read from the avatar folder's progress.jsonl. Cancelling sends SIGTERM: the trainer writes a
 checkpoint and exits, so the job can be resumed later with --resume. A job made from a video runs
-`avatar-studio track` first (its dataset written beside the avatar), then trains on what it tracked."""
+`avatar-studio track` first (its dataset written beside the avatar), then trains on what it tracked. A
+reenactment job runs `avatar-studio reenact` (a performance video driving an avatar: `dataset` is the avatar's
+folder, `out` the mp4, its animation OUT.json beside it); its progress is read from its log."""
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -37,7 +40,7 @@ class Job:
     """Image size of the tracked dataset, pixels."""
     track_fps: float | None = None
     """Frames a second taken from the video (None: every frame)."""
-    stage: Literal["track", "train"] = "train"
+    stage: Literal["track", "train", "reenact"] = "train"
     opened: bool = False
     """The studio opened the result (video jobs open theirs when done)."""
     state: State = "queued"
@@ -51,6 +54,10 @@ class Job:
         return self.out.with_name(self.out.name + ".log")
 
     def command(self) -> list[str]:
+        if self.stage == "reenact":
+            cmd = [sys.executable, "-m", "app.cli", "reenact", str(self.dataset), str(self.video), "--out",
+                   str(self.out), "--size", str(self.track_size)]
+            return cmd + (["--landmarker", str(self.landmarker)] if self.landmarker else [])
         if self.stage == "track":
             cmd = [sys.executable, "-m", "app.cli", "track", str(self.video), "--out", str(self.dataset),
                    "--head", self.head, "--size", str(self.track_size)]
@@ -85,7 +92,10 @@ class Job:
 
     @property
     def fraction(self) -> float:
-        """Share of the budget spent, from the last progress record."""
+        """Share of the budget spent, from the last progress record (a reenactment: of the frames rendered)."""
+        if self.stage == "reenact":
+            done = re.findall(r"reenact: (\d+)/(\d+) frames", JobQueue.log_text(self))
+            return 1.0 if self.state == "done" else int(done[-1][0]) / int(done[-1][1]) if done else 0.0
         if not self.progress:
             return 0.0
         last = self.progress[-1]
@@ -106,7 +116,7 @@ class JobQueue:
 
     def submit(self, dataset: Path, out: Path, **options) -> Job:
         job = Job(len(self.jobs) + 1, Path(dataset), Path(out), **options)
-        if job.video is not None and not (job.dataset / "transforms_train.json").exists():
+        if job.stage == "train" and job.video is not None and not (job.dataset / "transforms_train.json").exists():
             job.stage = "track"
         self.jobs.append(job)
         self.poll()
@@ -147,12 +157,16 @@ class JobQueue:
             self._start(queued[0])
 
     @staticmethod
-    def last_line(job: Job) -> str:
+    def log_text(job: Job) -> str:
         try:
-            lines = [ln for ln in job.log_path.read_text(errors="replace").replace("\r", "\n").splitlines()
-                     if ln.strip() and not ln.startswith(("W0000", "INFO:", "WARNING: All log"))]
+            return job.log_path.read_text(errors="replace").replace("\r", "\n")
         except OSError:
             return ""
+
+    @staticmethod
+    def last_line(job: Job) -> str:
+        lines = [ln for ln in JobQueue.log_text(job).splitlines()
+                 if ln.strip() and not ln.startswith(("W0000", "INFO:", "WARNING: All log"))]
         return lines[-1][:120] if lines else ""
 
     @staticmethod
@@ -186,8 +200,8 @@ class JobQueue:
     @staticmethod
     def status(job: Job) -> str:
         """What a job is doing, in a few words: its stage, and while tracking the tracker's last line."""
-        if job.stage == "track" and job.state == "running":
-            return "tracking: " + JobQueue.last_line(job)
+        if job.stage in ("track", "reenact") and job.state == "running":
+            return ("tracking: " if job.stage == "track" else "") + JobQueue.last_line(job)
         return job.state
 
     def stop_all(self, wait_s: float = 30.0) -> None:

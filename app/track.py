@@ -42,7 +42,7 @@ from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
 from models.tracking.landmarker import Face, Landmarker
 from models.tracking.masks import background_plate, foreground_mask
-from models.tracking.video import face_crop, sampled_frames, video_info
+from models.tracking.video import VideoInfo, face_crop, sampled_frames, video_info
 from render.video import write_video
 
 
@@ -59,6 +59,8 @@ class TrackConfig:
     page); default: $AVATAR_STUDIO_LANDMARKER."""
     fps: Annotated[float, Range(0, 1000, above=True)] | None = None
     """Frames a second taken from the video (default: every frame; fewer frames track and train faster)."""
+    seconds: Annotated[float, Range(0, 1e6, above=True)] | None = None
+    """Use only the video's first SECONDS (default: all of it)."""
     size: Annotated[int, Range(32, 2048)] = 256
     """Width and height of the dataset's images, pixels."""
     fov_deg: Annotated[float, Range(0, 170, above=True)] = 40.0
@@ -94,9 +96,13 @@ def detect_faces(cfg: TrackConfig, bundle: Path, info, progress) -> tuple[list[d
     Several faces in more than a tenth of the frames is an error: track needs a video of one person."""
     share = min(cfg.fps / info.fps, 1.0) if cfg.fps else 1.0
     expected = max(1, round(info.frames * share)) if info.frames > 0 else None
+    if expected and cfg.seconds:
+        expected = min(expected, max(1, round(cfg.seconds * info.fps * share)))
     kept, dropped, several, read = [], [], 0, 0
     with Landmarker(bundle, max_faces=2) as landmarker:
         for index, t, rgb in sampled_frames(cfg.video, cfg.fps):
+            if cfg.seconds and t >= cfg.seconds:
+                break
             read += 1
             faces = landmarker.detect(rgb, round(1000 * t))
             if not faces:
@@ -140,12 +146,36 @@ def split_of(k: int, n: int, n_test: int) -> str:
     return "val" if k % 20 == 10 else "train"
 
 
-def run_track(cfg: TrackConfig) -> int:
+@dataclass
+class Tracked:
+    """A video tracked: the kept frames (source index, time, RGB, MediaPipe face), the crop they share, its
+    intrinsics, the head model's fit, and where the fitted head puts every landmark."""
+
+    kept: list[dict]
+    dropped: list[dict]
+    read: int
+    crop: object
+    intrinsics: Intrinsics
+    result: object
+    targets: np.ndarray
+    pixels: np.ndarray
+    errors: np.ndarray
+    mp_ids: np.ndarray
+    vertex_ids: np.ndarray
+    info: VideoInfo
+    seconds_landmarks: float
+
+    @property
+    def faces(self) -> list[Face]:
+        return [f["face"] for f in self.kept]
+
+
+def track_video(cfg: TrackConfig, model) -> Tracked:
+    """Landmarks in every sampled frame, the crop, and the head model fitted to them (track's and reenact's first
+    half)."""
     t_start = time.perf_counter()
-    check_config(cfg)
     info = video_info(cfg.video)  # the video first: the input the user thinks of
     bundle = landmarker_path(cfg)
-    model = load_head(cfg.head)
     canonical, _ = canonical_face_mesh(bundle)
     corr = correspond(model, canonical)
     kept, dropped, read = sharp_faces(cfg, bundle, info)
@@ -164,6 +194,17 @@ def run_track(cfg: TrackConfig) -> int:
         verts = Head(model).pose(result.controls)[0]
     pixels = project(verts, k).numpy()
     errors = np.linalg.norm(pixels[:, corr.vertex_ids] - targets, axis=-1)
+    return Tracked(kept, dropped, read, crop, k, result, targets, pixels, errors, corr.mp_ids, corr.vertex_ids,
+                   info, t_landmarks)
+
+
+def run_track(cfg: TrackConfig) -> int:
+    t_start = time.perf_counter()
+    check_config(cfg)
+    model = load_head(cfg.head)
+    tr = track_video(cfg, model)
+    kept, dropped, read, crop, k, result = tr.kept, tr.dropped, tr.read, tr.crop, tr.intrinsics, tr.result
+    faces, targets, pixels, errors, t_landmarks = tr.faces, tr.targets, tr.pixels, tr.errors, tr.seconds_landmarks
 
     with partial_folder(cfg.out) as partial:
         (partial / "tracking").mkdir(parents=True)
@@ -174,19 +215,20 @@ def run_track(cfg: TrackConfig) -> int:
                  for img, face in zip(crops, faces, strict=True)]
         t_masks = time.perf_counter() - t_masks
         splits, per_frame, plate_report = write_frames(cfg, partial, kept, crops, masks, crop, k, result, errors,
-                                                       info.fps)
+                                                       tr.info.fps)
         if cfg.overlay:
-            write_video((overlay(img, pixels[j], model, targets[j], pixels[j][corr.vertex_ids])
-                         for j, img in enumerate(crops)), partial / "tracking" / "overlay.mp4", fps=cfg.fps or info.fps)
+            write_video((overlay(img, pixels[j], model, targets[j], pixels[j][tr.vertex_ids])
+                         for j, img in enumerate(crops)), partial / "tracking" / "overlay.mp4",
+                        fps=cfg.fps or tr.info.fps)
         total = time.perf_counter() - t_start
         report = {
             "video": str(cfg.video), "head_model": absolute_head_spec(cfg.head), "frames_read": read,
             "frames_kept": len(kept),
             "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
-            "landmarks_used": len(corr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
+            "landmarks_used": len(tr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
             "face_width_px": face_width_px(faces, crop),
             "crop": {"x0": round(crop.x0, 1), "y0": round(crop.y0, 1), "side": round(crop.side, 1),
-                     "whole_frame": crop.side >= min(info.width, info.height) - 0.5},
+                     "whole_frame": crop.side >= min(tr.info.width, tr.info.height) - 0.5},
             "fov_deg": cfg.fov_deg, "background_plate": plate_report,
             "landmark_error_px": {"median": round(float(np.median(errors)), 3),
                                   "p95": round(float(np.percentile(errors, 95)), 3),

@@ -315,6 +315,23 @@ class StartFromVideo(Command):
 
 
 @dataclass(frozen=True)
+class StartReenact(Command):
+    """A performance video drives the open avatar (`avatar-studio reenact` as a job)."""
+
+    video: str
+    landmarker: str
+    out: str
+    size: int = 256
+
+
+@dataclass(frozen=True)
+class OpenReenactment(Command):
+    """A finished reenactment's animation on the timeline (its avatar opened first where another is open)."""
+
+    job_id: int
+
+
+@dataclass(frozen=True)
 class CancelJob(Command):
     job_id: int | None = None
     """None: every job."""

@@ -100,9 +100,11 @@ class Studio:
         self.script = Script.load(cfg.script) if cfg.script else None
         self.confirm_close = False
         self.keep_jobs = False
+        """The user chose to keep training after the window closes (otherwise closing stops the jobs)."""
         self.last_play_tick: float | None = None
         self.pending_viewport_shot: Path | None = None
-        """The user chose to keep training after the window closes (otherwise closing stops the jobs)."""
+        self.after_open: Path | None = None
+        """An animation to put on the timeline once the avatar being opened is open (a reenactment's)."""
 
     # ---- actions -----------------------------------------------------------------------------------------
     def act(self, action: a.Action | a.Command) -> None:
@@ -117,6 +119,12 @@ class Studio:
                 self.session.job_message = jobs_panel.start(self.jobs, action) or ""
             case a.StartFromVideo():
                 self.session.job_message = jobs_panel.start_from_video(self.jobs, action) or ""
+            case a.StartReenact():
+                self.session.job_message = jobs_panel.start_reenact(self.jobs, self.session.folder, action) or ""
+            case a.OpenReenactment(job_id):
+                for job in self.jobs.jobs:
+                    if job.id == job_id:
+                        self.open_reenactment(job.dataset, job.out.with_suffix(".json"))
             case a.CancelJob(job_id):
                 for job in self.jobs.jobs:
                     if job_id is None or job.id == job_id:
@@ -165,18 +173,30 @@ class Studio:
         self.opening = opening
         self.session.opening = opening.folder
 
+    def open_reenactment(self, avatar: Path, animation: Path) -> None:
+        """A reenactment's animation on the timeline, once its avatar is open."""
+        folder = self.session.folder
+        if folder is not None and Path(folder).resolve() == Path(avatar).resolve() and self.opening is None:
+            self.act(a.LoadAnimation(animation))
+        else:
+            self.open_avatar(avatar)
+            self.after_open = animation
+
     def poll_opening(self) -> None:
         o = self.opening
         if o is None or o.thread.is_alive():
             return
         self.opening = None
         self.loading_s.append(o.seconds)
+        after, self.after_open = self.after_open, None
         if o.error is not None:
             self.act(a.OpenFailed(o.error))
             return
         self.act(a.AvatarOpened(o.files))
         remember_recent(o.folder)
         self.worker.set_avatar(o.files.folder)
+        if after is not None:
+            self.act(a.LoadAnimation(after))
 
     def save_viewport(self, path: Path) -> None:
         """The viewport as shown (the guide and the render, beside or over each other), as a PNG: read from the
@@ -231,10 +251,13 @@ class Studio:
                 self.open_avatar(self.cfg.avatar or DEMO_AVATAR)
         self.poll_opening()
         self.jobs.poll()
-        for job in self.jobs.jobs:  # a new avatar from video opens when its job is done
+        for job in self.jobs.jobs:  # a new avatar from video opens when its job is done, a reenactment too
             if job.video is not None and job.state == "done" and not job.opened:
                 job.opened = True
-                self.open_avatar(job.out)
+                if job.stage == "reenact":
+                    self.open_reenactment(job.dataset, job.out.with_suffix(".json"))
+                else:
+                    self.open_avatar(job.out)
         if self.session.playing:  # the animation's time follows the clock, round and round
             now = time.perf_counter()
             dt, self.last_play_tick = now - (self.last_play_tick or now), now

@@ -12,7 +12,15 @@ import numpy as np
 from imgui_bundle import imgui, implot
 
 from app.jobs import JobQueue
-from app.studio.actions import CancelJob, OpenAvatar, ResumeJob, StartFromVideo, StartTraining
+from app.studio.actions import (
+    CancelJob,
+    OpenAvatar,
+    OpenReenactment,
+    ResumeJob,
+    StartFromVideo,
+    StartReenact,
+    StartTraining,
+)
 from app.studio.config import STUDIO_HOME
 from app.studio.context import PanelContext
 from models.avatars.registry import AVATARS
@@ -32,6 +40,8 @@ class JobForm:
     video: str = ""
     head: str = "builtin"
     landmarker: str = field(default_factory=lambda: os.environ.get("AVATAR_STUDIO_LANDMARKER", ""))
+    performance: str = ""
+    reenact_out: str = field(default_factory=lambda: str(STUDIO_HOME / "reenact.mp4"))
 
 
 def start_from_video(jobs: JobQueue, c: StartFromVideo) -> str | None:
@@ -48,6 +58,23 @@ def start_from_video(jobs: JobQueue, c: StartFromVideo) -> str | None:
     dataset = out_path.with_name(out_path.name + "_dataset")
     jobs.submit(dataset, out_path, effects=c.effects, minutes=c.minutes, steps=c.steps, video=video_path,
                 head=c.head.strip() or "builtin", landmarker=Path(c.landmarker), track_size=c.size, track_fps=c.fps)
+    return None
+
+
+def start_reenact(jobs: JobQueue, avatar: Path | None, c: StartReenact) -> str | None:
+    """Queue a reenactment of the open avatar by a performance video; or why not."""
+    if avatar is None:
+        return "open an avatar to drive first"
+    video_path, out_path = Path(c.video), Path(c.out)
+    if not video_path.is_file():
+        return f"{video_path}: no such video file"
+    if not c.landmarker or not Path(c.landmarker).is_file():
+        return (f"{c.landmarker or '(none given)'}: MediaPipe's face landmarker bundle is needed "
+                "(face_landmarker_v2_with_blendshapes.task)")
+    if out_path.suffix.lower() != ".mp4":
+        return f"{out_path}: the performance is written as an .mp4"
+    jobs.submit(avatar, out_path, stage="reenact", video=video_path, landmarker=Path(c.landmarker),
+                track_size=c.size)
     return None
 
 
@@ -101,6 +128,14 @@ def draw(ctx: PanelContext) -> None:
                                max(f.minutes, 0.1)))
         imgui.same_line()
         imgui.text_disabled("(avatar folder, effects and minutes from above)")
+    if imgui.collapsing_header("Drive the open avatar from a performance video"):
+        _, f.performance = imgui.input_text("performance", f.performance)
+        _, f.reenact_out = imgui.input_text("mp4##reenact", f.reenact_out)
+        _, f.landmarker = imgui.input_text("landmarker (.task)##reenact", f.landmarker)
+        if imgui.button("Reenact"):
+            act(StartReenact(f.performance.strip(), f.landmarker.strip(), f.reenact_out.strip()))
+        imgui.same_line()
+        imgui.text_disabled("(then on the Animation timeline, Export panel)")
     if ctx.session.job_message:
         imgui.push_text_wrap_pos(0)
         imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.35, 1.0), ctx.session.job_message)
@@ -108,7 +143,8 @@ def draw(ctx: PanelContext) -> None:
     imgui.separator()
     for job in reversed(jobs.jobs):
         imgui.push_id(job.id)
-        imgui.text(f"#{job.id} {job.out.name}: {job.model} {job.effects} - {jobs.status(job)}"
+        what = f"driven by {job.video.name}" if job.stage == "reenact" and job.video else f"{job.model} {job.effects}"
+        imgui.text(f"#{job.id} {job.out.name}: {what} - {jobs.status(job)}"
                    + (" (resumed)" if job.resume else ""))
         imgui.progress_bar(job.fraction, imgui.ImVec2(-1, 0), progress_text(job))
         if job.error:
@@ -134,6 +170,8 @@ def draw(ctx: PanelContext) -> None:
             implot.end_plot()
         if job.state in ("queued", "running") and imgui.small_button("Cancel"):
             act(CancelJob(job.id))
+        if job.stage == "reenact" and job.state == "done" and imgui.small_button("Show on timeline"):
+            act(OpenReenactment(job.id))
         if job.state in ("cancelled", "done") and (job.out / "avatar.json").exists():
             if imgui.small_button("Open"):
                 act(OpenAvatar(job.out))

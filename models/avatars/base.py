@@ -23,6 +23,7 @@ import torch
 from torch import nn
 
 from models.avatars.components.codes import KEY_SCALE_FLOOR, control_key, nearest_code_weights
+from models.avatars.mesh import MeshField
 from models.avatars.quality import BUILTIN_PRESETS, Preset, Quality
 from models.head.controls import Controls
 from models.head.head import Head
@@ -287,6 +288,11 @@ class Avatar(nn.Module, ABC):
         quality = self.presets[preset].quality
         self.set_quality(quality)
         return quality.size(size)
+
+    def mesh_field(self, controls: Controls, rasterizer: Rasterizer | None) -> MeshField:
+        """The posed avatar's density and colour at any point, for mesh export (models/avatars/mesh.py)."""
+        raise ValueError(f"a {self.name} avatar has no field to export as a mesh yet (primitives, prior and "
+                         "CoDyNeRF avatars have)")
 
     def before_save(self, geometry: Any) -> None:
         """Called before each checkpoint with the first training frame's geometry (display caches follow the

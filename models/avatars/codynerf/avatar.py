@@ -26,6 +26,7 @@ from models.avatars.codynerf.prior import deformation_prior, nearest_vertices, p
 from models.avatars.codynerf.training import LossWeights, consistency_weight, ray_terms
 from models.avatars.components import losses
 from models.avatars.components.codes import frame_code
+from models.avatars.mesh import MeshField, front_eye
 from models.avatars.quality import Quality
 from models.head.controls import Controls
 from models.head.lbs import rotation_matrix_from_axis_angle
@@ -263,6 +264,31 @@ class CoDyNeRFAvatar(Avatar):
             return self.field.canonical_density(x, distance)[0] * self.support(distance)
 
         return self.occupancy.build(density, threshold, generator=torch.Generator().manual_seed(0))
+
+    def mesh_field(self, controls: Controls, rasterizer: Rasterizer | None) -> MeshField:
+        """The field where rays would sample it (within the shell about the posed mesh, faded by its support), the
+        codes new controls take, colours seen from in front of the face with the capture's light and shadows."""
+        geo = self.frame_geometry(controls, rasterizer)
+        omega, phi = self.codes(None, geo.code_weights)
+        rc = self.render_cfg
+        rotation = rotation_matrix_from_axis_angle(torch.as_tensor(controls.root, dtype=torch.float32)[None])[0]
+        eye = front_eye(rotation.to(geo.posed.device), geo.posed.mean(0))
+
+        def at(points: torch.Tensor, colour: bool) -> torch.Tensor:
+            points = points.to(geo.posed.device)
+            near, prior = prior_within(points, geo.meshes, rc.shell_m, rc.prior_falloff_m, geo.tree)
+            out = self.field.geometry(points[near], prior, omega)
+            if not colour:
+                return torch.zeros(len(points), device=points.device).index_copy(
+                    0, near, out.sigma.detach() * self.support(prior.distance))
+            view = torch.nn.functional.normalize(eye - points[near], dim=-1)
+            light = geo.light.visibility(points[near]) if self.field_cfg.shadow_factor else None
+            lit, factor, _ = self.field.appearance_terms(out, prior, view, phi, geo.landmarks, light)
+            rgb = (lit if factor is None else lit * factor).detach()
+            return torch.zeros(len(points), 3, device=points.device).index_copy(0, near, rgb)
+
+        return MeshField(geo.box_min.cpu().numpy(), geo.box_max.cpu().numpy(), lambda p: at(p, False),
+                         lambda p: at(p, True))
 
     def codes(self, frame: int | None, weights: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """omega and phi (1,C) of a training frame; for new controls (frame None) the training frames' codes

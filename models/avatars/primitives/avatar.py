@@ -28,6 +28,7 @@ from models.avatars.codynerf.avatar import key_light_dir
 from models.avatars.components import losses
 from models.avatars.components.codes import frame_code
 from models.avatars.components.rigid import kabsch
+from models.avatars.mesh import MeshField
 from models.avatars.primitives import march
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
@@ -253,6 +254,11 @@ class PrimitivesAvatar(Avatar):
         light = draw_light_depth(rasterizer, geo.posed.cpu().numpy(), self.head_model.triangles, self.light_dir)
         geo.light = light.to(geo.posed.device)
         return geo
+
+    def mesh_field(self, controls: Controls, rasterizer: Rasterizer | None) -> MeshField:
+        from models.avatars.primitives.mesh import primitives_mesh_field
+
+        return primitives_mesh_field(self, controls)
 
     @torch.no_grad()
     def slab_visibility(self, geo: PrimitivesGeometry, centres: torch.Tensor, rotations: torch.Tensor

@@ -1,0 +1,236 @@
+"""`avatar-studio reenact`: a performance video drives an avatar.
+
+The driving video is tracked with the project's tracker (app/track.py: landmarks, one crop, the head model
+fitted to every frame); what the driver does is taken relative to the driver's own neutral frame (the calmest
+one unless named), so that their resting face, whatever it is, becomes the avatar's rest: expressions and jaw
+as differences, head rotation as the rotation from the neutral frame, gaze as the change of the eyes'
+direction. Head translation is not carried: the avatar stays where its camera frames it.
+
+The result is an animation (app/animation.py, one key a tracked frame, linear) saved beside the mp4, which
+the studio opens on its timeline and `animate` renders again; the mp4 shows the driver's frames and the
+avatar side by side, or the avatar alone.
+
+Across head models (a FLAME-tracked driver onto an ICT or built-in avatar) expressions are carried by name:
+the names both models have; FLAME's expression components have no names, so from or onto FLAME only the jaw,
+gaze and head rotation are carried, and the command says so.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from app.animation import Animation, AnimationError, load_animation, save_animation
+from app.errors import UserInputError
+from app.progress import Progress
+from app.track import TrackConfig, track_video
+from models.files import atomic_write_bytes
+from models.head.controls import Controls
+from models.head.model import HeadModel
+from models.head.sources import load_head
+from models.ranges import Range
+
+EXPRESSION_RANGE = (-1.0, 1.5)
+"""The Controls panel's expression slider range: carried values are kept inside it."""
+JAW_RANGE_DEG = (-5.0, 30.0)
+GAZE_RANGE_DEG = (-30.0, 30.0)
+
+
+@dataclass(frozen=True)
+class ReenactConfig:
+    avatar: Path
+    """Avatar folder to drive."""
+    video: Path
+    """The performance: a video of one face (any person)."""
+    out: Path = Path("out/reenact.mp4")
+    """The mp4 to write (H.264); the animation goes beside it (OUT.json)."""
+    landmarker: Path | None = None
+    """MediaPipe's face landmarker bundle; default: $AVATAR_STUDIO_LANDMARKER."""
+    driver_head: str = ""
+    """The head model the driver is tracked with (builtin, ict:PATH, flame:PATH); default: the avatar's own,
+    which carries every expression."""
+    size: Annotated[int, Range(16, 2048)] = 256
+    """Height of the video, pixels (each half of a side-by-side video is size x size)."""
+    preset: Literal["draft", "preview", "final"] = "preview"
+    fps: Annotated[float, Range(0, 1000, above=True)] | None = None
+    """Frames a second taken from the driving video (default: every frame)."""
+    seconds: Annotated[float, Range(0, 1e6, above=True)] | None = None
+    """Use only the driving video's first SECONDS."""
+    neutral_frame: Annotated[int, Range(0)] | None = None
+    """The driver's neutral frame (an index among the tracked frames); default: the calmest frame."""
+    side_by_side: bool = True
+    """The driver's frames beside the avatar (--no-side-by-side: the avatar alone)."""
+    pngs: bool = False
+    """Also write the frames as PNGs into a folder beside the mp4."""
+    iterations: Annotated[int, Range(1, 100000)] = 400
+    """Fitting iterations of the tracker."""
+
+
+@dataclass
+class Retarget:
+    """How the driver's channels reach the avatar."""
+
+    neutral: int
+    carried: list[str] = field(default_factory=list)
+    """The avatar's expressions that are driven."""
+    missing: list[str] = field(default_factory=list)
+    """The driver's expressions the avatar has no counterpart for."""
+    note: str = ""
+
+
+def expression_map(driver: HeadModel, avatar: HeadModel) -> tuple[dict[int, int], list[str], str]:
+    """Driver expression index -> avatar expression index: every index for the same model, by name across
+    models; the driver's names left over; a note where nothing can be carried."""
+    if driver is avatar or (driver.name == avatar.name and driver.num_expression == avatar.num_expression
+                            and driver.expr_names == avatar.expr_names):
+        return {i: i for i in range(driver.num_expression)}, [], ""
+    if not driver.expr_names or not avatar.expr_names:
+        which = driver.name if not driver.expr_names else avatar.name
+        return {}, [], (f"expressions not carried: head model '{which}' has unnamed expression components (as "
+                        "FLAME's), which match no other model's; jaw, gaze and head rotation are carried")
+    mapping = {i: avatar.expr_names.index(n) for i, n in enumerate(driver.expr_names) if n in avatar.expr_names}
+    missing = [n for n in driver.expr_names if n not in avatar.expr_names]
+    note = "" if mapping else (f"no expression names in common between '{driver.name}' and '{avatar.name}'; jaw, "
+                               "gaze and head rotation are carried")
+    return mapping, missing, note
+
+
+def calmest_frame(controls: list[Controls]) -> int:
+    """The frame with the least expression and jaw: the driver's neutral unless one is named."""
+    activity = [float(np.abs(c.expression).sum() + 10.0 * abs(float(c.jaw[0]))) for c in controls]
+    return int(np.argmin(activity))
+
+
+def retarget(controls: list[Controls], times: list[float], driver: HeadModel, avatar: HeadModel,
+             neutral: int | None = None, fps: float = 30.0) -> tuple[Animation, Retarget]:
+    """The driver's tracked frames (controls at times, seconds from the first; frames sampled at fps) as an
+    animation of the avatar's sliders, relative to the driver's neutral frame; one linear key a frame."""
+    n = calmest_frame(controls) if neutral is None else neutral
+    if not 0 <= n < len(controls):
+        raise UserInputError(f"--neutral-frame {neutral}: the video gave {len(controls)} tracked frames")
+    mapping, missing, note = expression_map(driver, avatar)
+    rest = controls[n]
+    r_rest = Rotation.from_rotvec(np.asarray(rest.root, np.float64))
+    eyes_rest = [Rotation.from_rotvec(np.asarray(g, np.float64)) for g in (rest.gaze_left, rest.gaze_right)]
+    tracks: dict[str, list[tuple[float, float]]] = {}
+
+    def key(channel: str, t: float, v: float) -> None:
+        tracks.setdefault(channel, []).append((round(t, 6), round(float(v), 6)))
+
+    names = [avatar.expr_names[j] if j < len(avatar.expr_names) else str(j) for j in range(avatar.num_expression)]
+    for c, t in zip(controls, times, strict=True):
+        for i, j in mapping.items():
+            key(f"expression.{names[j]}", t, np.clip(c.expression[i] - rest.expression[i], *EXPRESSION_RANGE))
+        if "jaw" in avatar.joint_names:
+            key("jaw.open", t, np.clip(np.degrees(float(c.jaw[0]) - float(rest.jaw[0])), *JAW_RANGE_DEG))
+        # The head's turn since the neutral frame, in the camera's axes (the avatar's world axes from the front).
+        yaw, pitch, roll = (Rotation.from_rotvec(np.asarray(c.root, np.float64)) * r_rest.inv()).as_euler(
+            "YXZ", degrees=True)
+        for axis, v in zip(("yaw", "pitch", "roll"), (yaw, pitch, roll), strict=True):
+            key(f"head.{axis}", t, v)
+        if {"eye_l", "eye_r"} <= set(avatar.joint_names):
+            # Both eyes' turn since the neutral frame, averaged (the sliders' linked gaze).
+            turns = [(Rotation.from_rotvec(np.asarray(g, np.float64)) * e.inv()).as_euler("YXZ", degrees=True)
+                     for g, e in zip((c.gaze_left, c.gaze_right), eyes_rest, strict=True)]
+            gaze = np.clip(np.mean(turns, axis=0), *GAZE_RANGE_DEG)
+            key("gaze.yaw", t, gaze[0])
+            key("gaze.pitch", t, gaze[1])
+    # Seen from the front, as the driver's camera saw the driver.
+    tracks["camera.yaw"], tracks["camera.pitch"] = [(0.0, 0.0)], [(0.0, 0.0)]
+    fps = float(np.clip(fps, 1, 240))
+    anim = Animation(fps=fps, duration_s=times[-1] + 1.0 / fps,
+                     interpolation="linear", tracks={c: tuple(k) for c, k in tracks.items()})
+    carried = [names[j] for j in sorted(set(mapping.values()))]
+    return anim, Retarget(n, carried, missing, note)
+
+
+def run_reenact(cfg: ReenactConfig) -> int:
+    from app.avatar_commands import animation_frames
+    from models.avatars.registry import load_avatar
+    from models.files import foreign_files
+    from render.gl.context import GLContext
+    from render.gl.raster import Rasterizer
+    from render.video import write_video
+
+    if cfg.out.suffix.lower() != ".mp4":
+        raise UserInputError(f"{cfg.out}: the performance is written as an .mp4")
+    signal.signal(signal.SIGTERM, interrupted)  # the studio's Cancel: as Ctrl-C, no partial mp4 is left
+    pngs = cfg.out.with_suffix("") if cfg.pngs else None
+    if pngs is not None and (pngs.is_file() or foreign_files(pngs, r"frame_\d{4}\.png")):
+        raise UserInputError(f"{pngs}: the PNG frames go there, and it holds other files; choose another --out")
+    anim_path = cfg.out.with_suffix(".json")
+    if anim_path.exists():
+        try:
+            load_animation(anim_path)
+        except AnimationError:
+            raise UserInputError(f"{anim_path}: the performance's animation goes there, and it holds another file; "
+                                 "choose another --out") from None
+    avatar, meta = load_avatar(cfg.avatar)
+    driver_spec = cfg.driver_head or meta["head_model"]
+    driver = avatar.head_model if not cfg.driver_head else load_head(cfg.driver_head)
+    t0 = time.perf_counter()
+    tracked = track_video(TrackConfig(cfg.video, cfg.out, head=driver_spec, landmarker=cfg.landmarker, fps=cfg.fps,
+                                      seconds=cfg.seconds, size=cfg.size, iterations=cfg.iterations, overlay=False),
+                          driver)
+    t_track = time.perf_counter() - t0
+    times = [f["time_s"] - tracked.kept[0]["time_s"] for f in tracked.kept]
+    fps = min(cfg.fps or tracked.info.fps, tracked.info.fps)
+    anim, how = retarget(tracked.result.controls, times, driver, avatar.head_model, cfg.neutral_frame, fps)
+    if how.note:
+        print(f"reenact: {how.note}", flush=True)
+    print(f"reenact: driver's neutral frame {how.neutral} (source frame {tracked.kept[how.neutral]['source_frame']});"
+          f" {len(how.carried)} expressions carried" + (f", {len(how.missing)} of the driver's have no counterpart"
+                                                        if how.missing else ""), flush=True)
+
+    def driver_image(t: float) -> np.ndarray:
+        nearest = int(np.argmin(np.abs(np.asarray(times) - t)))
+        return tracked.crop.image(tracked.kept[nearest]["rgb"])
+
+    height = cfg.size - cfg.size % 2
+    bar = Progress("reenact", anim.frames)
+    gl = GLContext.headless()
+    t1 = time.perf_counter()
+
+    def frames():
+        rendered = animation_frames(avatar, Rasterizer(gl), anim, height, cfg.preset,
+                                    on_frame=lambda k: bar.update(k + 1))
+        for t, image in zip(anim.times(), rendered, strict=True):
+            image = resized(image, height)
+            yield np.concatenate([resized(driver_image(t), height), image], 1) if cfg.side_by_side else image
+
+    n = write_video(frames(), cfg.out, anim.fps, pngs)
+    t_render = time.perf_counter() - t1
+    save_animation(anim, anim_path)
+    report = {"video": str(cfg.video), "avatar": str(cfg.avatar), "driver_head": driver_spec,
+              "frames_tracked": len(tracked.kept), "frames_read": tracked.read, "frames_written": n,
+              "neutral_frame": how.neutral, "expressions_carried": how.carried,
+              "expressions_missing": how.missing, "note": how.note, "preset": cfg.preset, "size": height,
+              "seconds": {"track": round(t_track, 2), "render": round(t_render, 2)},
+              "seconds_per_frame": {"track": round(t_track / max(tracked.read, 1), 4),
+                                    "render": round(t_render / max(n, 1), 4)},
+              "landmark_error_px_median": round(float(np.median(tracked.errors)), 3)}
+    atomic_write_bytes(cfg.out.with_name(cfg.out.stem + "_report.json"), (json.dumps(report, indent=1) + "\n").encode())
+    print(f"wrote {cfg.out} ({n} frames at {anim.fps:g} fps{', driver beside the avatar' if cfg.side_by_side else ''})"
+          f" and its animation {anim_path}; tracking {t_track:.1f} s ({report['seconds_per_frame']['track']:.3f} s a "
+          f"frame), rendering {t_render:.1f} s ({report['seconds_per_frame']['render']:.3f} s a frame, {cfg.preset})")
+    return 0
+
+
+def interrupted(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def resized(image: np.ndarray, size: int) -> np.ndarray:
+    """An (H,W,3) uint8 image at size x size (the avatar's render is already; the driver's crop is at --size)."""
+    if image.shape[:2] == (size, size):
+        return image
+    import cv2
+
+    return cv2.resize(image, (size, size), interpolation=cv2.INTER_AREA)
