@@ -40,6 +40,8 @@ class Job:
     """Image size of the tracked dataset, pixels."""
     track_fps: float | None = None
     """Frames a second taken from the video (None: every frame)."""
+    seconds: float | None = None
+    """Only the video's first seconds (a reenactment)."""
     stage: Literal["track", "train", "reenact"] = "train"
     opened: bool = False
     """The studio opened the result (video jobs open theirs when done)."""
@@ -57,6 +59,7 @@ class Job:
         if self.stage == "reenact":
             cmd = [sys.executable, "-m", "app.cli", "reenact", str(self.dataset), str(self.video), "--out",
                    str(self.out), "--size", str(self.track_size)]
+            cmd += ["--seconds", str(self.seconds)] if self.seconds else []
             return cmd + (["--landmarker", str(self.landmarker)] if self.landmarker else [])
         if self.stage == "track":
             cmd = [sys.executable, "-m", "app.cli", "track", str(self.video), "--out", str(self.dataset),
@@ -74,7 +77,9 @@ class Job:
         return cmd
 
     def read_progress(self) -> None:
-        """Append the progress records written since the last call."""
+        """Append the progress records written since the last call (a training's; a reenactment has none)."""
+        if self.stage == "reenact":
+            return
         path = self.out / "progress.jsonl"
         try:
             with open(path, "rb") as f:

@@ -215,7 +215,9 @@ def run_reenact(cfg: ReenactConfig) -> int:
               "seconds": {"track": round(t_track, 2), "render": round(t_render, 2)},
               "seconds_per_frame": {"track": round(t_track / max(tracked.read, 1), 4),
                                     "render": round(t_render / max(n, 1), 4)},
-              "landmark_error_px_median": round(float(np.median(tracked.errors)), 3)}
+              "landmark_error_px_median": round(float(np.median(tracked.errors)), 3),
+              "crop": {"x0": tracked.crop.x0, "y0": tracked.crop.y0, "side": tracked.crop.side},
+              "source_frames": [f["source_frame"] for f in tracked.kept]}
     atomic_write_bytes(cfg.out.with_name(cfg.out.stem + "_report.json"), (json.dumps(report, indent=1) + "\n").encode())
     print(f"wrote {cfg.out} ({n} frames at {anim.fps:g} fps{', driver beside the avatar' if cfg.side_by_side else ''})"
           f" and its animation {anim_path}; tracking {t_track:.1f} s ({report['seconds_per_frame']['track']:.3f} s a "

@@ -118,6 +118,9 @@ def detect_faces(cfg: TrackConfig, bundle: Path, info, progress) -> tuple[list[d
     if several > 0.1 * read:
         raise UserInputError(f"{cfg.video}: several people (two or more faces in {several} of {read} frames); "
                              "track needs a video of one face")
+    if read < 10:
+        raise UserInputError(f"{cfg.video}: only {read} frames taken (at least 10 are needed: a longer part of the "
+                             "video, or a higher --fps)")
     if len(kept) < 10:
         raise UserInputError(f"{cfg.video}: a face was found in only {len(kept)} of {read} frames "
                              "(at least 10 are needed)")

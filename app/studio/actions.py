@@ -5,6 +5,7 @@ application's machinery (threads, job processes, exports) and are carried out by
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -20,7 +21,9 @@ from app.animation import (
     rest_sliders,
     save_animation,
 )
-from app.studio.session import AvatarFiles, Session, Sliders, View
+from app.studio import poses as pose_file
+from app.studio.poses import PosesError, apply_pose, avatar_key, pose_of, read_poses, write_poses
+from app.studio.session import AvatarFiles, History, Session, Sliders, View, expression_groups
 from app.turntable import INSPECT, TurntableConfig
 
 
@@ -34,6 +37,27 @@ class Action:
 class Command:
     """A request the application carries out (it may start threads or processes, and report back through
     actions)."""
+
+
+class SliderChange(Action):
+    """A change of the sliders or the camera by the user: undoable (Session.history)."""
+
+    def apply(self, s: Session) -> None:
+        h = s.history
+        before = (list(h.undo), list(h.redo), h.gesture, h.last_s)
+        h.remember(s.sliders, s.view, self.gesture(), time.monotonic())
+        try:
+            self.change(s)
+        except Exception:  # refused (a group that does not exist): no step to undo
+            h.undo, h.redo, h.gesture, h.last_s = before
+            raise
+
+    def gesture(self) -> object:
+        """Changes with the same gesture in a row are one change (a slider's drag); None: a change of its own."""
+        return None
+
+    def change(self, s: Session) -> None:
+        raise NotImplementedError
 
 
 def controls_moved(s: Session) -> None:
@@ -57,6 +81,12 @@ class AvatarOpened(Action):
         s.timeline_frame = -1
         s.dirty = True
         s.opening = None
+        s.history = History()  # another head's sliders: nothing to go back to
+        try:
+            s.poses = read_poses(pose_file.POSES_FILE).get(avatar_key(f.folder), {})
+        except PosesError as e:
+            s.poses = {}
+            s.report(str(e))
 
 
 @dataclass(frozen=True)
@@ -70,30 +100,36 @@ class OpenFailed(Action):
 
 # ---- controls ----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class SetExpression(Action):
+class SetExpression(SliderChange):
     index: int
     value: float
 
-    def apply(self, s: Session) -> None:
+    def gesture(self) -> object:
+        return ("expression", self.index)
+
+    def change(self, s: Session) -> None:
         s.sliders.expression[self.index] = self.value
         controls_moved(s)
 
 
 @dataclass(frozen=True)
-class ResetExpression(Action):
-    def apply(self, s: Session) -> None:
+class ResetExpression(SliderChange):
+    def change(self, s: Session) -> None:
         s.sliders.expression[:] = 0
         controls_moved(s)
 
 
 @dataclass(frozen=True)
-class SetAngles(Action):
+class SetAngles(SliderChange):
     """Head or neck (yaw, pitch, roll), or an eye's gaze (yaw, pitch), in degrees."""
 
     which: str  # head, neck, gaze_left, gaze_right
     degrees: tuple[float, ...]
 
-    def apply(self, s: Session) -> None:
+    def gesture(self) -> object:
+        return ("angles", self.which)
+
+    def change(self, s: Session) -> None:
         if self.which not in ("head", "neck", "gaze_left", "gaze_right"):
             raise ValueError(f"no angles named {self.which!r}")
         getattr(s.sliders, self.which)[:] = np.asarray(self.degrees, np.float32)
@@ -101,36 +137,39 @@ class SetAngles(Action):
 
 
 @dataclass(frozen=True)
-class SetJaw(Action):
+class SetJaw(SliderChange):
     degrees: float
 
-    def apply(self, s: Session) -> None:
+    def gesture(self) -> object:
+        return "jaw"
+
+    def change(self, s: Session) -> None:
         s.sliders.jaw_open_deg = float(self.degrees)
         controls_moved(s)
 
 
 @dataclass(frozen=True)
-class LinkGaze(Action):
+class LinkGaze(SliderChange):
     linked: bool
 
-    def apply(self, s: Session) -> None:
+    def change(self, s: Session) -> None:
         s.sliders.gaze_linked = self.linked
         controls_moved(s)
 
 
 @dataclass(frozen=True)
-class ResetPose(Action):
+class ResetPose(SliderChange):
     """Head and neck back to zero."""
 
-    def apply(self, s: Session) -> None:
+    def change(self, s: Session) -> None:
         s.sliders.head[:] = 0
         s.sliders.neck[:] = 0
         controls_moved(s)
 
 
 @dataclass(frozen=True)
-class ResetGaze(Action):
-    def apply(self, s: Session) -> None:
+class ResetGaze(SliderChange):
+    def change(self, s: Session) -> None:
         s.sliders.gaze_left[:] = 0
         s.sliders.gaze_right[:] = 0
         controls_moved(s)
@@ -166,19 +205,118 @@ class ShowAtSize(Action):
 
 
 @dataclass(frozen=True)
-class CopyFrameToSliders(Action):
+class CopyFrameToSliders(SliderChange):
     """The timeline's frame becomes the sliders' controls."""
 
-    def apply(self, s: Session) -> None:
+    def change(self, s: Session) -> None:
         if s.capture is None or not 0 <= s.timeline_frame < len(s.capture.frames):
             return
         s.sliders = Sliders.of(s.capture.frames[s.timeline_frame].controls, s.avatar.head_model.num_expression)
         controls_moved(s)
 
 
+@dataclass(frozen=True)
+class ResetGroup(SliderChange):
+    """One group of sliders back to rest: an expression group (expression_groups: "expression:mouth"), or head,
+    neck, jaw, gaze, camera."""
+
+    group: str
+
+    def change(self, s: Session) -> None:
+        sl = s.sliders
+        kind, _, part = self.group.partition(":")
+        if kind == "expression" and s.avatar is not None:
+            groups = expression_groups(s.avatar.head_model)
+            if part and part not in groups:
+                raise ValueError(f"no expression group {part!r} (this head has {', '.join(groups)})")
+            for i in (groups[part] if part else range(len(sl.expression))):
+                sl.expression[i] = 0.0
+        elif kind in ("head", "neck"):
+            getattr(sl, kind)[:] = 0
+        elif kind == "jaw":
+            sl.jaw_open_deg = 0.0
+        elif kind == "gaze":
+            sl.gaze_left[:] = 0
+            sl.gaze_right[:] = 0
+        elif kind == "camera":
+            s.view = View()
+        elif kind != "expression":
+            raise ValueError(f"no slider group {self.group!r}")
+        controls_moved(s)
+
+
+@dataclass(frozen=True)
+class Undo(Action):
+    """The sliders and the camera one change back (forward = True: redo)."""
+
+    forward: bool = False
+
+    def apply(self, s: Session) -> None:
+        state = s.history.step(not self.forward, s.sliders, s.view)
+        if state is None:
+            return
+        s.sliders, s.view = state
+        controls_moved(s)
+
+
+# ---- named poses -------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SavePose(Action):
+    """The sliders now (the face's channels, not the camera) as a named pose of the open avatar."""
+
+    name: str
+
+    def apply(self, s: Session) -> None:
+        name = self.name.strip()
+        if s.avatar is None or not name:
+            s.report("a pose needs an open avatar and a name")
+            return
+        try:
+            every = read_poses(pose_file.POSES_FILE)
+            mine = every.setdefault(avatar_key(s.folder), {})
+            mine[name] = pose_of(s.sliders, s.view, s.avatar.head_model)
+            write_poses(every, pose_file.POSES_FILE)
+        except PosesError as e:
+            s.report(str(e))
+            return
+        except OSError as e:
+            s.report(f"{pose_file.POSES_FILE}: cannot save the pose ({e.strerror})")
+            return
+        s.poses = mine
+
+
+@dataclass(frozen=True)
+class RecallPose(SliderChange):
+    name: str
+
+    def change(self, s: Session) -> None:
+        if s.avatar is None or self.name not in s.poses:
+            s.report(f"no pose named {self.name!r}")
+            return
+        apply_pose(s.poses[self.name], s.sliders, s.view, s.avatar.head_model)
+        controls_moved(s)
+
+
+@dataclass(frozen=True)
+class DeletePose(Action):
+    name: str
+
+    def apply(self, s: Session) -> None:
+        if s.folder is None:
+            return
+        try:
+            every = read_poses(pose_file.POSES_FILE)
+            every.get(avatar_key(s.folder), {}).pop(self.name, None)
+            write_poses(every, pose_file.POSES_FILE)
+        except (PosesError, OSError) as e:
+            s.report(str(e))
+            return
+        s.poses = every.get(avatar_key(s.folder), {})
+
+
 # ---- camera ------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class SetView(Action):
+class SetView(SliderChange):
     """Orbit yaw and pitch, zoom, field of view (degrees); None leaves one as it is."""
 
     yaw_deg: float | None = None
@@ -186,7 +324,10 @@ class SetView(Action):
     zoom: float | None = None
     fov_deg: float | None = None
 
-    def apply(self, s: Session) -> None:
+    def gesture(self) -> object:
+        return ("view", tuple(k for k in ("yaw_deg", "pitch_deg", "zoom", "fov_deg") if getattr(self, k) is not None))
+
+    def change(self, s: Session) -> None:
         for name in ("yaw_deg", "pitch_deg", "zoom", "fov_deg"):
             value = getattr(self, name)
             if value is not None:
@@ -195,26 +336,32 @@ class SetView(Action):
 
 
 @dataclass(frozen=True)
-class Orbit(Action):
+class Orbit(SliderChange):
     """A mouse drag of (dx, dy) pixels."""
 
     dx_px: float
     dy_px: float = 0.0
 
-    def apply(self, s: Session) -> None:
+    def gesture(self) -> object:
+        return "orbit"
+
+    def change(self, s: Session) -> None:
         s.view.orbit(self.dx_px, self.dy_px)
         s.dirty = True
 
 
 @dataclass(frozen=True)
-class Pan(Action):
+class Pan(SliderChange):
     """A right-drag of (dx, dy) pixels over an image of size_px."""
 
     dx_px: float
     dy_px: float
     size_px: int
 
-    def apply(self, s: Session) -> None:
+    def gesture(self) -> object:
+        return "pan"
+
+    def change(self, s: Session) -> None:
         if s.avatar is None:
             return
         cam = s.view.camera(s.avatar.rest_vertices(), self.size_px, self.size_px)
@@ -223,17 +370,20 @@ class Pan(Action):
 
 
 @dataclass(frozen=True)
-class Zoom(Action):
+class Zoom(SliderChange):
     wheel: float
 
-    def apply(self, s: Session) -> None:
+    def gesture(self) -> object:
+        return "zoom"
+
+    def change(self, s: Session) -> None:
         s.view.zoom_by(self.wheel)
         s.dirty = True
 
 
 @dataclass(frozen=True)
-class ResetView(Action):
-    def apply(self, s: Session) -> None:
+class ResetView(SliderChange):
+    def change(self, s: Session) -> None:
         s.view = View()
         s.dirty = True
 
@@ -322,6 +472,8 @@ class StartReenact(Command):
     landmarker: str
     out: str
     size: int = 256
+    seconds: float | None = None
+    """Only the video's first seconds (None: all of it)."""
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from app.studio.context import PanelContext
 from app.studio.exporting import Exporter
 from app.studio.neural import NeuralWorker, Request
 from app.studio.script import Script
-from app.studio.session import AvatarFiles, Session, read_avatar_folder, remember_recent
+from app.studio.session import AvatarFiles, Session, read_avatar_folder, remember_recent, sliders_json
 from render.gl.context import GLContext
 
 REPO = Path(__file__).resolve().parents[2]
@@ -352,6 +352,7 @@ class Studio:
                 "fps_training": round(self.clock.fps("training"), 1),
                 "fps_playing": round(self.clock.fps("playing"), 1),
                 "animation": self.session.animation.to_json(), "anim_time": round(self.session.anim_time, 3),
+                "sliders": sliders_json(self.session.sliders), "poses": sorted(self.session.poses),
                 "frames": {k: len(v) for k, v in self.clock.times.items()},
                 "loading_s": [round(x, 2) for x in self.loading_s],
                 "fps_loading": round(self.clock.fps("loading"), 1),
@@ -362,7 +363,8 @@ class Studio:
                 "presets": {"ms": self.worker.figures.ms, "psnr_vs_final": self.worker.figures.psnr_vs_final},
                 "errors": list(self.session.errors),
                 "steps_run": None if self.script is None else self.script.ran,
-                "latencies": None if self.script is None else self.script.latencies}
+                "latencies": None if self.script is None else self.script.latencies,
+                "sliders_log": None if self.script is None else self.script.sliders_log}
 
     def close(self) -> None:
         """The window is gone, however it ended (closed, a script done or failed, an error): the renders stop,

@@ -1,6 +1,8 @@
 """The Controls panel: every expression component (named where the head model names them; a filter box),
-head pose, neck, jaw, gaze (linked or each eye), the camera orbit, resets, and a timeline over the
-capture's frames that loads a frame's controls and shows its image beside the render."""
+head pose, neck, jaw, gaze (linked or each eye), the camera orbit, resets (all, and per group: brows, eyes,
+mouth..., head, neck, jaw, gaze, camera), undo and redo (Ctrl+Z, Ctrl+Shift+Z or Ctrl+Y), named poses of the
+avatar, and a timeline over the capture's frames that loads a frame's controls and shows its image beside the
+render."""
 
 from __future__ import annotations
 
@@ -9,10 +11,48 @@ from imgui_bundle import imgui
 
 from app.studio import actions as a
 from app.studio.context import PanelContext
+from app.studio.session import expression_groups
 
 
 class PanelState:
     filter_text = ""
+    pose_name = ""
+
+
+def draw_history(ctx: PanelContext) -> None:
+    """Undo and redo, as buttons and keys (Ctrl+Z; Ctrl+Shift+Z or Ctrl+Y), with how many steps each has."""
+    h, act = ctx.session.history, ctx.act
+    ctrl, shift = imgui.Key.mod_ctrl, imgui.Key.mod_shift
+    keys = not imgui.get_io().want_text_input  # a text field being typed in has its own undo
+    if imgui.button(f"Undo ({len(h.undo)})") or (keys and imgui.is_key_chord_pressed(ctrl | imgui.Key.z)):
+        act(a.Undo())
+    imgui.same_line()
+    if imgui.button(f"Redo ({len(h.redo)})") or (keys and (imgui.is_key_chord_pressed(ctrl | shift | imgui.Key.z)
+                                                          or imgui.is_key_chord_pressed(ctrl | imgui.Key.y))):
+        act(a.Undo(forward=True))
+
+
+def draw_poses(ctx: PanelContext) -> None:
+    """Named poses of this avatar: save the sliders under a name, recall or delete one."""
+    s, act = ctx.session, ctx.act
+    imgui.set_next_item_width(140)
+    _, PanelState.pose_name = imgui.input_text("##pose_name", PanelState.pose_name)
+    imgui.same_line()
+    if imgui.button("Save pose"):
+        act(a.SavePose(PanelState.pose_name))
+    if imgui.is_item_hovered():
+        imgui.set_tooltip("the face's sliders (expression, head, neck, jaw, gaze) under this name, for this avatar; "
+                          "the camera is not part of a pose")
+    for name in sorted(s.poses):
+        imgui.push_id(f"pose_{name}")
+        if imgui.small_button(name):
+            act(a.RecallPose(name))
+        imgui.same_line()
+        if imgui.small_button("x"):
+            act(a.DeletePose(name))
+        imgui.pop_id()
+    if not s.poses:
+        imgui.text_disabled("no poses saved for this avatar")
 
 
 def _angles(label: str, values: np.ndarray, names: tuple[str, ...], limit: float) -> tuple[float, ...] | None:
@@ -46,6 +86,9 @@ def draw(ctx: PanelContext) -> None:
         imgui.pop_text_wrap_pos()
     if s.timeline_frame >= 0:
         imgui.text_wrapped("Showing a capture frame: the sliders below take over when you move them.")
+    draw_history(ctx)
+    if imgui.collapsing_header("Poses"):
+        draw_poses(ctx)
 
     if imgui.collapsing_header("Expression", imgui.TreeNodeFlags_.default_open):
         if imgui.button("Reset expression"):
@@ -53,6 +96,13 @@ def draw(ctx: PanelContext) -> None:
         imgui.same_line()
         imgui.set_next_item_width(140)
         _, PanelState.filter_text = imgui.input_text("filter", PanelState.filter_text)
+        groups = expression_groups(head)
+        if len(groups) > 1:
+            imgui.text("reset:")
+            for group in groups:
+                imgui.same_line()
+                if imgui.small_button(group):
+                    act(a.ResetGroup(f"expression:{group}"))
         needle = PanelState.filter_text.lower()
         for i in range(head.num_expression):
             name = head.expr_names[i] if i < len(head.expr_names) else f"expression {i}"
@@ -64,6 +114,13 @@ def draw(ctx: PanelContext) -> None:
     if imgui.collapsing_header("Head and neck", imgui.TreeNodeFlags_.default_open):
         if imgui.button("Reset pose"):
             act(a.ResetPose())
+        imgui.same_line()
+        if imgui.small_button("head##reset"):
+            act(a.ResetGroup("head"))
+        if "neck" in head.joint_names:
+            imgui.same_line()
+            if imgui.small_button("neck##reset"):
+                act(a.ResetGroup("neck"))
         if (moved := _angles("head", sl.head, ("head yaw", "head pitch", "head roll"), 60)) is not None:
             act(a.SetAngles("head", moved))
         if "neck" in head.joint_names and (
@@ -73,6 +130,8 @@ def draw(ctx: PanelContext) -> None:
         c, v = imgui.slider_float("jaw open", sl.jaw_open_deg, -5.0, 30.0, "%.1f deg")
         if c:
             act(a.SetJaw(v))
+        if imgui.small_button("Reset jaw"):
+            act(a.ResetGroup("jaw"))
     if {"eye_l", "eye_r"} <= set(head.joint_names) and imgui.collapsing_header("Gaze"):
         c, linked = imgui.checkbox("both eyes together", sl.gaze_linked)
         if c:

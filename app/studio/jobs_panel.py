@@ -74,7 +74,7 @@ def start_reenact(jobs: JobQueue, avatar: Path | None, c: StartReenact) -> str |
     if out_path.suffix.lower() != ".mp4":
         return f"{out_path}: the performance is written as an .mp4"
     jobs.submit(avatar, out_path, stage="reenact", video=video_path, landmarker=Path(c.landmarker),
-                track_size=c.size)
+                track_size=c.size, seconds=c.seconds)
     return None
 
 

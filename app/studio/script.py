@@ -15,6 +15,13 @@ pictures). Steps:
   {"record_latency": true}                the ms from the last change to each of its passes' pixels (and as
                                           "PASS render" the pass's own render time), kept for the report's
                                           "latencies" (benchmarks/bench_studio.py)
+  {"undo": true}                          undo the last slider or camera change (Ctrl+Z)
+  {"redo": true}                          redo it (Ctrl+Shift+Z)
+  {"reset": GROUP}                        a group back to rest: expression[:brows|eyes|mouth|...], head, neck, jaw,
+                                          gaze, camera
+  {"record_sliders": true}               keep the sliders' values now, for the report's "sliders_log"
+  {"save_pose": NAME}                     save the sliders as a named pose of this avatar
+  {"recall_pose": NAME}                   set the sliders to a named pose
   {"key": true}                           key the pose at the animation's time (Animation tab's "Key pose")
   {"seek": SECONDS}                       move along the animation (its keyed channels set the sliders)
   {"play": BOOL}                          play or stop the animation
@@ -27,6 +34,9 @@ pictures). Steps:
   {"train": {"dataset": D, "out": O, "steps": N, "effects": E, "model": M}}  queue a training job
   {"from_video": {"video": V, "head": H, "landmarker": L, "out": O, "steps": N, "size": PX, "fps": F}}
                                           queue a new avatar from a video (track, then train)
+  {"reenact": {"video": V, "landmarker": L, "out": MP4, "size": PX, "seconds": S}}
+                                          queue a reenactment of the open avatar by a performance video (its
+                                          animation comes onto the timeline when done)
   {"wait_job": true}                      until no job is queued or running
   {"expect_open": FOLDER}                 fail unless the open avatar is FOLDER
   {"open_job": true}                      open the last job's avatar
@@ -55,7 +65,7 @@ from app.jobs import JobQueue
 from app.studio import actions as a
 from app.studio.exporting import Exporter
 from app.studio.neural import NeuralWorker
-from app.studio.session import Session
+from app.studio.session import Session, sliders_json
 from app.studio.viewport import Viewport
 from app.turntable import TurntableConfig
 from models.avatars.quality import PRESET_NAMES
@@ -107,6 +117,7 @@ class Script:
     """Steps completed (the report's steps_run: every step runs once)."""
     log: list[str] = field(default_factory=list)
     latencies: list[dict[str, float]] = field(default_factory=list)
+    sliders_log: list[dict] = field(default_factory=list)
     """What each record_latency step saw."""
 
     @staticmethod
@@ -174,6 +185,49 @@ def _expression(sc: Script, st: Driven, s: dict) -> bool:
     key = s["expression"]
     i = key if isinstance(key, int) else st.session.avatar.head_model.expression_index(key)
     st.act(a.SetExpression(i, float(s["value"])))
+    return True
+
+
+@step("undo")
+def _undo(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.Undo())
+    return True
+
+
+@step("redo")
+def _redo(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.Undo(forward=True))
+    return True
+
+
+@step("reset")
+def _reset(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.ResetGroup(s["reset"]))
+    return True
+
+
+@step("record_sliders")
+def _record_sliders(sc: Script, st: Driven, s: dict) -> bool:
+    sc.sliders_log.append(sliders_json(st.session.sliders))
+    return True
+
+
+@step("save_pose")
+def _save_pose(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.SavePose(s["save_pose"]))
+    return True
+
+
+@step("recall_pose")
+def _recall_pose(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.RecallPose(s["recall_pose"]))
+    return True
+
+
+@step("reenact")
+def _reenact(sc: Script, st: Driven, s: dict) -> bool:
+    r = s["reenact"]
+    st.act(a.StartReenact(r["video"], r["landmarker"], r["out"], int(r.get("size", 256)), r.get("seconds")))
     return True
 
 

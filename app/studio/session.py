@@ -4,6 +4,7 @@ state and conversions, no GL, no imgui; panels change it only through app/studio
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 from dataclasses import dataclass, field
@@ -63,6 +64,13 @@ class Sliders:
         return Sliders(expr, rotvec_to_euler(controls.root), rotvec_to_euler(controls.neck),
                        math.degrees(float(controls.jaw[0])), bool(np.allclose(gl, gr, atol=1e-3)),
                        gl[:2].copy(), gr[:2].copy(), np.asarray(controls.shape, np.float32))
+
+
+def sliders_json(s: Sliders) -> dict:
+    """The sliders as plain numbers (scripted runs' reports)."""
+    r = lambda v: [round(float(x), 5) for x in v]
+    return {"expression": r(s.expression), "head": r(s.head), "neck": r(s.neck),
+            "jaw_open_deg": round(float(s.jaw_open_deg), 5), "gaze_left": r(s.gaze_left), "gaze_right": r(s.gaze_right)}
 
 
 @dataclass
@@ -161,6 +169,61 @@ def read_avatar_folder(folder: str | Path) -> AvatarFiles:
     return files
 
 
+EXPRESSION_GROUPS = {"brows": ("brow",), "eyes": ("eye", "blink", "squint"),
+                     "mouth": ("mouth", "smile", "frown", "pucker", "jaw", "lip", "stretch"),
+                     "cheeks and nose": ("cheek", "nose", "sneer")}
+
+
+def expression_groups(head) -> dict[str, list[int]]:
+    """The head model's expressions by the part of the face their names say they move (the first group whose word
+    a name holds; the rest under "other"); unnamed expressions (FLAME's) are one group.
+
+    >>> from models.head.builtin import load_builtin
+    >>> g = expression_groups(load_builtin()); [load_builtin().expr_names[i] for i in g["brows"]]
+    ['browRaise_L', 'browRaise_R', 'browDown_L', 'browDown_R']
+    """
+    groups: dict[str, list[int]] = {}
+    for i in range(head.num_expression):
+        name = head.expr_names[i].lower() if i < len(head.expr_names) else ""
+        group = next((g for g, words in EXPRESSION_GROUPS.items() if any(w in name for w in words)),
+                     "other" if name else "expression")
+        groups.setdefault(group, []).append(i)
+    return groups
+
+
+@dataclass
+class History:
+    """Undo and redo of the sliders and the camera. One change is one step back: a slider dragged through many
+    values is one change, as long as the same slider keeps moving (under GESTURE_S between its values)."""
+
+    undo: list[tuple[Sliders, View]] = field(default_factory=list)
+    redo: list[tuple[Sliders, View]] = field(default_factory=list)
+    gesture: object = None
+    last_s: float = -math.inf
+
+    LIMIT = 200
+    GESTURE_S = 1.0
+
+    def remember(self, sliders: Sliders, view: View, gesture: object, now: float) -> None:
+        """Before a change: keep the state it changes, unless it continues the change before it."""
+        continues = gesture is not None and gesture == self.gesture and now - self.last_s < self.GESTURE_S
+        self.gesture, self.last_s = gesture, now
+        if continues:
+            return
+        self.undo.append((copy.deepcopy(sliders), copy.deepcopy(view)))
+        del self.undo[:-self.LIMIT]
+        self.redo.clear()
+
+    def step(self, back: bool, sliders: Sliders, view: View) -> tuple[Sliders, View] | None:
+        """The state one change back (or forward, after an undo); None where there is none."""
+        source, other = (self.undo, self.redo) if back else (self.redo, self.undo)
+        if not source:
+            return None
+        other.append((copy.deepcopy(sliders), copy.deepcopy(view)))
+        self.gesture = None
+        return source.pop()
+
+
 @dataclass
 class Session:
     """Everything the studio shows, as one value: the open avatar and its capture, the sliders, the camera, the
@@ -186,6 +249,9 @@ class Session:
     anim_time: float = 0.0
     """Where on the animation the sliders are, seconds."""
     playing: bool = False
+    history: History = field(default_factory=History)
+    poses: dict[str, dict[str, float]] = field(default_factory=dict)
+    """The open avatar's named poses (app/studio/poses.py)."""
 
     @property
     def avatar(self) -> Avatar | None:

@@ -72,6 +72,86 @@ def test_slider_actions_move_the_controls(session):
         a.SetAngles("elbow", (1.0,)).apply(session)
 
 
+def test_undo_and_redo_step_through_whole_changes(session):
+    """A slider dragged through many values is one change; undo walks back change by change, redo forward, and a
+    new change after an undo drops what could be redone."""
+    for v in (0.1, 0.3, 0.6):  # one drag
+        a.SetExpression(2, v).apply(session)
+    a.SetJaw(12.0).apply(session)
+    a.Orbit(10.0).apply(session)
+    a.Orbit(15.0).apply(session)  # one drag of the camera
+    yaw = session.view.yaw_deg
+    assert len(session.history.undo) == 3
+    a.Undo().apply(session)
+    assert session.view.yaw_deg == 20.0 and session.sliders.jaw_open_deg == 12.0
+    a.Undo().apply(session)
+    assert session.sliders.jaw_open_deg == 0.0 and session.sliders.expression[2] == pytest.approx(0.6)
+    a.Undo().apply(session)
+    assert not session.sliders.expression.any() and session.dirty
+    a.Undo().apply(session)  # nothing further back: nothing changes
+    assert not session.sliders.expression.any()
+    a.Undo(forward=True).apply(session)
+    a.Undo(forward=True).apply(session)
+    assert session.sliders.expression[2] == pytest.approx(0.6) and session.sliders.jaw_open_deg == 12.0
+    assert len(session.history.redo) == 1
+    a.ResetExpression().apply(session)  # a new change: the camera drag can no longer be redone
+    assert session.history.redo == [] and session.view.yaw_deg != yaw
+    a.Undo().apply(session)
+    assert session.sliders.expression[2] == pytest.approx(0.6)
+
+
+def test_resets_per_group(session):
+    head = session.avatar.head_model
+    for name in ("browRaise_L", "smile_L", "blink_R", "noseSneer"):
+        a.SetExpression(head.expression_index(name), 0.5).apply(session)
+    a.SetAngles("head", (10.0, 5.0, 0.0)).apply(session)
+    a.SetAngles("neck", (4.0, 0.0, 0.0)).apply(session)
+    a.SetJaw(8.0).apply(session)
+    a.ResetGroup("expression:brows").apply(session)
+    e = lambda name: session.sliders.expression[head.expression_index(name)]
+    assert e("browRaise_L") == 0 and e("smile_L") == 0.5 and e("blink_R") == 0.5
+    a.ResetGroup("expression:mouth").apply(session)
+    assert e("smile_L") == 0 and e("blink_R") == 0.5 and e("noseSneer") == 0.5
+    a.ResetGroup("head").apply(session)
+    assert not session.sliders.head.any() and session.sliders.neck[0] == 4.0
+    a.ResetGroup("jaw").apply(session)
+    assert session.sliders.jaw_open_deg == 0 and session.sliders.neck[0] == 4.0
+    with pytest.raises(ValueError, match="no expression group"):
+        a.ResetGroup("expression:elbows").apply(session)
+    with pytest.raises(ValueError, match="no slider group"):
+        a.ResetGroup("tail").apply(session)
+    a.Undo().apply(session)  # a reset is undone like any change
+    assert session.sliders.jaw_open_deg == 8.0
+
+
+def test_named_poses_are_kept_per_avatar(session, tmp_path, monkeypatch):
+    from app.studio import poses
+
+    monkeypatch.setattr(poses, "POSES_FILE", tmp_path / "poses.json")
+    head = session.avatar.head_model
+    a.SetExpression(head.expression_index("smile_L"), 0.8).apply(session)
+    a.SetJaw(14.0).apply(session)
+    a.SavePose("grin").apply(session)
+    saved = __import__("json").loads((tmp_path / "poses.json").read_text())
+    pose = saved["avatars"][str(DEMO.resolve())]["grin"]
+    assert pose["expression.smile_L"] == pytest.approx(0.8) and pose["jaw.open"] == 14.0
+    assert not any(c.startswith("camera.") for c in pose)  # a pose is the face, not the view
+    a.ResetExpression().apply(session)
+    a.ResetGroup("jaw").apply(session)
+    a.SetView(yaw_deg=-40.0).apply(session)
+    a.RecallPose("grin").apply(session)
+    assert session.sliders.expression[head.expression_index("smile_L")] == pytest.approx(0.8)
+    assert session.sliders.jaw_open_deg == 14.0 and session.view.yaw_deg == -40.0
+    other = Session()  # the same avatar opened again finds its pose
+    a.AvatarOpened(session.files).apply(other)
+    assert set(other.poses) == {"grin"}
+    a.DeletePose("grin").apply(session)
+    assert session.poses == {} and "grin" not in (tmp_path / "poses.json").read_text()
+    (tmp_path / "poses.json").write_text("{not json")  # the user's broken file is never overwritten
+    a.SavePose("again").apply(session)
+    assert "poses.json" in session.errors[-1] and (tmp_path / "poses.json").read_text() == "{not json"
+
+
 def test_timeline_shows_a_capture_frame_and_moves_the_sliders_to_it(session, files):
     frame = files.capture.frames[2].controls
     a.ShowFrame(2).apply(session)

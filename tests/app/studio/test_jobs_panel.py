@@ -16,3 +16,28 @@ def test_progress_text():
     job.state = "done"
     assert progress_text(job) == "step 60, done"
     assert progress_text(Job(2, Path("d"), Path("o"))) == "step 0, queued"
+
+
+def test_a_reenactment_is_refused_with_its_reason_and_runs_the_reenact_command(tmp_path):
+    from app.jobs import JobQueue
+    from app.studio.actions import StartReenact
+    from app.studio.jobs_panel import start_reenact
+
+    video, bundle = tmp_path / "perf.mp4", tmp_path / "lm.task"
+    video.write_bytes(b"x")
+    bundle.write_bytes(b"x")
+    jobs = JobQueue(max_running=0)  # queued, never started
+    ask = lambda **kw: start_reenact(jobs, kw.pop("avatar", tmp_path), StartReenact(**{
+        "video": str(video), "landmarker": str(bundle), "out": str(tmp_path / "o.mp4"), **kw}))
+    assert ask(avatar=None) == "open an avatar to drive first"
+    assert "no such video" in ask(video=str(tmp_path / "none.mp4"))
+    assert "landmarker" in ask(landmarker="")
+    assert ask(out=str(tmp_path / "o.gif")).endswith("written as an .mp4")
+    assert jobs.jobs == []
+    assert ask(seconds=2.0) is None
+    job = jobs.jobs[0]
+    cmd = job.command()
+    assert cmd[3:6] == ["reenact", str(tmp_path), str(video)] and cmd[cmd.index("--seconds") + 1] == "2.0"
+    assert job.stage == "reenact" and job.fraction == 0.0
+    job.log_path.write_text("reenact: 9/30 frames\nreenact: 12/30 frames\n")
+    assert job.fraction == 0.4

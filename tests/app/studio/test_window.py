@@ -217,3 +217,35 @@ def test_keyframes_play_and_export(display, avatar, tmp_path):
     while cap.read()[0]:
         n += 1
     assert n == round(saved["duration_s"] * saved["fps"])  # the animation's frames, at its rate
+
+
+def test_undo_reset_poses_and_a_performance_on_the_timeline(display, tmp_path, face_video, landmarker):
+    """Through the window, on the demo: a pose saved and recalled, group resets, undo and redo; then a second and
+    a half of a real video reenacted as a job, whose animation lands on the timeline when it is done."""
+    from app.animation import load_animation
+    from tests.conftest import DEMO
+
+    mp4 = tmp_path / "perf.mp4"
+    report = run_script(display, tmp_path, DEMO, [
+        {"wait_render": "draft"}, {"expression": "smile_L", "value": 0.8}, {"jaw_open_deg": 14},
+        {"save_pose": "grin"}, {"reset": "expression:mouth"}, {"reset": "jaw"},
+        {"record_sliders": True}, {"undo": True}, {"record_sliders": True}, {"undo": True}, {"record_sliders": True},
+        {"redo": True}, {"record_sliders": True}, {"reset": "expression"}, {"reset": "jaw"}, {"recall_pose": "grin"},
+        {"record_sliders": True},
+        {"reenact": {"video": str(face_video), "landmarker": str(landmarker), "out": str(mp4), "size": 64,
+                     "seconds": 1.5}},
+        {"wait_frames": 5}, {"wait_job": True}, {"wait_frames": 5}, {"seek": 0.5}, {"record_sliders": True}])
+    assert report["errors"] == [], report["errors"]
+    assert report["poses"] == ["grin"]
+    log = report["sliders_log"]
+    smile = [s["expression"][0] for s in log[:5]]  # smile_L is the built-in head's first expression
+    jaw = [s["jaw_open_deg"] for s in log[:5]]
+    # reset mouth and jaw | undo: the jaw back | undo: the smile back | redo: the smile reset again | the pose
+    assert smile == [0.0, 0.0, 0.8, 0.0, 0.8] and jaw == [0.0, 14.0, 14.0, 14.0, 14.0]
+    poses = json.loads((tmp_path / ".config" / "avatar-studio" / "poses.json").read_text())
+    assert poses["avatars"][str(DEMO.resolve())]["grin"]["jaw.open"] == 14.0
+    saved = json.loads(mp4.with_suffix(".json").read_text())
+    assert report["animation"] == saved and any(c.startswith("expression.") for c in saved["tracks"])
+    anim = load_animation(mp4.with_suffix(".json"))  # the timeline at 0.5 s: the performance's values there
+    assert log[5]["jaw_open_deg"] == pytest.approx(anim.value("jaw.open", 0.5), abs=1e-4)
+    assert log[5]["expression"][0] == pytest.approx(anim.value("expression.smile_L", 0.5), abs=1e-4)
