@@ -385,6 +385,26 @@ def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, o
             on_frame(k)
 
 
+def guide_mesh_writer(avatar, out: Path, kind: str):
+    """on_pose(k, controls) for animation_frames: the posed guide mesh of frame k to OUT_meshes/frame_K.obj|ply
+    (nothing for kind "none"); a folder that holds other files is refused first."""
+    meshes = out.with_name(out.stem + "_meshes") if kind != "none" else None
+    if meshes is not None and (meshes.is_file() or foreign_files(meshes, r"frame_\d{4}\.(obj|ply)")):
+        raise UserInputError(f"{meshes}: the guide meshes go there, and it holds other files; choose another --out")
+
+    def write_mesh(k: int, controls: Controls) -> None:
+        from models.head.meshio import mesh_bytes
+
+        if meshes is None:
+            return
+        meshes.mkdir(parents=True, exist_ok=True)
+        with torch.no_grad():
+            verts = avatar.head.pose([controls])[0][0].cpu().numpy()
+        atomic_write_bytes(meshes / f"frame_{k:04d}.{kind}", mesh_bytes(f".{kind}", verts, avatar.head_model.triangles))
+
+    return write_mesh
+
+
 def run_animate(cfg: AnimateConfig) -> int:
     from app.animation import AnimationError, check_channels, load_animation
 
@@ -400,20 +420,7 @@ def run_animate(cfg: AnimateConfig) -> int:
     if pngs is not None and (pngs.is_file() or foreign_files(pngs, r"frame_\d{4}\.png")):
         raise UserInputError(f"{pngs}: the animation's PNG frames go there, and it holds other files; choose another "
                              "--out or pass --no-pngs")
-    meshes = cfg.out.with_name(cfg.out.stem + "_meshes") if cfg.meshes != "none" else None
-    if meshes is not None and (meshes.is_file() or foreign_files(meshes, r"frame_\d{4}\.(obj|ply)")):
-        raise UserInputError(f"{meshes}: the guide meshes go there, and it holds other files; choose another --out")
-
-    def write_mesh(k: int, controls: Controls) -> None:
-        from models.head.meshio import mesh_bytes
-
-        if meshes is None:
-            return
-        meshes.mkdir(parents=True, exist_ok=True)
-        with torch.no_grad():
-            verts = avatar.head.pose([controls])[0][0].cpu().numpy()
-        atomic_write_bytes(meshes / f"frame_{k:04d}.{cfg.meshes}",
-                           mesh_bytes(f".{cfg.meshes}", verts, avatar.head_model.triangles))
+    write_mesh = guide_mesh_writer(avatar, cfg.out, cfg.meshes)
 
     gl = GLContext.headless()
     t0 = time.perf_counter()

@@ -69,6 +69,8 @@ class ReenactConfig:
     """The driver's frames beside the avatar (--no-side-by-side: the avatar alone)."""
     pngs: bool = False
     """Also write the frames as PNGs into a folder beside the mp4."""
+    meshes: Literal["none", "obj", "ply"] = "none"
+    """Also write the posed guide mesh of every frame (OUT_meshes/frame_0000.obj ...), for other tools."""
     iterations: Annotated[int, Range(1, 100000)] = 400
     """Fitting iterations of the tracker."""
 
@@ -152,7 +154,7 @@ def retarget(controls: list[Controls], times: list[float], driver: HeadModel, av
 
 
 def run_reenact(cfg: ReenactConfig) -> int:
-    from app.avatar_commands import animation_frames
+    from app.avatar_commands import animation_frames, guide_mesh_writer
     from models.avatars.registry import load_avatar
     from models.files import foreign_files
     from render.gl.context import GLContext
@@ -173,6 +175,7 @@ def run_reenact(cfg: ReenactConfig) -> int:
             raise UserInputError(f"{anim_path}: the performance's animation goes there, and it holds another file; "
                                  "choose another --out") from None
     avatar, meta = load_avatar(cfg.avatar)
+    write_mesh = guide_mesh_writer(avatar, cfg.out, cfg.meshes)
     driver_spec = cfg.driver_head or meta["head_model"]
     driver = avatar.head_model if not cfg.driver_head else load_head(cfg.driver_head)
     t0 = time.perf_counter()
@@ -200,7 +203,7 @@ def run_reenact(cfg: ReenactConfig) -> int:
 
     def frames():
         rendered = animation_frames(avatar, Rasterizer(gl), anim, height, cfg.preset,
-                                    on_frame=lambda k: bar.update(k + 1))
+                                    on_frame=lambda k: bar.update(k + 1), on_pose=write_mesh)
         for t, image in zip(anim.times(), rendered, strict=True):
             image = resized(image, height)
             yield np.concatenate([resized(driver_image(t), height), image], 1) if cfg.side_by_side else image

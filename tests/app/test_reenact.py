@@ -129,8 +129,13 @@ def test_reenact_a_real_video(tmp_path, face_video, landmarker, capsys, gl):
     assert all(abs(anim.value(c, n / anim.fps)) < 1e-5 for c in anim.tracks if not c.startswith("camera."))
     alone = tmp_path / "alone.mp4"
     assert main(["reenact", str(DEMO), str(face_video), "--out", str(alone), "--landmarker", str(landmarker),
-                 "--seconds", "1.0", "--fps", "10", "--size", "32", "--no-side-by-side"]) == 0
+                 "--seconds", "1.0", "--fps", "10", "--size", "32", "--no-side-by-side", "--meshes", "obj"]) == 0
     assert decoded(alone)[0].shape == (32, 32, 3)
+    objs = sorted((tmp_path / "alone_meshes").iterdir())  # the guide mesh of every frame, for other tools
+    assert len(objs) == 10 and objs[0].name == "frame_0000.obj"
+    import trimesh
+
+    assert len(trimesh.load(objs[3], process=False).vertices) == avatar.head_model.num_vertices
 
 
 def test_reenact_refuses_what_it_cannot_use(tmp_path, face_video, landmarker, capsys):
