@@ -47,7 +47,8 @@ EFFECT_SETS = ("none", "shading,specular", "all")
 SETTINGS = (
     # samples per ray at full size
     *(Quality(1.0, s) for s in (4, 6, 8, 12, 16, 24, 32)),
-    # smaller images, shown scaled up
+    # smaller images, shown scaled up (the smallest: first pixels in the studio while a slider moves)
+    *(Quality(sc, s) for sc in (0.25, 0.375) for s in (4, 6)),
     *(Quality(sc, s) for sc in (0.5, 0.75) for s in (6, 8, 12)),
     # a second pass where the first pass's weights lie
     *(Quality(1.0, s, s) for s in (6, 8, 12, 16)),

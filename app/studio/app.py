@@ -375,6 +375,21 @@ class Studio:
             self.jobs.stop_all()
 
 
+class FrameCpu:
+    """The window process's CPU time per frame (its GL driver's threads included: on a software GL they draw),
+    smoothed over the last frames."""
+
+    def __init__(self) -> None:
+        self.last = time.process_time()
+        self.seconds = 0.0
+
+    def tick(self) -> float:
+        now = time.process_time()
+        used, self.last = now - self.last, now
+        self.seconds = used if self.seconds == 0.0 else 0.8 * self.seconds + 0.2 * used
+        return self.seconds
+
+
 def run_studio(cfg: StudioConfig) -> int:
     studio = Studio(cfg)
     params = hello_imgui.RunnerParams()
@@ -390,6 +405,7 @@ def run_studio(cfg: StudioConfig) -> int:
     params.ini_disable = True
     shots: list = []
     last_swap = [time.perf_counter()]
+    frame_cpu = FrameCpu()
 
     def before_swap() -> None:
         if cfg.screenshot and hello_imgui.get_runner_params().app_shall_exit and not shots:
@@ -399,7 +415,10 @@ def run_studio(cfg: StudioConfig) -> int:
             studio.script.after_frame(studio)
         # The cap: no display sync here, so without it the interface would take a whole core. Counted from the
         # previous frame's swap, so that only what is left of a whole frame's time is slept.
-        cap = min(cfg.fps_cap, cfg.rendering_fps_cap) if studio.worker.busy else cfg.fps_cap
+        cpu_s = frame_cpu.tick()
+        cap = cfg.fps_cap
+        if studio.worker.busy:
+            cap = min(cap, cfg.rendering_fps_cap, max(8.0, cfg.rendering_window_share / max(cpu_s, 1e-4)))
         spare = 1.0 / cap - (time.perf_counter() - last_swap[0])
         if spare > 0:  # a pass's new pixels end the wait: the next frame shows them
             studio.worker.arrived.wait(spare)
