@@ -41,7 +41,7 @@ def test_settings_each_model_reads(builtin_model):
     settings, reference = settings_for(untrained_avatar("primitives", builtin_model))
     assert all(q.fine == 0 and not q.bf16 for q in settings) and len(set(settings)) == len(settings)
     assert {(q.scale, q.samples) for q in settings} == {(q.scale, q.samples) for q in SETTINGS}
-    assert reference == Quality(1.0, 32) and len(settings) == 13
+    assert reference == Quality(1.0, 32) and len(settings) == 17
     assert series_name("codynerf", "all") == "all" and series_name("primitives", "all") == "primitives all"
 
 
@@ -105,7 +105,8 @@ def test_every_setting_is_finite_and_near_the_reference(tiny_avatar, capture, gl
         assert np.isfinite(out["depth"][out["opacity"] > 0.5]).all(), q
         rgb = out["rgb"] if q.scale == 1 else cv2.resize(out["rgb"], reference.shape[:2][::-1])
         db[q] = psnr(rgb, reference)
-        assert db[q] >= (30.0 if q.scale == 1 else 25.0), (q, db[q])
+        # scaled up from fewer pixels: blurred, not wrong (a quarter of this small frame is 16 pixels across)
+        assert db[q] >= (30.0 if q.scale == 1 else 25.0 if q.scale >= 0.5 else 20.0), (q, db[q])
     # More samples come closer to the reference; a fine pass beats its first pass alone; bf16 costs < 0.2 dB.
     one_pass = [db[Quality(1.0, s)] for s in (4, 6, 8, 12, 16, 24, 32)]
     assert all(b > a for a, b in itertools.pairwise(one_pass)), one_pass
