@@ -358,7 +358,8 @@ class PrimitivesAvatar(Avatar):
         lists = march.candidate_lists(rays.origins, rays.directions, prims)
         out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims, lists,
                           self.samples if not training else self.cfg.samples,
-                          0.0 if training else self.cfg.stop_below)
+                          0.0 if training else self.cfg.stop_below,
+                          min_weight=0.0 if training else march.DISPLAY_MIN_WEIGHT)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
         if self.needs_normals:
             buffers["normals"] = out.extra[:, :3]

@@ -241,6 +241,10 @@ class MarchOutput:
     segments: int  # segments sampled
 
 
+DISPLAY_MIN_WEIGHT = 1e-4
+"""Display looks up a sample's colour only where its compositing weight reaches this: a pixel loses at most this
+much of its colour's range per sample left out (the samples of a ray number tens), far under 8 bits' step."""
+
 WAVE_CANDIDATES = 8
 """Display marches each live ray's next this many candidates at once, then drops the rays that are opaque (early
 termination by groups): fewer, larger operations than one candidate a wave, and a few more slab tests."""
@@ -248,19 +252,20 @@ termination by groups): fewer, larger operations than one candidate a wave, and 
 
 def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: Primitives,
           lists: CandidateLists, samples: int, stop_below: float = 0.0, exact_lookup: bool = False,
-          wave: int = WAVE_CANDIDATES) -> MarchOutput:
+          wave: int = WAVE_CANDIDATES, min_weight: float = 0.0) -> MarchOutput:
     """Composite the primitives along R rays (origins, directions (R,3), background (R,3) or (3,)), each through
     its candidate list in order, `samples` samples a segment. Without stop_below (training) every candidate in one
     pass; with stop_below > 0 (display) in waves of `wave` candidates of every live ray, and a ray takes no more
-    once less than that share of its light gets through (early termination). exact_lookup: the gather-based
-    `trilinear` instead of grid_sample (the reference)."""
+    once less than that share of its light gets through (early termination). min_weight > 0 (display): the
+    density is looked up first, and the colour channels only at samples whose compositing weight reaches it (the
+    others, empty space and what lies behind opaque matter, add less than that each). exact_lookup: the
+    gather-based `trilinear` instead of grid_sample (the reference)."""
     R = len(origins)
-    values = torch.cat([prims.density[..., None], prims.colour], -1)  # (P,M,M,M,1+C)
-    lookup_of = (lambda p, x: trilinear(values, p, x)) if exact_lookup else _packed_lookup(values)
+    lookup_of = Lookups(prims, exact_lookup)
     frames = box_frames(origins, prims)
     dtype, device = prims.density.dtype, origins.device
     trans = torch.ones(R, dtype=dtype, device=device)
-    total = Composited.empty(R, values.shape[-1] - 1, dtype, device)
+    total = Composited.empty(R, prims.colour.shape[-1], dtype, device)
     longest = int(lists.count.max()) if R else 0
     step = max(1, longest) if stop_below <= 0 else max(1, wave)
     for k0 in range(0, longest, step):
@@ -274,7 +279,7 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
         ray = torch.repeat_interleave(r, n)
         k = k0 + torch.arange(len(ray), device=device) - torch.repeat_interleave(n.cumsum(0) - n, n)
         part = composite_pairs(origins, directions, prims, lookup_of, frames, ray,
-                               lists.prims[lists.start[ray] + k], samples, trans)
+                               lists.prims[lists.start[ray] + k], samples, trans, min_weight)
         total = total + part
         trans = trans * torch.exp(-part.optical_depth).to(dtype)
     depth = torch.where(total.opacity > 1e-10, total.depth / total.opacity.clamp_min(1e-10),
@@ -283,9 +288,27 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
                        total.lookups, total.segments)
 
 
-def _packed_lookup(values: torch.Tensor):
-    packed = pack(values)
-    return lambda prim, local: lookup(packed, prim, local)
+class Lookups:
+    """The primitives' density (N,) and colour channels (N,C) at box coordinates: by grid_sample on packed volumes,
+    or (exact) by the gather-based `trilinear`."""
+
+    def __init__(self, prims: Primitives, exact: bool = False):
+        self.exact = exact
+        if exact:
+            self.values = torch.cat([prims.density[..., None], prims.colour], -1)
+        else:
+            self.packed_density = pack(prims.density[..., None])
+            self.packed_colour = pack(prims.colour)
+
+    def density(self, prim: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+        if self.exact:
+            return trilinear(self.values[..., :1], prim, local)[:, 0]
+        return lookup(self.packed_density, prim, local)[:, 0]
+
+    def colour(self, prim: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+        if self.exact:
+            return trilinear(self.values[..., 1:], prim, local)
+        return lookup(self.packed_colour, prim, local)
 
 
 @dataclass
@@ -312,12 +335,13 @@ class Composited:
                           self.segments + other.segments)
 
 
-def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, lookup_of, frames: BoxFrames,
-                    ray: torch.Tensor, prim: torch.Tensor, samples: int, trans: torch.Tensor) -> Composited:
+def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, lookups: Lookups,
+                    frames: BoxFrames, ray: torch.Tensor, prim: torch.Tensor, samples: int, trans: torch.Tensor,
+                    min_weight: float = 0.0) -> Composited:
     """The (ray, primitive) pairs (Q,) in order (ray by ray, each ray's front to back), composited over the light
     `trans` (R,) that reaches each ray's first: the slab test, `samples` samples a segment where they meet, each
     segment's light exp(-) the optical depth of the ray's earlier segments here (an exclusive running sum
-    restarted at every ray)."""
+    restarted at every ray); the colour looked up only where a sample's weight reaches min_weight."""
     R = len(origins)
     t0, t1, meet, o_box, d_box = ray_box_segments(origins, directions, prims, ray, prim, frames)
     hit = torch.nonzero(meet).squeeze(1)
@@ -325,9 +349,9 @@ def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     t, delta = segment_samples(t0[hit], t1[hit], samples)  # (S,n)
     S = len(ray)
     local = (o_box[:, None] + d_box[:, None] * t[..., None]).reshape(-1, 3)  # the box's unit frame
-    v = lookup_of(prim.repeat_interleave(samples), local)
-    v = v.reshape(S, samples, v.shape[-1])
-    tau = (v[..., 0] * delta).clamp(0.0, MAX_OPTICAL_DEPTH)
+    at = prim.repeat_interleave(samples)
+    density = lookups.density(at, local).reshape(S, samples)
+    tau = (density * delta).clamp(0.0, MAX_OPTICAL_DEPTH)
     seg = tau.sum(1).double()
     before = seg.cumsum(0) - seg  # over all segments, then less what earlier rays took
     first = torch.ones(S, dtype=torch.bool, device=origins.device)
@@ -337,9 +361,19 @@ def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     reach = trans[ray] * torch.exp(-(before - start[ray])).to(tau.dtype)  # (S,) the light reaching each segment
     inside = torch.exp(-(tau.cumsum(1) - tau))  # within the segment
     w = reach[:, None] * inside * (1.0 - torch.exp(-tau))
+    C = prims.colour.shape[-1]
+    if min_weight > 0:
+        shows = torch.nonzero(w.reshape(-1) >= min_weight).squeeze(1)
+        colour = torch.zeros(S * samples, C, dtype=tau.dtype, device=origins.device)
+        colour[shows] = lookups.colour(at[shows], local[shows]).to(tau.dtype)
+        colour = colour.reshape(S, samples, C)
+        looked = len(shows)
+    else:
+        colour = lookups.colour(at, local).reshape(S, samples, C)
+        looked = S * samples
     zeros = torch.zeros(R, dtype=tau.dtype, device=origins.device)
-    return Composited(torch.zeros(R, v.shape[-1] - 1, dtype=tau.dtype, device=origins.device).index_add(
-                          0, ray, (w[..., None] * v[..., 1:]).sum(1)),
+    return Composited(torch.zeros(R, C, dtype=tau.dtype, device=origins.device).index_add(
+                          0, ray, (w[..., None] * colour).sum(1)),
                       zeros.index_add(0, ray, w.sum(1)), zeros.index_add(0, ray, (w * t).sum(1)),
                       torch.zeros(R, dtype=torch.float64, device=origins.device).index_add(0, ray, seg),
-                      S * samples, S)
+                      S * samples + looked, S)

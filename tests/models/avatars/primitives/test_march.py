@@ -125,6 +125,25 @@ def test_early_termination_changes_only_what_the_light_barely_reaches():
         torch.testing.assert_close(cut.rgb, full.rgb, atol=2e-3, rtol=0)  # at most the light left (1e-3) x a colour
 
 
+def test_colour_only_where_a_sample_shows_changes_a_pixel_by_at_most_the_weights_left_out():
+    """Display looks the colour up only at samples whose weight reaches min_weight: each sample left out takes at
+    most min_weight of a colour in [0,1] from its pixel, and most samples (empty space, what lies behind opaque
+    matter) are left out."""
+    prims = random_primitives(seed=6)
+    prims.density.mul_(20)
+    prims.density[prims.density < prims.density.median()] = 0.0  # empty space inside the boxes, as trained ones
+    origins, dirs = camera_rays()
+    pairs = march.candidate_lists(origins, dirs, prims, 16)
+    bg = torch.tensor([0.2, 0.3, 0.4], dtype=origins.dtype)
+    full = march.march(origins, dirs, bg, prims, pairs, 6)
+    for min_weight in (1e-4, 1e-2):
+        part = march.march(origins, dirs, bg, prims, pairs, 6, min_weight=min_weight)
+        per_ray = int(pairs.count.max()) * 6  # samples a ray can have
+        assert (part.rgb - full.rgb).abs().max() <= min_weight * per_ray
+        torch.testing.assert_close(part.opacity, full.opacity, atol=1e-12, rtol=0)  # the density is all there
+        assert part.samples < 0.8 * full.samples, (min_weight, part.samples, full.samples)
+
+
 def test_one_slab_of_known_density_hand_worked():
     # One axis-aligned box, half-size 0.05 m, density 20 / m everywhere, colour (1, 0, 0); a ray along +z through
     # its middle crosses 0.1 m: opacity 1 - exp(-20 * 0.1) = 1 - e^-2 = 0.8647; rgb = 0.8647 red + 0.1353 background
