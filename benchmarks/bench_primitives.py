@@ -40,7 +40,8 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int) -> dict:
         bg = avatar.ray_background(rays)
 
         def run():
-            return march.march(rays.origins, rays.directions, bg, prims, lists, avatar.samples, avatar.cfg.stop_below)
+            return march.march(rays.origins, rays.directions, bg, prims, lists, avatar.samples, avatar.cfg.stop_below,
+                               min_weight=march.DISPLAY_MIN_WEIGHT)
 
         march_s = median_seconds(run)
         looked = []  # the lookups' share of one march: march.lookup timed where the march calls it
