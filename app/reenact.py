@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import signal
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Literal
@@ -48,7 +49,8 @@ class ReenactConfig:
     avatar: Path
     """Avatar folder to drive."""
     video: Path
-    """The performance: a video of one face (any person)."""
+    """The performance: a video of one face (any person), or a capture folder, or another avatar's folder (its
+    capture's frames drive this one: "drive B from A's frames")."""
     out: Path = Path("out/reenact.mp4")
     """The mp4 to write (H.264); the animation goes beside it (OUT.json)."""
     landmarker: Path | None = None
@@ -60,7 +62,8 @@ class ReenactConfig:
     """Height of the video, pixels (each half of a side-by-side video is size x size)."""
     preset: Literal["draft", "preview", "final"] = "preview"
     fps: Annotated[float, Range(0, 1000, above=True)] | None = None
-    """Frames a second taken from the driving video (default: every frame)."""
+    """Frames a second taken from the driving video (default: every frame); a capture's frames play at this rate
+    (default 30)."""
     seconds: Annotated[float, Range(0, 1e6, above=True)] | None = None
     """Use only the driving video's first SECONDS."""
     neutral_frame: Annotated[int, Range(0)] | None = None
@@ -153,6 +156,73 @@ def retarget(controls: list[Controls], times: list[float], driver: HeadModel, av
     return anim, Retarget(n, carried, missing, note)
 
 
+@dataclass
+class Driver:
+    """The performance: its frames' controls, their times (seconds from the first), the rate they play at, the
+    head model they are in, each frame's picture, and what the report says of how they were had."""
+
+    controls: list[Controls]
+    times: list[float]
+    fps: float
+    head: HeadModel
+    head_spec: str
+    picture: Callable[[int], np.ndarray]
+    """Frame k's picture (RGB uint8), for the side-by-side video."""
+    report: dict
+    seconds: float
+
+
+def driver_from_video(cfg: ReenactConfig, head: HeadModel, head_spec: str) -> Driver:
+    t0 = time.perf_counter()
+    tracked = track_video(TrackConfig(cfg.video, cfg.out, head=head_spec, landmarker=cfg.landmarker, fps=cfg.fps,
+                                      seconds=cfg.seconds, size=cfg.size, iterations=cfg.iterations, overlay=False),
+                          head)
+    times = [f["time_s"] - tracked.kept[0]["time_s"] for f in tracked.kept]
+    report = {"frames_read": tracked.read, "landmark_error_px_median": round(float(np.median(tracked.errors)), 3),
+              "crop": {"x0": tracked.crop.x0, "y0": tracked.crop.y0, "side": tracked.crop.side},
+              "source_frames": [f["source_frame"] for f in tracked.kept]}
+    return Driver(tracked.result.controls, times, min(cfg.fps or tracked.info.fps, tracked.info.fps), head, head_spec,
+                  lambda k: tracked.crop.image(tracked.kept[k]["rgb"]), report, time.perf_counter() - t0)
+
+
+def capture_of(folder: Path) -> Path:
+    """A capture folder, or an avatar folder's capture (the one it was trained on, from its provenance)."""
+    if (folder / "avatar.json").is_file():
+        try:
+            prov = json.loads((folder / "avatar.json").read_text()).get("provenance", {})
+        except (OSError, json.JSONDecodeError, AttributeError):
+            raise UserInputError(f"{folder / 'avatar.json'}: not readable as JSON") from None
+        for dataset in (prov.get("dataset_resolved"), prov.get("dataset")):
+            if dataset and Path(dataset).is_dir():
+                return Path(dataset)
+        raise UserInputError(f"{folder}: the capture this avatar was trained on is not on this machine; give the "
+                             "capture folder (or a video) instead")
+    return folder
+
+
+def driver_from_capture(cfg: ReenactConfig, avatar_head: HeadModel, avatar_spec: str) -> Driver:
+    """Another person's capture (or an avatar's, "drive B from A's frames"): its frames' controls as they are,
+    played at --fps (default 30), the first --seconds of them."""
+    from models.capture.dataset import load_split
+    from models.capture.frames import load_rgb
+
+    t0 = time.perf_counter()
+    folder = capture_of(cfg.video)
+    split = load_split(folder, "train")
+    if split.head_model is None:
+        raise UserInputError(f"{folder}: a capture without a head model (NerFACE's) cannot drive an avatar")
+    fps = cfg.fps or 30.0
+    frames = [f for k, f in enumerate(split.frames) if not cfg.seconds or k / fps < cfg.seconds]
+    if not frames:
+        raise UserInputError(f"{folder}: no frames in its train split")
+    head = avatar_head if split.head_model == avatar_spec else load_head(split.head_model)
+    background = np.asarray(split.background, np.float32) if not isinstance(split.background, Path) else \
+        np.zeros(3, np.float32)
+    return Driver([f.controls for f in frames], [k / fps for k in range(len(frames))], fps, head, split.head_model,
+                  lambda k: (np.clip(load_rgb(frames[k].image_path, background), 0, 1) * 255).round().astype(np.uint8),
+                  {"capture": str(folder), "frames_read": len(frames)}, time.perf_counter() - t0)
+
+
 def run_reenact(cfg: ReenactConfig) -> int:
     from app.avatar_commands import animation_frames, guide_mesh_writer
     from models.avatars.registry import load_avatar
@@ -176,25 +246,19 @@ def run_reenact(cfg: ReenactConfig) -> int:
                                  "choose another --out") from None
     avatar, meta = load_avatar(cfg.avatar)
     write_mesh = guide_mesh_writer(avatar, cfg.out, cfg.meshes)
-    driver_spec = cfg.driver_head or meta["head_model"]
-    driver = avatar.head_model if not cfg.driver_head else load_head(cfg.driver_head)
-    t0 = time.perf_counter()
-    tracked = track_video(TrackConfig(cfg.video, cfg.out, head=driver_spec, landmarker=cfg.landmarker, fps=cfg.fps,
-                                      seconds=cfg.seconds, size=cfg.size, iterations=cfg.iterations, overlay=False),
-                          driver)
-    t_track = time.perf_counter() - t0
-    times = [f["time_s"] - tracked.kept[0]["time_s"] for f in tracked.kept]
-    fps = min(cfg.fps or tracked.info.fps, tracked.info.fps)
-    anim, how = retarget(tracked.result.controls, times, driver, avatar.head_model, cfg.neutral_frame, fps)
+    if cfg.video.is_dir():
+        driver = driver_from_capture(cfg, avatar.head_model, meta["head_model"])
+    else:
+        spec = cfg.driver_head or meta["head_model"]
+        driver = driver_from_video(cfg, avatar.head_model if not cfg.driver_head else load_head(spec), spec)
+    anim, how = retarget(driver.controls, driver.times, driver.head, avatar.head_model, cfg.neutral_frame, driver.fps)
     if how.note:
         print(f"reenact: {how.note}", flush=True)
-    print(f"reenact: driver's neutral frame {how.neutral} (source frame {tracked.kept[how.neutral]['source_frame']});"
-          f" {len(how.carried)} expressions carried" + (f", {len(how.missing)} of the driver's have no counterpart"
-                                                        if how.missing else ""), flush=True)
+    print(f"reenact: driver's neutral frame {how.neutral}; {len(how.carried)} expressions carried"
+          + (f", {len(how.missing)} of the driver's have no counterpart" if how.missing else ""), flush=True)
 
     def driver_image(t: float) -> np.ndarray:
-        nearest = int(np.argmin(np.abs(np.asarray(times) - t)))
-        return tracked.crop.image(tracked.kept[nearest]["rgb"])
+        return driver.picture(int(np.argmin(np.abs(np.asarray(driver.times) - t))))
 
     height = cfg.size - cfg.size % 2
     bar = Progress("reenact", anim.frames)
@@ -211,20 +275,20 @@ def run_reenact(cfg: ReenactConfig) -> int:
     n = write_video(frames(), cfg.out, anim.fps, pngs)
     t_render = time.perf_counter() - t1
     save_animation(anim, anim_path)
-    report = {"video": str(cfg.video), "avatar": str(cfg.avatar), "driver_head": driver_spec,
-              "frames_tracked": len(tracked.kept), "frames_read": tracked.read, "frames_written": n,
-              "neutral_frame": how.neutral, "expressions_carried": how.carried,
-              "expressions_missing": how.missing, "note": how.note, "preset": cfg.preset, "size": height,
-              "seconds": {"track": round(t_track, 2), "render": round(t_render, 2)},
-              "seconds_per_frame": {"track": round(t_track / max(tracked.read, 1), 4),
-                                    "render": round(t_render / max(n, 1), 4)},
-              "landmark_error_px_median": round(float(np.median(tracked.errors)), 3),
-              "crop": {"x0": tracked.crop.x0, "y0": tracked.crop.y0, "side": tracked.crop.side},
-              "source_frames": [f["source_frame"] for f in tracked.kept]}
+    read = driver.report["frames_read"]
+    report = {"driver": str(cfg.video), "avatar": str(cfg.avatar), "driver_head": driver.head_spec,
+              "frames_driving": len(driver.controls), "frames_written": n, "neutral_frame": how.neutral,
+              "expressions_carried": how.carried, "expressions_missing": how.missing, "note": how.note,
+              "preset": cfg.preset, "size": height,
+              "seconds": {"track": round(driver.seconds, 2), "render": round(t_render, 2)},
+              "seconds_per_frame": {"track": round(driver.seconds / max(read, 1), 4),
+                                    "render": round(t_render / max(n, 1), 4)}, **driver.report}
     atomic_write_bytes(cfg.out.with_name(cfg.out.stem + "_report.json"), (json.dumps(report, indent=1) + "\n").encode())
+    what = "tracking" if not cfg.video.is_dir() else "reading the capture"
     print(f"wrote {cfg.out} ({n} frames at {anim.fps:g} fps{', driver beside the avatar' if cfg.side_by_side else ''})"
-          f" and its animation {anim_path}; tracking {t_track:.1f} s ({report['seconds_per_frame']['track']:.3f} s a "
-          f"frame), rendering {t_render:.1f} s ({report['seconds_per_frame']['render']:.3f} s a frame, {cfg.preset})")
+          f" and its animation {anim_path}; {what} {driver.seconds:.1f} s "
+          f"({report['seconds_per_frame']['track']:.3f} s a frame), rendering {t_render:.1f} s "
+          f"({report['seconds_per_frame']['render']:.3f} s a frame, {cfg.preset})")
     return 0
 
 

@@ -62,19 +62,20 @@ def start_from_video(jobs: JobQueue, c: StartFromVideo) -> str | None:
 
 
 def start_reenact(jobs: JobQueue, avatar: Path | None, c: StartReenact) -> str | None:
-    """Queue a reenactment of the open avatar by a performance video; or why not."""
+    """Queue a reenactment of the open avatar by a performance (a video, a capture, another avatar's frames); or why
+    not."""
     if avatar is None:
         return "open an avatar to drive first"
     video_path, out_path = Path(c.video), Path(c.out)
-    if not video_path.is_file():
-        return f"{video_path}: no such video file"
-    if not c.landmarker or not Path(c.landmarker).is_file():
+    if not video_path.exists():
+        return f"{video_path}: no such video, capture or avatar folder"
+    if video_path.is_file() and (not c.landmarker or not Path(c.landmarker).is_file()):
         return (f"{c.landmarker or '(none given)'}: MediaPipe's face landmarker bundle is needed "
                 "(face_landmarker_v2_with_blendshapes.task)")
     if out_path.suffix.lower() != ".mp4":
         return f"{out_path}: the performance is written as an .mp4"
-    jobs.submit(avatar, out_path, stage="reenact", video=video_path, landmarker=Path(c.landmarker),
-                track_size=c.size, seconds=c.seconds)
+    jobs.submit(avatar, out_path, stage="reenact", video=video_path,
+                landmarker=Path(c.landmarker) if c.landmarker else None, track_size=c.size, seconds=c.seconds)
     return None
 
 
@@ -128,8 +129,10 @@ def draw(ctx: PanelContext) -> None:
                                max(f.minutes, 0.1)))
         imgui.same_line()
         imgui.text_disabled("(avatar folder, effects and minutes from above)")
-    if imgui.collapsing_header("Drive the open avatar from a performance video"):
+    if imgui.collapsing_header("Drive the open avatar from a performance"):
         _, f.performance = imgui.input_text("performance", f.performance)
+        if imgui.is_item_hovered():
+            imgui.set_tooltip("a video of a face, a capture folder, or another avatar's folder (its capture's frames)")
         _, f.reenact_out = imgui.input_text("mp4##reenact", f.reenact_out)
         _, f.landmarker = imgui.input_text("landmarker (.task)##reenact", f.landmarker)
         if imgui.button("Reenact"):

@@ -166,3 +166,44 @@ def test_cancel_leaves_no_video(tmp_path, face_video, landmarker):
     rest = proc.communicate(timeout=120)[0]
     assert proc.returncode == 130, rest
     assert list(tmp_path.iterdir()) == []
+
+
+def test_drive_an_avatar_from_another_persons_frames(tmp_path, synth_capture, capsys):
+    """"Drive B from A's frames": a capture (or the avatar folder trained on it) drives the demo; each frame's
+    expression is the capture frame's less its calmest frame's, and the video's left half is the capture's image."""
+    from app.animation import load_animation
+    from app.cli import main
+    from app.reenact import capture_of
+    from models.capture.dataset import load_split
+    from models.capture.frames import load_rgb
+
+    capture = synth_capture("sun", 12, 32)
+    out = tmp_path / "ab.mp4"
+    assert main(["reenact", str(DEMO), str(capture), "--out", str(out), "--size", "32", "--fps", "10"]) == 0
+    assert "reading the capture" in capsys.readouterr().out
+    split = load_split(capture, "train")
+    anim = load_animation(tmp_path / "ab.json")
+    n = calmest_frame([f.controls for f in split.frames])
+    head = load_split(capture, "train").head_model
+    assert head == "builtin"
+    names = ("smile_L", "blink_R", "browRaise_L")
+    from models.head.sources import load_builtin
+
+    index = {name: load_builtin().expression_index(name) for name in names}
+    for k, f in enumerate(split.frames):
+        for name in names:
+            want = float(np.clip(f.controls.expression[index[name]] - split.frames[n].controls.expression[index[name]],
+                                 -1.0, 1.5))
+            assert anim.value(f"expression.{name}", k / 10) == pytest.approx(want, abs=1e-5)
+    video = decoded(out)
+    assert len(video) == len(split.frames) == anim.frames
+    truth = (np.clip(load_rgb(split.frames[3].image_path, np.asarray(split.background, np.float32)), 0, 1) * 255)
+    assert psnr(video[3][:, :32], truth.round().astype(np.uint8)) > 25
+    # an avatar folder stands for the capture it was trained on, where that is on this machine
+    folder = tmp_path / "anna"
+    folder.mkdir()
+    (folder / "avatar.json").write_text(json.dumps({"provenance": {"dataset": str(capture)}}))
+    assert capture_of(folder) == capture
+    (folder / "avatar.json").write_text(json.dumps({"provenance": {"dataset": str(tmp_path / "gone")}}))
+    assert main(["reenact", str(DEMO), str(folder), "--out", str(tmp_path / "x.mp4")]) == 2
+    assert "not on this machine" in capsys.readouterr().err

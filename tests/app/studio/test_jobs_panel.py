@@ -31,6 +31,8 @@ def test_a_reenactment_is_refused_with_its_reason_and_runs_the_reenact_command(t
         "video": str(video), "landmarker": str(bundle), "out": str(tmp_path / "o.mp4"), **kw}))
     assert ask(avatar=None) == "open an avatar to drive first"
     assert "no such video" in ask(video=str(tmp_path / "none.mp4"))
+    assert ask(video=str(tmp_path), landmarker="", out=str(tmp_path / "f.mp4")) is None  # a folder: no landmarker
+    jobs.jobs.clear()
     assert "landmarker" in ask(landmarker="")
     assert ask(out=str(tmp_path / "o.gif")).endswith("written as an .mp4")
     assert jobs.jobs == []
