@@ -20,7 +20,7 @@ from app.turntable import INSPECT, TurntableConfig, buffer_image, turntable_fram
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
 from models.capture.dataset import check_images, load_split
-from models.capture.frames import camera_of, load_rgb
+from models.capture.frames import background_plate, camera_of, load_rgb
 from models.capture.synthetic import read_png16
 from models.device import device_of
 from models.files import FolderBusy, WriterLock, atomic_write_bytes, foreign_files
@@ -324,8 +324,12 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
         raise UserInputError(f"{cfg.scan}: its head model is {split.head_model!r}, the prior's {meta['head_model']!r}")
     gl = GLContext.headless()
     t0 = time.perf_counter()
+    plate = background_plate(split)  # a tracked video's room: composited behind the person, as `train` does
     with torch.no_grad():
-        avatar.background.copy_(torch.as_tensor(np.asarray(split.background, np.float32)))
+        bg = split.background if plate is None else plate[0].reshape(-1, 3).mean(0)
+        avatar.background.copy_(torch.as_tensor(np.asarray(bg, np.float32)))
+        if plate is not None:
+            avatar.set_plate(*plate)
         shape = split.frames[0].controls.shape
         avatar.personalize(neutral_texture(split, avatar, gl), avatar.neutral_geometry_of(shape))
     if cfg.tune == "decoder":
