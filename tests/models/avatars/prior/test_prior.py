@@ -245,3 +245,27 @@ def test_one_persons_expression_drives_another(gl):
     forehead = change[box(brow - [0, 10], 2)].mean()
     # measured on the shipped prior: 0.011 about the lips (the box holds cheek and chin too), 1e-5 on the forehead
     assert near_mouth > 0.005 and near_mouth > 20 * forehead, (near_mouth, forehead)
+
+
+def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker, capsys):
+    """A second of a real video tracked with the built-in head is a scan: personalize composites the person over
+    the video's room (the plate, as `train` does), and the avatar renders the capture camera's view over it."""
+    from app.cli import main
+    from models.avatars.registry import load_avatar
+    from models.capture.dataset import load_split
+    from models.capture.frames import camera_of
+
+    if not (PRIOR / "avatar.json").is_file():
+        pytest.skip(f"no shipped prior at {PRIOR}")
+    scan, out = tmp_path / "scan", tmp_path / "me"
+    assert main(["track", str(face_video), "--out", str(scan), "--size", "64", "--seconds", "1",
+                 "--landmarker", str(landmarker), "--no-overlay"]) == 0
+    assert main(["personalize", str(scan), "--prior", str(PRIOR), "--out", str(out), "--steps", "2"]) == 0
+    avatar, _ = load_avatar(out)
+    split = load_split(scan, "test")
+    camera = camera_of(split, split.frames[0].camera_to_world)
+    plate = avatar.plate_for(camera)
+    assert plate is not None  # the room was kept with the weights
+    image = avatar.render_image(split.frames[0].controls, camera, None)["rgb"]
+    corner = image[:4, :4].reshape(-1, 3)  # no person up there: the room shows as the plate has it
+    np.testing.assert_allclose(corner, plate.reshape(64, 64, 3)[:4, :4].reshape(-1, 3).numpy(), atol=0.02)
