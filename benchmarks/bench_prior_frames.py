@@ -1,0 +1,83 @@
+"""How few frames a scan may have (paper 002, Fig. 14): a held-out person's scan cut to its first 1, 3, 9, 33
+training frames (the same test frames for all), the prior personalised on each and a primitives avatar trained
+from scratch on each, the same minutes; held-out PSNR against the frames the scan had. One run at a time, nothing
+else running.
+
+    .venv/bin/python -m benchmarks.bench_prior_frames --prior resources/prior --scan out/scan1000 \
+        [--frames 1 3 9 33] [--minutes 3] [--out benchmarks/results/prior_frames.json]
+
+The scan as for benchmarks/bench_prior.py (`synth --identity 1000 --frames 60 --size 128 --scene ambient`). Writes
+the JSON and a chart beside it (PNG)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.bench_prior import REPO, evaluate, run
+
+
+def scan_with(scan: Path, frames: int, out: Path) -> Path:
+    """The scan with only `frames` of its training frames (spread evenly over them, the first among them), copied
+    (a capture's files must lie inside its folder: links out of it are refused)."""
+    shutil.copytree(scan, out)
+    train = json.loads((scan / "transforms_train.json").read_text())
+    keep = np.unique(np.linspace(0, len(train["frames"]) - 1, frames).round().astype(int))
+    train["frames"] = [train["frames"][k] for k in keep]
+    (out / "transforms_train.json").write_text(json.dumps(train))
+    return out
+
+
+def chart(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for key, label, colour in (("prior", "prior, personalised", "tab:green"),
+                               ("scratch", "primitives from scratch", "tab:red")):
+        rows = results[key]
+        ax.plot([r["frames"] for r in rows], [r["psnr"] for r in rows], "o-", color=colour, label=label)
+    ax.set_xscale("log")
+    ax.set_xticks(results["frames"], [str(f) for f in results["frames"]])
+    ax.set_xlabel(f"training frames in the scan ({results['minutes']:g} minutes of training each, 2 CPU cores)")
+    ax.set_ylabel("held-out PSNR (dB)")
+    ax.set_title("A held-out person from few frames: what the prior buys", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--prior", type=Path, default=REPO / "resources" / "prior")
+    p.add_argument("--scan", type=Path, required=True)
+    p.add_argument("--frames", type=int, nargs="+", default=[1, 3, 9, 33])
+    p.add_argument("--minutes", type=float, default=3.0)
+    p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "prior_frames.json")
+    a = p.parse_args()
+    results: dict = {"scan": str(a.scan), "frames": a.frames, "minutes": a.minutes, "prior": [], "scratch": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in a.frames:
+            scan = scan_with(a.scan, n, Path(tmp) / f"scan_{n}")
+            for key, args in (("prior", ["personalize", str(scan), "--prior", str(a.prior)]),
+                              ("scratch", ["train", str(scan), "--model", "primitives", "--effects", "none"])):
+                out = Path(tmp) / f"{key}_{n}"
+                seconds = run([*args, "--out", str(out), "--minutes", str(a.minutes)])
+                results[key].append({"frames": n, "seconds": round(seconds, 1), **evaluate(out, a.scan, None)})
+                print(key, results[key][-1], flush=True)
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    a.out.write_text(json.dumps(results, indent=1))
+    chart(results, a.out.with_suffix(".png"))
+    print(f"wrote {a.out} and {a.out.with_suffix('.png')}")
+
+
+if __name__ == "__main__":
+    main()
