@@ -167,17 +167,24 @@ def check_channels(anim: Animation, head: HeadModel, where: str) -> None:
             raise AnimationError(f"{where}: {e}") from None
 
 
-def load_animation(path: str | Path) -> Animation:
-    """An animation file, checked: AnimationError naming the file and the first problem."""
-    path = Path(path)
+def read_format_file(path: Path, fmt: str, kind: str, error: type[Exception], after: str = "") -> dict:
+    """A JSON file of the studio's own (its "format" key is fmt), read; `error` naming the file and what is wrong
+    with it (a file it cannot read, not JSON, not a KIND), with `after` added (what follows for the user)."""
     try:
         data = json.loads(path.read_text())
     except OSError as e:
-        raise AnimationError(f"{path}: cannot read it ({e.strerror})") from None
+        raise error(f"{path}: cannot read it ({e.strerror}){after}") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise AnimationError(f"{path}: not JSON ({e})") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise AnimationError(f"{path}: not an animation (\"format\": \"{FORMAT}\" is missing)")
+        raise error(f"{path}: not JSON ({e}){after}") from None
+    if not isinstance(data, dict) or data.get("format") != fmt:
+        raise error(f"{path}: not {kind} (\"format\": \"{fmt}\" is missing){after}")
+    return data
+
+
+def load_animation(path: str | Path) -> Animation:
+    """An animation file, checked: AnimationError naming the file and the first problem."""
+    path = Path(path)
+    data = read_format_file(path, FORMAT, "an animation", AnimationError)
     try:
         fps, duration = float(data.get("fps", 30.0)), float(data["duration_s"])
         interp = data.get("interpolation", "smooth")

@@ -43,7 +43,10 @@ def evaluate(avatar: Path, scan: Path, round_views: Path | None) -> dict:
     return row
 
 
-def chart(results: dict, path: Path) -> None:
+def chart(results: dict, path: Path, x: str = "minutes", xlabel: str = "minutes of training on the scan (2 CPU cores)",
+          title: str | None = None) -> None:
+    """The prior's and the from-scratch avatars' held-out PSNR against `x` (minutes, or a scan's frames: a log axis
+    at the values measured), and where measured from cameras all round the head."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -53,13 +56,17 @@ def chart(results: dict, path: Path) -> None:
     for key, label, colour in (("prior", "prior, personalised", "tab:green"), ("scratch", "primitives from scratch",
                                                                                   "tab:red")):
         rows = results[key]
-        ax.plot([r["minutes"] for r in rows], [r["psnr"] for r in rows], "o-", color=colour, label=label)
+        ax.plot([r[x] for r in rows], [r["psnr"] for r in rows], "o-", color=colour, label=label)
         if rows and "round_psnr" in rows[0]:
-            ax.plot([r["minutes"] for r in rows], [r["round_psnr"] for r in rows], "s--", color=colour,
+            ax.plot([r[x] for r in rows], [r["round_psnr"] for r in rows], "s--", color=colour,
                     label=label + ": cameras all round")
-    ax.set_xlabel("minutes of training on the scan (2 CPU cores)")
+    if x == "frames":
+        ax.set_xscale("log")
+        ax.set_xticks(results["frames"], [str(f) for f in results["frames"]])
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("held-out PSNR (dB)")
-    ax.set_title(f"A held-out person ({results['scan_frames']} scan frames): what the prior buys", fontsize=10)
+    ax.set_title(title or f"A held-out person ({results['scan_frames']} scan frames): what the prior buys",
+                 fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench_prior import REPO, evaluate, run
+from benchmarks.bench_prior import REPO, chart, evaluate, run
 
 
 def scan_with(scan: Path, frames: int, out: Path) -> Path:
@@ -33,26 +33,10 @@ def scan_with(scan: Path, frames: int, out: Path) -> Path:
     return out
 
 
-def chart(results: dict, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for key, label, colour in (("prior", "prior, personalised", "tab:green"),
-                               ("scratch", "primitives from scratch", "tab:red")):
-        rows = results[key]
-        ax.plot([r["frames"] for r in rows], [r["psnr"] for r in rows], "o-", color=colour, label=label)
-    ax.set_xscale("log")
-    ax.set_xticks(results["frames"], [str(f) for f in results["frames"]])
-    ax.set_xlabel(f"training frames in the scan ({results['minutes']:g} minutes of training each, 2 CPU cores)")
-    ax.set_ylabel("held-out PSNR (dB)")
-    ax.set_title("A held-out person from few frames: what the prior buys", fontsize=10)
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+def frames_chart(results: dict, path: Path) -> None:
+    chart(results, path, "frames",
+          f"training frames in the scan ({results['minutes']:g} minutes of training each, 2 CPU cores)",
+          "A held-out person from few frames: what the prior buys")
 
 
 def main() -> None:
@@ -75,7 +59,7 @@ def main() -> None:
                 print(key, results[key][-1], flush=True)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(results, indent=1))
-    chart(results, a.out.with_suffix(".png"))
+    frames_chart(results, a.out.with_suffix(".png"))
     print(f"wrote {a.out} and {a.out.with_suffix('.png')}")
 
 

@@ -15,7 +15,7 @@ import json
 import math
 from pathlib import Path
 
-from app.animation import all_channels, channel_value, set_channel
+from app.animation import all_channels, channel_value, read_format_file, set_channel
 from models.files import atomic_write_bytes
 from models.head.model import HeadModel
 
@@ -31,15 +31,10 @@ def read_poses(path: Path = POSES_FILE) -> dict[str, dict[str, dict[str, float]]
     """Every avatar's poses: folder -> name -> channel -> value (nothing where there is no file yet)."""
     if not path.exists():
         return {}
-    try:
-        data = json.loads(path.read_text())
-    except OSError as e:
-        raise PosesError(f"{path}: cannot read it ({e.strerror})") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise PosesError(f"{path}: not JSON ({e}); poses are not saved until it is fixed or moved away") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("avatars"), dict):
-        raise PosesError(f"{path}: not a poses file (\"format\": \"{FORMAT}\" is missing); poses are not saved until "
-                         "it is fixed or moved away")
+    after = "; poses are not saved until it is fixed or moved away"
+    data = read_format_file(path, FORMAT, "a poses file", PosesError, after)
+    if not isinstance(data.get("avatars"), dict):
+        raise PosesError(f"{path}: its \"avatars\" is not an object{after}")
     out: dict[str, dict[str, dict[str, float]]] = {}
     for folder, poses in data["avatars"].items():
         if not isinstance(poses, dict):
