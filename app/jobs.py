@@ -50,6 +50,8 @@ class Job:
     progress: list[dict] = field(default_factory=list)
     proc: subprocess.Popen | None = None
     _read_bytes: int = 0
+    _log_bytes: int = -1
+    _frames_done: float = 0.0
 
     @property
     def log_path(self) -> Path:
@@ -99,8 +101,17 @@ class Job:
     def fraction(self) -> float:
         """Share of the budget spent, from the last progress record (a reenactment: of the frames rendered)."""
         if self.stage == "reenact":
-            done = re.findall(r"reenact: (\d+)/(\d+) frames", JobQueue.log_text(self))
-            return 1.0 if self.state == "done" else int(done[-1][0]) / int(done[-1][1]) if done else 0.0
+            if self.state == "done":
+                return 1.0
+            try:  # the panel asks every frame: the log is read again only when it has grown
+                size = self.log_path.stat().st_size
+            except OSError:
+                return 0.0
+            if size != self._log_bytes:
+                self._log_bytes = size
+                done = re.findall(r"reenact: (\d+)/(\d+) frames", JobQueue.log_text(self))
+                self._frames_done = int(done[-1][0]) / int(done[-1][1]) if done else 0.0
+            return self._frames_done
         if not self.progress:
             return 0.0
         last = self.progress[-1]

@@ -5,6 +5,7 @@ state and conversions, no GL, no imgui; panels change it only through app/studio
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import math
 from dataclasses import dataclass, field
@@ -174,6 +175,7 @@ EXPRESSION_GROUPS = {"brows": ("brow",), "eyes": ("eye", "blink", "squint"),
                      "cheeks and nose": ("cheek", "nose", "sneer")}
 
 
+@functools.lru_cache(maxsize=8)
 def expression_groups(head) -> dict[str, list[int]]:
     """The head model's expressions by the part of the face their names say they move (the first group whose word
     a name holds; the rest under "other"); unnamed expressions (FLAME's) are one group.
@@ -182,7 +184,7 @@ def expression_groups(head) -> dict[str, list[int]]:
     >>> g = expression_groups(load_builtin()); [load_builtin().expr_names[i] for i in g["brows"]]
     ['browRaise_L', 'browRaise_R', 'browDown_L', 'browDown_R']
     """
-    groups: dict[str, list[int]] = {}
+    groups: dict[str, list[int]] = {}  # (the Controls panel asks every frame: one head's answer is kept)
     for i in range(head.num_expression):
         name = head.expr_names[i].lower() if i < len(head.expr_names) else ""
         group = next((g for g, words in EXPRESSION_GROUPS.items() if any(w in name for w in words)),
