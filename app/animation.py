@@ -36,6 +36,9 @@ if TYPE_CHECKING:  # the studio's session holds an Animation: its types are name
 FORMAT = "avatar-studio/animation/1"
 POSE_CHANNELS = {f"{group}.{axis}": (group, k) for group in ("head", "neck")
                  for k, axis in enumerate(("yaw", "pitch", "roll"))}
+SLIDER_RANGES = {"expression": (-1.0, 1.5), "jaw.open": (-5.0, 30.0), "gaze": (-30.0, 30.0), "head": (-60.0, 60.0),
+                 "neck": (-45.0, 45.0)}
+"""The Controls panel's slider ranges (expression weights; degrees)."""
 OTHER_CHANNELS = ("jaw.open", "gaze.yaw", "gaze.pitch", "camera.yaw", "camera.pitch", "camera.zoom", "camera.fov")
 
 

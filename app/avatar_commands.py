@@ -245,10 +245,7 @@ def run_turntable(cfg: TurntableConfig) -> int:
     if cfg.out.suffix.lower() != ".mp4":
         raise UserInputError(f"{cfg.out}: the turntable is written as an .mp4")
     gl = GLContext.headless()
-    pngs = cfg.out.with_suffix("") if cfg.pngs else None
-    if pngs is not None and (pngs.is_file() or foreign_files(pngs, r"frame_\d{4}\.png")):
-        raise UserInputError(f"{pngs}: the turntable's PNG frames go there, and it holds other files; choose another "
-                             "--out or pass --no-pngs")
+    pngs = frames_folder(cfg.out, cfg.pngs, "turntable")
     t0 = time.perf_counter()
     bar = Progress("turntable", cfg.frames)
     n = write_video(turntable_frames(avatar, Rasterizer(gl), cfg, on_frame=lambda k: bar.update(k + 1)), cfg.out,
@@ -389,6 +386,16 @@ def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, o
             on_frame(k)
 
 
+def frames_folder(out: Path, wanted: bool, what: str) -> Path | None:
+    """Where a video's PNG frames go (the mp4's name without its suffix), or None; a folder that holds other files
+    is refused before any work."""
+    pngs = out.with_suffix("") if wanted else None
+    if pngs is not None and (pngs.is_file() or foreign_files(pngs, r"frame_\d{4}\.png")):
+        raise UserInputError(f"{pngs}: the {what}'s PNG frames go there, and it holds other files; choose another "
+                             "--out or pass --no-pngs")
+    return pngs
+
+
 def guide_mesh_writer(avatar, out: Path, kind: str):
     """on_pose(k, controls) for animation_frames: the posed guide mesh of frame k to OUT_meshes/frame_K.obj|ply
     (nothing for kind "none"); a folder that holds other files is refused first."""
@@ -420,10 +427,7 @@ def run_animate(cfg: AnimateConfig) -> int:
         raise UserInputError(str(e)) from None
     if cfg.out.suffix.lower() != ".mp4":
         raise UserInputError(f"{cfg.out}: the animation is written as an .mp4")
-    pngs = cfg.out.with_suffix("") if cfg.pngs else None
-    if pngs is not None and (pngs.is_file() or foreign_files(pngs, r"frame_\d{4}\.png")):
-        raise UserInputError(f"{pngs}: the animation's PNG frames go there, and it holds other files; choose another "
-                             "--out or pass --no-pngs")
+    pngs = frames_folder(cfg.out, cfg.pngs, "animation")
     write_mesh = guide_mesh_writer(avatar, cfg.out, cfg.meshes)
 
     gl = GLContext.headless()

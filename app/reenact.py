@@ -28,7 +28,7 @@ from typing import Annotated, Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from app.animation import Animation, AnimationError, load_animation, save_animation
+from app.animation import SLIDER_RANGES, Animation, AnimationError, load_animation, save_animation
 from app.errors import UserInputError
 from app.progress import Progress
 from app.track import TrackConfig, track_video
@@ -38,10 +38,9 @@ from models.head.model import HeadModel
 from models.head.sources import load_head
 from models.ranges import Range
 
-EXPRESSION_RANGE = (-1.0, 1.5)
-"""The Controls panel's expression slider range: carried values are kept inside it."""
-JAW_RANGE_DEG = (-5.0, 30.0)
-GAZE_RANGE_DEG = (-30.0, 30.0)
+EXPRESSION_RANGE, JAW_RANGE_DEG = SLIDER_RANGES["expression"], SLIDER_RANGES["jaw.open"]
+GAZE_RANGE_DEG = SLIDER_RANGES["gaze"]
+"""Carried values are kept inside the Controls panel's slider ranges."""
 
 
 @dataclass(frozen=True)
@@ -224,9 +223,8 @@ def driver_from_capture(cfg: ReenactConfig, avatar_head: HeadModel, avatar_spec:
 
 
 def run_reenact(cfg: ReenactConfig) -> int:
-    from app.avatar_commands import animation_frames, guide_mesh_writer
+    from app.avatar_commands import animation_frames, frames_folder, guide_mesh_writer
     from models.avatars.registry import load_avatar
-    from models.files import foreign_files
     from render.gl.context import GLContext
     from render.gl.raster import Rasterizer
     from render.video import write_video
@@ -234,9 +232,7 @@ def run_reenact(cfg: ReenactConfig) -> int:
     if cfg.out.suffix.lower() != ".mp4":
         raise UserInputError(f"{cfg.out}: the performance is written as an .mp4")
     signal.signal(signal.SIGTERM, interrupted)  # the studio's Cancel: as Ctrl-C, no partial mp4 is left
-    pngs = cfg.out.with_suffix("") if cfg.pngs else None
-    if pngs is not None and (pngs.is_file() or foreign_files(pngs, r"frame_\d{4}\.png")):
-        raise UserInputError(f"{pngs}: the PNG frames go there, and it holds other files; choose another --out")
+    pngs = frames_folder(cfg.out, cfg.pngs, "performance")
     anim_path = cfg.out.with_suffix(".json")
     if anim_path.exists():
         try:

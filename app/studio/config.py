@@ -30,5 +30,5 @@ class StudioConfig:
     render needs (measured by benchmarks/bench_studio.py: slider to first pixels against the frame rate)."""
     rendering_window_share: float = 0.5
     """While the neural render works, the window's frames take at most this share of one core (its own CPU time
-    per frame, measured as it runs: a large window on a software GL draws fewer frames, a GPU's window keeps
-    rendering_fps_cap), and never fewer than 8 frames a second."""
+    per frame, measured as it runs: a large window on a software GL draws fewer frames; a window whose frames cost
+    under 25 ms of CPU keeps rendering_fps_cap), and never fewer than 8 frames a second."""

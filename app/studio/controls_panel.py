@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from imgui_bundle import imgui
 
+from app.animation import SLIDER_RANGES
 from app.studio import actions as a
 from app.studio.context import PanelContext
 from app.studio.session import expression_groups
@@ -108,7 +109,7 @@ def draw(ctx: PanelContext) -> None:
             name = head.expr_names[i] if i < len(head.expr_names) else f"expression {i}"
             if needle and needle not in name.lower():
                 continue
-            c, v = imgui.slider_float(name, float(sl.expression[i]), -1.0, 1.5, "%.2f")
+            c, v = imgui.slider_float(name, float(sl.expression[i]), *SLIDER_RANGES["expression"], "%.2f")
             if c:
                 act(a.SetExpression(i, v))
     if imgui.collapsing_header("Head and neck", imgui.TreeNodeFlags_.default_open):
@@ -121,13 +122,15 @@ def draw(ctx: PanelContext) -> None:
             imgui.same_line()
             if imgui.small_button("neck##reset"):
                 act(a.ResetGroup("neck"))
-        if (moved := _angles("head", sl.head, ("head yaw", "head pitch", "head roll"), 60)) is not None:
+        if (moved := _angles("head", sl.head, ("head yaw", "head pitch", "head roll"),
+                            SLIDER_RANGES["head"][1])) is not None:
             act(a.SetAngles("head", moved))
         if "neck" in head.joint_names and (
-                moved := _angles("neck", sl.neck, ("neck yaw", "neck pitch", "neck roll"), 45)) is not None:
+                moved := _angles("neck", sl.neck, ("neck yaw", "neck pitch", "neck roll"),
+                SLIDER_RANGES["neck"][1])) is not None:
             act(a.SetAngles("neck", moved))
     if "jaw" in head.joint_names and imgui.collapsing_header("Jaw", imgui.TreeNodeFlags_.default_open):
-        c, v = imgui.slider_float("jaw open", sl.jaw_open_deg, -5.0, 30.0, "%.1f deg")
+        c, v = imgui.slider_float("jaw open", sl.jaw_open_deg, *SLIDER_RANGES["jaw.open"], "%.1f deg")
         if c:
             act(a.SetJaw(v))
         if imgui.small_button("Reset jaw"):
@@ -137,9 +140,10 @@ def draw(ctx: PanelContext) -> None:
         if c:
             act(a.LinkGaze(linked))
         names = ("gaze yaw", "gaze pitch") if sl.gaze_linked else ("left yaw", "left pitch")
-        if (moved := _angles("gl", sl.gaze_left, names, 30)) is not None:
+        if (moved := _angles("gl", sl.gaze_left, names, SLIDER_RANGES["gaze"][1])) is not None:
             act(a.SetAngles("gaze_left", moved))
-        if not sl.gaze_linked and (moved := _angles("gr", sl.gaze_right, ("right yaw", "right pitch"), 30)) is not None:
+        if not sl.gaze_linked and (moved := _angles("gr", sl.gaze_right, ("right yaw", "right pitch"),
+                                                          SLIDER_RANGES["gaze"][1])) is not None:
             act(a.SetAngles("gaze_right", moved))
         if imgui.button("Reset gaze"):
             act(a.ResetGaze())

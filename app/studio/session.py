@@ -175,18 +175,24 @@ EXPRESSION_GROUPS = {"brows": ("brow",), "eyes": ("eye", "blink", "squint"),
                      "cheeks and nose": ("cheek", "nose", "sneer")}
 
 
-@functools.lru_cache(maxsize=8)
 def expression_groups(head) -> dict[str, list[int]]:
     """The head model's expressions by the part of the face their names say they move (the first group whose word
     a name holds; the rest under "other"); unnamed expressions (FLAME's) are one group.
 
-    >>> from models.head.builtin import load_builtin
+    >>> from models.head.sources import load_builtin
     >>> g = expression_groups(load_builtin()); [load_builtin().expr_names[i] for i in g["brows"]]
     ['browRaise_L', 'browRaise_R', 'browDown_L', 'browDown_R']
     """
-    groups: dict[str, list[int]] = {}  # (the Controls panel asks every frame: one head's answer is kept)
-    for i in range(head.num_expression):
-        name = head.expr_names[i].lower() if i < len(head.expr_names) else ""
+    return _groups_of_names(tuple(head.expr_names), head.num_expression)
+
+
+@functools.lru_cache(maxsize=8)
+def _groups_of_names(names: tuple[str, ...], count: int) -> dict[str, list[int]]:
+    """expression_groups by the names alone: the Controls panel asks every frame, and the answer is kept without
+    keeping a head model (and its bases) alive."""
+    groups: dict[str, list[int]] = {}
+    for i in range(count):
+        name = names[i].lower() if i < len(names) else ""
         group = next((g for g, words in EXPRESSION_GROUPS.items() if any(w in name for w in words)),
                      "other" if name else "expression")
         groups.setdefault(group, []).append(i)

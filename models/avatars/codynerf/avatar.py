@@ -277,7 +277,8 @@ class CoDyNeRFAvatar(Avatar):
         def at(points: torch.Tensor, colour: bool) -> torch.Tensor:
             points = points.to(geo.posed.device)
             near, prior = prior_within(points, geo.meshes, rc.shell_m, rc.prior_falloff_m, geo.tree)
-            out = self.field.geometry(points[near], prior, omega)
+            # the density alone needs no normals: the mesh's stand in, and no gradient is taken
+            out = self.field.geometry(points[near], prior, omega, mesh_normals=not colour)
             if not colour:
                 return torch.zeros(len(points), device=points.device).index_copy(
                     0, near, out.sigma.detach() * self.support(prior.distance))
