@@ -317,7 +317,7 @@ def write_frames(cfg: TrackConfig, partial: Path, kept: list[dict], crops: list[
     n_test = max(1, math.ceil(cfg.test_fraction * len(kept)))
     train = [j for j in range(len(kept)) if split_of(j, len(kept), n_test) == "train"]
     plate, inpainted = background_plate([crops[j] for j in train], [masks[j] for j in train],
-                                        grow_px=max(2, round(0.03 * cfg.size)))
+                                        grow_px=max(1, round(0.01 * cfg.size)))
     write_png8(partial / "background.png", plate / 255.0)
     plate_report = {"file": "background.png", "inpainted_share": round(inpainted, 4),
                     "frames": len(train)}

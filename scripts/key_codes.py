@@ -1,6 +1,7 @@
 """Give an avatar trained on a tracked video before held-out frames took the nearest training frames' codes
-(models/avatars/components/codes.py) the keys that rule needs, from its capture's training frames, into a new
-folder (the avatar's own folder is left as it is).
+(models/avatars/components/codes.py) the keys that rule needs, and one trained before new views were held to its
+capture's (models/avatars/components/views.py) that cone, from its capture's training frames, into a new folder
+(the avatar's own folder is left as it is).
 
     .venv/bin/python scripts/key_codes.py AVATAR DATASET OUT
 """
@@ -15,6 +16,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from models.avatars.checkpoint import save_checkpoint
 from models.avatars.registry import load_avatar
 from models.capture.dataset import load_split
+from models.training.data import build_frames
+from render.gl.context import GLContext
 
 
 def main() -> int:
@@ -26,11 +29,13 @@ def main() -> int:
         print(f"{out}: exists; choose a new folder", file=sys.stderr)
         return 2
     avatar, meta = load_avatar(avatar_dir)
-    frames = load_split(dataset, "train").frames
+    split = load_split(dataset, "train")
+    frames = split.frames
     if len(frames) != int(meta["frames"]):
         print(f"{dataset}: {len(frames)} training frames, not the avatar's {meta['frames']}", file=sys.stderr)
         return 2
     avatar.key_codes([f.controls for f in frames])
+    avatar.note_views(build_frames(split, avatar, GLContext.headless()))
     save_checkpoint(out, meta, avatar.state_dict(), int(meta.get("step", 1)))
     print(f"wrote {out}")
     return 0

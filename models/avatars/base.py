@@ -23,6 +23,7 @@ import torch
 from torch import nn
 
 from models.avatars.components.codes import KEY_SCALE_FLOOR, control_key, nearest_code_weights
+from models.avatars.components.views import into_cone, view_cone
 from models.avatars.mesh import MeshField
 from models.avatars.quality import BUILTIN_PRESETS, Preset, Quality
 from models.head.controls import Controls
@@ -159,6 +160,45 @@ class Avatar(nn.Module, ABC):
         """What each ray sees behind the avatar: the plate's pixel where the rays carry one, else the colour."""
         return self.background if rays.background is None else rays.background
 
+    # ---- the views its capture saw (components/views.py) ----------------------------------------------
+    def capture_views(self, frames: Any) -> torch.Tensor | None:
+        """(N,3) the view directions a model that reads one a frame was trained on (towards the camera, in the
+        frame it reads them), for the cone new views are held to (seen_view); None: no cone."""
+        del frames
+        return None
+
+    def note_views(self, frames: Any) -> None:
+        """Remember (with the weights) where the capture's camera stood if it stood still (a tracked video:
+        towards_capture_camera) and the cone of capture_views."""
+        device = self.background.device
+        origins = frames.origins
+        if len(origins) and float((origins - origins[0]).norm(dim=-1).max()) < 1e-4:
+            self.register_buffer("capture_eye", origins[0].float().clone().to(device))
+        views = self.capture_views(frames)
+        cone = None if views is None else view_cone(views)
+        if cone is not None:
+            self.register_buffer("view_axis", cone[0].to(device))
+            self.register_buffer("view_cos", torch.tensor(cone[1], dtype=torch.float32, device=device))
+
+    def seen_view(self, towards: torch.Tensor) -> torch.Tensor:
+        """(N,3) view directions (towards the camera), held to the capture's cone where the avatar has one."""
+        axis = getattr(self, "view_axis", None)
+        return towards if axis is None else into_cone(towards, axis, float(self.view_cos))
+
+    def towards_capture_camera(self, points: torch.Tensor) -> torch.Tensor | None:
+        """(P,3) unit directions from world points to the capture's camera where it stood still, else None.
+
+        One fixed camera saw every point of the head from one direction only, the way to that camera (the head
+        turned, the camera did not): a colour network that reads the view learnt it there and nowhere else. So
+        on such a capture the view it reads is that direction whatever camera renders: along the capture
+        camera's own rays it is the ray's direction reversed (the same input as before), and a turntable or
+        an orbit of the studio's camera no longer asks it for views it never saw (components/views.py)."""
+        eye = getattr(self, "capture_eye", None)
+        if eye is None:
+            return None
+        v = eye.to(points) - points
+        return v / v.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+
     # ---- codes for new controls ------------------------------------------------------------------------
     def key_codes(self, controls: list[Controls]) -> None:
         """Let new controls take the codes of the training frames (in order) whose controls are nearest
@@ -180,7 +220,7 @@ class Avatar(nn.Module, ABC):
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
         """Weights with a plate or code keys give the avatar those buffers (of their size) before they are read."""
-        for name in ("plate", "plate_camera", "code_keys", "code_key_scale"):
+        for name in ("plate", "plate_camera", "code_keys", "code_key_scale", "view_axis", "view_cos", "capture_eye"):
             if prefix + name in state_dict:
                 self.register_buffer(name, torch.empty_like(state_dict[prefix + name]))
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)

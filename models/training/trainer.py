@@ -114,6 +114,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
         # sliders take the nearest training frames' (components/codes.py). Synthetic captures keep the mean code.
         avatar.key_codes([f.controls for f in split.frames])
     frames = build_frames(split, avatar, gl)
+    avatar.note_views(frames)
     validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
     return Trainer(cfg, avatar, frames, validation, resumed)
 

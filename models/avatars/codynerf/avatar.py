@@ -332,6 +332,8 @@ class CoDyNeRFAvatar(Avatar):
             pts, d, sigma, weights, remaining = self._densities(rays, geo, omega, samples,
                                                                 replace(settings, stop_below=0))
         shown = render.shown_samples(d, weights, rays.directions, settings.min_weight)
+        fixed_view = self.towards_capture_camera(pts[shown.keep])  # a tracked video's view (base.py)
+        shown = shown if fixed_view is None else replace(shown, view=fixed_view)
         mesh_vis = geo.light.visibility(pts[shown.keep]) if self.field_cfg.shadow_factor else None
         lit, factor, visibility = self.field.appearance_terms(shown.field, shown.prior, shown.view, phi,
                                                               geo.landmarks, mesh_vis)

@@ -238,6 +238,8 @@ class NerfaceAvatar(Avatar):
             t_mid = 0.5 * (t0 + t1)
             pts = (o[:, None] + d[:, None] * t_mid[..., None]).reshape(-1, 3)
             view = (-d[:, None]).expand(R, S, 3).reshape(-1, 3)
+            fixed_view = self.towards_capture_camera(pts @ rot.T + tr)  # a tracked video's view (base.py)
+            view = view if fixed_view is None else fixed_view @ rot
             sigma, rgb = net(pts, view, condition.repeat_interleave(S, 0), self.scale_m)
             sigma = sigma.reshape(R, S) * hits[:, None]
             weights, remaining = weights_from_density(sigma, t1 - t0)

@@ -304,12 +304,23 @@ class PrimitivesAvatar(Avatar):
         del training  # the decoder is deterministic
         return self.decoder(condition, geo.gaze, light)
 
+    @staticmethod
+    def view_of(geo: PrimitivesGeometry, eye: torch.Tensor) -> torch.Tensor:
+        """(3,) the unit direction from the head to a camera at `eye`, in the head's frame: R^T (eye - t)."""
+        view = (eye - geo.translation) @ geo.rotation
+        return view / view.norm().clamp_min(1e-9)
+
+    def capture_views(self, frames) -> torch.Tensor:
+        """The decoder reads one view a frame: the direction to each training frame's camera."""
+        pairs = zip(frames.geometry, frames.origins, strict=True)
+        return torch.stack([self.view_of(geo, eye.to(geo.translation)) for geo, eye in pairs])
+
     def decode(self, geo: PrimitivesGeometry, code: torch.Tensor, eye: torch.Tensor, lit: bool = False,
-               training: bool = False) -> march.Primitives:
-        """The frame's primitives, placed on its posed mesh, for a camera at `eye` (3,) (the view enters the
-        decoder as the direction to the eye in the head's frame). lit: every texel lit (no cast shadows)."""
-        view = (eye - geo.translation) @ geo.rotation  # R^T (eye - t)
-        view = view / view.norm().clamp_min(1e-9)
+               training: bool = False) -> tuple[march.Primitives, torch.Tensor]:
+        """The frame's primitives, placed on its posed mesh, and their offsets, for a camera at `eye` (3,) (the view
+        enters the decoder as the direction to the eye in the head's frame, held to the capture's cone: base.py).
+        lit: every texel lit (no cast shadows)."""
+        view = self.seen_view(self.view_of(geo, eye)[None])[0]
         inputs = [geo.condition, code, view[None]]
         if self.light_dir is not None:
             inputs.append((torch.as_tensor(self.light_dir, dtype=view.dtype, device=view.device) @ geo.rotation)[None])

@@ -1,0 +1,68 @@
+"""The directions a capture saw the head from, and new views held to them.
+
+A colour network that reads the view direction learns it only over the directions its capture's rays came
+from. A monocular video's fixed camera gives a cone of a few degrees (its field of view); a turntable or the
+studio's camera sliders then ask for directions the network never saw, and it extrapolates: on the tracked
+d3 video (`all`, 30 minutes, captured yaws -22.8 to 14.3 degrees) a camera turned 20 degrees to the subject's
+left washed the face out to grey, where the same render with the view held to the capture camera's axis kept
+her colours (and the density, which reads no view, is the same in both).
+
+So an avatar remembers the cone of the directions it was trained on (its axis and the largest angle from it,
+plus a margin) and moves a direction outside it to the nearest direction on its rim, in the plane of the
+direction and the axis. Directions inside are untouched: the capture's own frames render exactly as before.
+A capture that saw the head from all round (the mean direction shorter than a few percent, or a cone wider
+than a hemisphere's 180 degrees) gets no cone.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+MARGIN_DEG = 2.0
+"""Added to the widest training direction: pose corrections turn a tracked video's rays by a fraction of it."""
+
+
+def view_cone(towards: torch.Tensor, margin_deg: float = MARGIN_DEG) -> tuple[torch.Tensor, float] | None:
+    """The cone (unit axis (3,), cosine of its half-angle) holding every unit direction of (N,3) `towards` (from
+    the head towards the camera) with margin_deg to spare; None where they come from all round.
+
+    >>> axis, cos = view_cone(torch.tensor([[0.0, 0.0, 1.0], [math.sin(0.1), 0.0, math.cos(0.1)]]), margin_deg=0)
+    >>> [round(v, 4) for v in axis.tolist()], round(math.degrees(math.acos(cos)), 3)
+    ([0.05, 0.0, 0.9988], 2.865)
+    """
+    v = towards.detach().double()
+    v = v[torch.isfinite(v).all(-1)]
+    if len(v) == 0:
+        return None
+    v = v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    mean = v.mean(0)
+    if mean.norm() < 0.05:
+        return None
+    axis = mean / mean.norm()
+    half = math.acos(float((v @ axis).min().clamp(-1, 1))) + math.radians(margin_deg)
+    if half >= math.pi / 2:
+        return None
+    return axis.float(), math.cos(half)
+
+
+def into_cone(v: torch.Tensor, axis: torch.Tensor, cos_max: float) -> torch.Tensor:
+    """(N,3) unit directions, those outside the cone moved to its rim towards them (a direction opposite the
+    axis: to the rim on the side of the smallest component of the axis).
+
+    A direction 90 degrees from the axis, into a cone of 60: to 60 degrees, in their plane.
+    >>> into_cone(torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), torch.tensor([0.0, 0.0, 1.0]), 0.5)
+    tensor([[0.8660, 0.0000, 0.5000],
+            [0.0000, 0.0000, 1.0000]])
+    """
+    axis = axis.to(v)
+    c = v @ axis
+    side = v - c[:, None] * axis
+    length = side.norm(dim=-1, keepdim=True)
+    spare = torch.zeros_like(axis)
+    spare[int(axis.abs().argmin())] = 1.0
+    spare = spare - (spare @ axis) * axis
+    side = torch.where(length > 1e-6, side / length.clamp_min(1e-6), spare / spare.norm())
+    rim = cos_max * axis + math.sqrt(max(0.0, 1.0 - cos_max * cos_max)) * side
+    return torch.where((c >= cos_max)[:, None], v, rim)
