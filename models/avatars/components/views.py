@@ -1,17 +1,21 @@
 """The directions a capture saw the head from, and new views held to them.
 
 A colour network that reads the view direction learns it only over the directions its capture's rays came
-from. A monocular video's fixed camera gives a cone of a few degrees (its field of view); a turntable or the
-studio's camera sliders then ask for directions the network never saw, and it extrapolates: on the tracked
-d3 video (`all`, 30 minutes, captured yaws -22.8 to 14.3 degrees) a camera turned 20 degrees to the subject's
-left washed the face out to grey, where the same render with the view held to the capture camera's axis kept
-her colours (and the density, which reads no view, is the same in both).
+from, and a turntable or the studio's camera sliders ask it for others: on the tracked d3 video (`all`, 30
+minutes, captured yaws -22.8 to 14.3 degrees) a camera turned 20 degrees to the subject's left washed the face out
+to grey, where the same render with the view held to the capture camera's axis kept her colours (the density,
+which reads no view, is the same in both). Two rules, by what the model reads (models/avatars/base.py):
 
-So an avatar remembers the cone of the directions it was trained on (its axis and the largest angle from it,
-plus a margin) and moves a direction outside it to the nearest direction on its rim, in the plane of the
-direction and the axis. Directions inside are untouched: the capture's own frames render exactly as before.
-A capture that saw the head from all round (the mean direction shorter than a few percent, or a cone wider
-than a hemisphere's 180 degrees) gets no cone.
+- a colour read per sample (CoDyNeRF, NerFACE) on a capture whose camera stood still (a tracked video): one
+  camera saw every point from one direction, the way to that camera, so that is the direction the colour reads
+  whatever camera renders (`Avatar.towards_capture_camera`);
+- a view read once a frame (the primitives' decoder, in the head's frame): held to the cone of the training
+  frames' views (`view_cone`, `into_cone`): its axis and the largest angle from it, plus a margin; a direction
+  outside moves to the nearest direction on the rim, in the plane of the direction and the axis.
+
+Directions the capture gave are untouched either way: its own frames render exactly as before. A capture that saw
+the head from all round (the mean direction shorter than a few percent, or a cone wider than a hemisphere) gets
+no cone.
 """
 
 from __future__ import annotations
