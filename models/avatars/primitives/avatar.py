@@ -370,7 +370,7 @@ class PrimitivesAvatar(Avatar):
         out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims, lists,
                           self.samples if not training else self.cfg.samples,
                           0.0 if training else self.cfg.stop_below,
-                          min_weight=0.0 if training else march.DISPLAY_MIN_WEIGHT)
+                          min_weight=0.0 if training else march.DISPLAY_MIN_WEIGHT, adaptive=not training)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
         if self.needs_normals:
             buffers["normals"] = out.extra[:, :3]

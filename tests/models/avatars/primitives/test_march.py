@@ -187,3 +187,23 @@ def test_hard_cases_stay_finite():
     assert (out.opacity <= 1 + 1e-5).all()
     (out.rgb.sum() + out.depth.sum()).backward()
     assert torch.isfinite(d.grad).all() and torch.isfinite(h.grad).all()
+
+
+def test_display_samples_follow_the_voxels_a_segment_crosses():
+    """Display's adaptive samples (one a voxel crossed and one more, 8 at most) against the march with 256
+    samples a segment (the integral, near enough): closer than 6 fixed samples a segment with no more lookups,
+    and the tiled lists render what every primitive renders with them (no early stop: the waves differ)."""
+    prims = random_primitives(P=40, M=8, seed=6)
+    origins, dirs = camera_rays(size=32)
+    bg = torch.tensor([0.2, 0.3, 0.4], dtype=origins.dtype)
+    every = march.every_primitive(origins, prims)
+
+    def run(samples, adaptive, lists=every, stop_below=1e-3):
+        return march.march(origins, dirs, bg, prims, lists, samples, stop_below, min_weight=1e-4, adaptive=adaptive)
+
+    truth, fixed, adaptive = run(256, False), run(6, False), run(8, True)
+    assert truth.opacity.max() > 0.5
+    assert adaptive.samples <= fixed.samples
+    assert (adaptive.rgb - truth.rgb).abs().max() < 0.7 * (fixed.rgb - truth.rgb).abs().max()
+    tiled = run(8, True, march.candidate_lists(origins, dirs, prims, rays_per_tile=16), stop_below=0.0)
+    torch.testing.assert_close(tiled.rgb, run(8, True, stop_below=0.0).rgb, atol=1e-12, rtol=0)
