@@ -40,8 +40,7 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int) -> dict:
         bg = avatar.ray_background(rays)
 
         def run():
-            return march.march(rays.origins, rays.directions, bg, prims, lists, avatar.samples, avatar.cfg.stop_below,
-                               min_weight=march.DISPLAY_MIN_WEIGHT)
+            return avatar.display_march(rays.origins, rays.directions, bg, prims, lists)
 
         march_s = median_seconds(run)
         looked = []  # the lookups' share of one march: march.lookup timed where the march calls it

@@ -266,7 +266,7 @@ DISPLAY_MIN_WEIGHT = 1e-4
 """Display looks up a sample's colour only where its compositing weight reaches this: a pixel loses at most this
 much of its colour's range per sample left out (the samples of a ray number tens), far under 8 bits' step."""
 
-WAVE_CANDIDATES = 8
+WAVE_CANDIDATES = 4
 """Display marches each live ray's next this many candidates at once, then drops the rays that are opaque (early
 termination by groups): fewer, larger operations than one candidate a wave, and a few more slab tests."""
 
