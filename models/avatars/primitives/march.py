@@ -240,14 +240,10 @@ def pack(values: torch.Tensor) -> torch.Tensor:
     return values.permute(4, 1, 2, 0, 3).reshape(1, C, M, M, P * M)
 
 
-def lookup(packed: torch.Tensor, prim: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
-    """`trilinear` on the packed volume (1,C,M,M,P*M), by one grid_sample: a point's x is its primitive's offset
-    plus its voxel x, clamped inside its primitive, so no lookup blends two primitives. (N,C)."""
-    M, W = packed.shape[2], packed.shape[4]
-    g = ((local + 1.0) * 0.5 * (M - 1)).clamp(0, M - 1)
-    x = prim.to(g.dtype) * M + g[:, 0]
-    grid = torch.stack([2.0 * x / (W - 1) - 1.0, local[:, 1].clamp(-1, 1), local[:, 2].clamp(-1, 1)], -1)
-    out = F.grid_sample(packed, grid.reshape(1, 1, 1, -1, 3), mode="bilinear", padding_mode="border",
+def lookup(packed: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+    """The packed volume (1,C,M,M,P*M) at points (N,3) in its grid_sample coordinates (`Lookups.points` makes
+    them, each inside its own primitive's grid, so no lookup blends two primitives), by one grid_sample. (N,C)."""
+    out = F.grid_sample(packed, points.reshape(1, 1, 1, -1, 3), mode="bilinear", padding_mode="border",
                         align_corners=True)
     return out[0, :, 0, 0].T
 
@@ -312,26 +308,53 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
 
 
 class Lookups:
-    """The primitives' density (N,) and colour channels (N,C) at box coordinates: by grid_sample on packed volumes,
-    or (exact) by the gather-based `trilinear`."""
+    """The primitives' density (N,) and colour channels (N,C) at sample points: by grid_sample on packed volumes,
+    or (exact) by the gather-based `trilinear`. `points` places segments' samples in the coordinates the lookup
+    reads."""
 
     def __init__(self, prims: Primitives, exact: bool = False):
         self.exact = exact
+        P, M = prims.density.shape[:2]
         if exact:
             self.values = torch.cat([prims.density[..., None], prims.colour], -1)
-        else:
-            self.packed_density = pack(prims.density[..., None])
-            self.packed_colour = pack(prims.colour)
+            return
+        self.packed_density = pack(prims.density[..., None])
+        self.packed_colour = pack(prims.colour)
+        # box coordinates x in [-1, 1] of primitive p to the packed volume's: a x + b p + c along x (the
+        # primitives side by side, voxel centres at align_corners' grid), y and z as they are
+        span = max(P * M - 1, 1)  # the packed volume's width less one: align_corners' step is 2 / span
+        self.scale = torch.tensor([(M - 1) / span, 1.0, 1.0], dtype=torch.float64, device=prims.density.device)
+        self.shift = (2.0 * M / span, (M - 1) / span - 1.0)
 
-    def density(self, prim: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+    def points(self, prim: torch.Tensor, o_box: torch.Tensor, d_box: torch.Tensor, t: torch.Tensor
+               ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The samples at t (S,n) along segments of primitives prim (S,) (rays o' + d' t in their boxes' unit
+        frames (S,3)), clamped inside their boxes: their coordinates (S*n,3) (the packed volume's, or (exact) the
+        boxes'), and (exact) each sample's primitive (S*n,); select samples with `pick`."""
+        local = torch.addcmul(o_box[:, None], d_box[:, None], t[..., None]).clamp_(-1.0, 1.0)  # (S,n,3)
         if self.exact:
-            return trilinear(self.values[..., :1], prim, local)[:, 0]
-        return lookup(self.packed_density, prim, local)[:, 0]
+            return local.reshape(-1, 3), prim.repeat_interleave(t.shape[1])
+        shift = torch.zeros_like(o_box)
+        shift[:, 0] = prim.to(o_box.dtype) * self.shift[0] + self.shift[1]
+        return torch.addcmul(shift[:, None], local, self.scale.to(o_box.dtype)).reshape(-1, 3), None
 
-    def colour(self, prim: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+    @staticmethod
+    def pick(points: tuple[torch.Tensor, torch.Tensor | None], index: torch.Tensor
+             ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        coords, prim = points
+        return coords[index], (prim[index] if prim is not None else None)
+
+    def density(self, points: tuple[torch.Tensor, torch.Tensor | None]) -> torch.Tensor:
+        coords, prim = points
         if self.exact:
-            return trilinear(self.values[..., 1:], prim, local)
-        return lookup(self.packed_colour, prim, local)
+            return trilinear(self.values[..., :1], prim, coords)[:, 0]
+        return lookup(self.packed_density, coords)[:, 0]
+
+    def colour(self, points: tuple[torch.Tensor, torch.Tensor | None]) -> torch.Tensor:
+        coords, prim = points
+        if self.exact:
+            return trilinear(self.values[..., 1:], prim, coords)
+        return lookup(self.packed_colour, coords)
 
 
 @dataclass
@@ -373,16 +396,15 @@ def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     counts = voxel_counts(d_box, t0[hit], t1[hit], prims.density.shape[1], samples) if adaptive else None
     t, delta = segment_samples(t0[hit], t1[hit], samples, counts)  # (S,n)
     S = len(ray)
-    local = (o_box[:, None] + d_box[:, None] * t[..., None]).reshape(-1, 3)  # the box's unit frame
-    at = prim.repeat_interleave(samples)
+    points = lookups.points(prim, o_box, d_box, t)
     if adaptive:  # the density of the samples in use only; the others have length 0
         used = torch.nonzero(delta.reshape(-1) > 0).squeeze(1)
-        density = torch.zeros(S * samples, dtype=local.dtype, device=local.device)
-        density[used] = lookups.density(at[used], local[used]).to(local.dtype)
+        density = torch.zeros(S * samples, dtype=t.dtype, device=t.device)
+        density[used] = lookups.density(lookups.pick(points, used)).to(t.dtype)
         density = density.reshape(S, samples)
         looked_density = len(used)
     else:
-        density = lookups.density(at, local).reshape(S, samples)
+        density = lookups.density(points).reshape(S, samples)
         looked_density = S * samples
     tau = (density * delta).clamp(0.0, MAX_OPTICAL_DEPTH)
     seg = tau.sum(1).double()
@@ -398,11 +420,11 @@ def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     if min_weight > 0:
         shows = torch.nonzero(w.reshape(-1) >= min_weight).squeeze(1)
         colour = torch.zeros(S * samples, C, dtype=tau.dtype, device=origins.device)
-        colour[shows] = lookups.colour(at[shows], local[shows]).to(tau.dtype)
+        colour[shows] = lookups.colour(lookups.pick(points, shows)).to(tau.dtype)
         colour = colour.reshape(S, samples, C)
         looked = len(shows)
     else:
-        colour = lookups.colour(at, local).reshape(S, samples, C)
+        colour = lookups.colour(points).reshape(S, samples, C)
         looked = S * samples
     zeros = torch.zeros(R, dtype=tau.dtype, device=origins.device)
     return Composited(torch.zeros(R, C, dtype=tau.dtype, device=origins.device).index_add(

@@ -108,8 +108,19 @@ def test_packed_lookup_is_the_trilinear_reference():
     values = torch.rand(7, 4, 4, 4, 3, generator=g, dtype=torch.float64)
     prim = torch.randint(7, (500,), generator=g)
     local = torch.rand(500, 3, generator=g, dtype=torch.float64) * 2.4 - 1.2  # beyond the box: its border
-    torch.testing.assert_close(march.lookup(march.pack(values), prim, local), march.trilinear(values, prim, local),
-                               atol=1e-12, rtol=0)
+    want = march.trilinear(values, prim, local)
+    prims = march.Primitives(torch.zeros(7, 3), torch.eye(3).expand(7, 3, 3), torch.ones(7, 3), values[..., 0],
+                             values)
+    o = torch.rand(500, 3, generator=g, dtype=torch.float64) * 2 - 1  # the points as rays o' + d' t
+    t = torch.rand(500, 1, generator=g, dtype=torch.float64) + 0.5
+    d = (local - o) / t
+    for exact in (False, True):
+        lookups = march.Lookups(prims, exact)
+        points = lookups.points(prim, o, d, t)
+        torch.testing.assert_close(lookups.colour(points), want, atol=1e-12, rtol=0)
+        torch.testing.assert_close(lookups.density(points), want[:, 0], atol=1e-12, rtol=0)
+        torch.testing.assert_close(lookups.colour(lookups.pick(points, torch.arange(5, 500, 7))),
+                                   want[5::7], atol=1e-12, rtol=0)
 
 
 def test_early_termination_changes_only_what_the_light_barely_reaches():
