@@ -417,18 +417,17 @@ def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     inside = torch.exp(-(tau.cumsum(1) - tau))  # within the segment
     w = reach[:, None] * inside * (1.0 - torch.exp(-tau))
     C = prims.colour.shape[-1]
-    if min_weight > 0:
+    values = torch.zeros(R, C, dtype=tau.dtype, device=origins.device)
+    if min_weight > 0:  # each shown sample's colour straight onto its ray
         shows = torch.nonzero(w.reshape(-1) >= min_weight).squeeze(1)
-        colour = torch.zeros(S * samples, C, dtype=tau.dtype, device=origins.device)
-        colour[shows] = lookups.colour(lookups.pick(points, shows)).to(tau.dtype)
-        colour = colour.reshape(S, samples, C)
+        colour = lookups.colour(lookups.pick(points, shows)).to(tau.dtype)
+        values.index_add_(0, ray[torch.div(shows, samples, rounding_mode="floor")], w.reshape(-1)[shows, None] * colour)
         looked = len(shows)
     else:
         colour = lookups.colour(points).reshape(S, samples, C)
+        values.index_add_(0, ray, (w[..., None] * colour).sum(1))
         looked = S * samples
     zeros = torch.zeros(R, dtype=tau.dtype, device=origins.device)
-    return Composited(torch.zeros(R, C, dtype=tau.dtype, device=origins.device).index_add(
-                          0, ray, (w[..., None] * colour).sum(1)),
-                      zeros.index_add(0, ray, w.sum(1)), zeros.index_add(0, ray, (w * t).sum(1)),
+    return Composited(values, zeros.index_add(0, ray, w.sum(1)), zeros.index_add(0, ray, (w * t).sum(1)),
                       torch.zeros(R, dtype=torch.float64, device=origins.device).index_add(0, ray, seg),
                       looked_density + looked, S)
