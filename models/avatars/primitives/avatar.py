@@ -319,7 +319,7 @@ class PrimitivesAvatar(Avatar):
                training: bool = False) -> tuple[march.Primitives, torch.Tensor]:
         """The frame's primitives, placed on its posed mesh, and their offsets, for a camera at `eye` (3,) (the view
         enters the decoder as the direction to the eye in the head's frame, held to the capture's cone: base.py).
-        lit: every texel lit (no cast shadows)."""
+        lit: every texel lit (no cast shadows). training: colour alone (the buffers' extra channels are display's)."""
         view = self.seen_view(self.view_of(geo, eye)[None])[0]
         inputs = [geo.condition, code, view[None]]
         if self.light_dir is not None:
@@ -336,6 +336,8 @@ class PrimitivesAvatar(Avatar):
         rotations = rotations @ rotation_matrix_from_axis_angle(offsets[:, 3:6])
         density = F.softplus(density_raw - 1.0) * self.cfg.density_scale
         colour = torch.sigmoid(colour_raw)
+        if training:  # no loss reads the normals or the visibility: the march composites colour alone
+            return march.Primitives(centres, rotations, half, density, colour), offsets
         if self.needs_normals:
             colour = torch.cat([colour, grid_normals(density, rotations, half)], -1)
         if light is not None:  # each texel's visibility through its column of voxels: the rgb_light buffer
@@ -373,7 +375,7 @@ class PrimitivesAvatar(Avatar):
         else:
             out = self.display_march(rays.origins, rays.directions, self.ray_background(rays), prims, lists)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
-        if self.needs_normals:
+        if self.needs_normals and not training:
             buffers["normals"] = out.extra[:, :3]
         return RayOutput(buffers, (prims, offsets, out, rays, frame))
 
