@@ -1,7 +1,8 @@
 """Where a primitives avatar's frame time goes, at 128, 256 and 512 pixels on this machine: the decode (once a
-frame), the screen tiles' candidate lists, the march (slab tests, lookups and compositing, in waves) and within it
-the lookups (one timed march), and the whole `render_image` (posing the mesh, rays, images); with the lookups made
-and the lookups a second.
+frame), the screen tiles' candidate lists (the whole image's, timed apart), the march as display runs it (the rays
+in one group a torch thread, each group's lists and waves: slab tests, lookups and compositing) and within it the
+lookups (one timed march; with groups on threads, the sum of the threads' lookup times), and the whole
+`render_image` (posing the mesh, rays, images); with the lookups made and the lookups a second.
 
     .venv/bin/python -m benchmarks.bench_primitives AVATAR [--out benchmarks/results/primitives.json]
 """
@@ -40,7 +41,7 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int) -> dict:
         bg = avatar.ray_background(rays)
 
         def run():
-            return avatar.display_march(rays.origins, rays.directions, bg, prims, lists)
+            return avatar.display_march(rays.origins, rays.directions, bg, prims)
 
         march_s = median_seconds(run)
         looked = []  # the lookups' share of one march: march.lookup timed where the march calls it

@@ -44,6 +44,8 @@ from render.rays import Raster, Rays
 from render.shadow_map import LightDepthMap
 
 GAZE_JOINTS = ("eye_l", "eye_r")
+DISPLAY_PARALLEL_RAYS = 4096
+"""Display marches a batch of at least this many rays in as many groups as torch has threads (march_in_parts)."""
 
 
 @dataclass(frozen=True)
@@ -368,23 +370,24 @@ class PrimitivesAvatar(Avatar):
         binned in screen tiles, march.candidate_lists). lit: decoded with every texel lit (inspection)."""
         del generator  # the march is deterministic
         prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit)
-        lists = march.candidate_lists(rays.origins, rays.directions, prims)
         if training:
-            out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims, lists,
-                              self.cfg.samples)
+            out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims,
+                              march.candidate_lists(rays.origins, rays.directions, prims), self.cfg.samples)
         else:
-            out = self.display_march(rays.origins, rays.directions, self.ray_background(rays), prims, lists)
+            out = self.display_march(rays.origins, rays.directions, self.ray_background(rays), prims)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
         if self.needs_normals and not training:
             buffers["normals"] = out.extra[:, :3]
         return RayOutput(buffers, (prims, offsets, out, rays, frame))
 
     def display_march(self, origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor,
-                      prims: march.Primitives, lists: march.CandidateLists) -> march.MarchOutput:
-        """The march as display runs it (and the bench times it): in waves with early termination, samples by
-        the voxels a segment crosses, colour looked up only where it shows."""
-        return march.march(origins, directions, background, prims, lists, self.samples, self.cfg.stop_below,
-                           min_weight=march.DISPLAY_MIN_WEIGHT, adaptive=True)
+                      prims: march.Primitives) -> march.MarchOutput:
+        """The march as display runs it (and the bench times it): the rays in as many groups as torch has threads
+        (one thread a group), each with its candidate lists; in waves with early termination, samples by the voxels
+        a segment crosses, colour looked up only where it shows."""
+        parts = torch.get_num_threads() if len(origins) >= DISPLAY_PARALLEL_RAYS else 1
+        return march.march_in_parts(origins, directions, background, prims, self.samples, self.cfg.stop_below,
+                                    parts, min_weight=march.DISPLAY_MIN_WEIGHT, adaptive=True)
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
         out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)

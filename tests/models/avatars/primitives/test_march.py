@@ -218,3 +218,20 @@ def test_display_samples_follow_the_voxels_a_segment_crosses():
     assert (adaptive.rgb - truth.rgb).abs().max() < 0.7 * (fixed.rgb - truth.rgb).abs().max()
     tiled = run(8, True, march.candidate_lists(origins, dirs, prims, rays_per_tile=16), stop_below=0.0)
     torch.testing.assert_close(tiled.rgb, run(8, True, stop_below=0.0).rgb, atol=1e-12, rtol=0)
+
+
+def test_marching_in_parts_on_threads_renders_what_one_march_renders():
+    prims = random_primitives(seed=7)
+    origins, dirs = camera_rays(size=32, yaw=-20.0)
+    bg = torch.rand(len(origins), 3, generator=torch.Generator().manual_seed(7), dtype=origins.dtype)
+    threads = torch.get_num_threads()
+    for stop, atol in ((0.0, 1e-12), (1e-3, 1e-3)):  # the groups' lists cut the waves elsewhere: early termination
+        whole = march.march(origins, dirs, bg, prims, march.candidate_lists(origins, dirs, prims), 6, stop,
+                            min_weight=march.DISPLAY_MIN_WEIGHT, adaptive=True)
+        for parts in (2, 3):
+            split = march.march_in_parts(origins, dirs, bg, prims, 6, stop, parts,
+                                         min_weight=march.DISPLAY_MIN_WEIGHT, adaptive=True)
+            assert abs(split.segments - whole.segments) <= 0.01 * whole.segments and whole.segments > 0
+            for a, b in ((split.rgb, whole.rgb), (split.opacity, whole.opacity)):
+                torch.testing.assert_close(a, b, atol=atol, rtol=0)
+            assert torch.get_num_threads() == threads  # restored after the groups' one-thread marches
