@@ -462,6 +462,7 @@ class StartFromVideo(Command):
     steps: int | None = None
     size: int = 256
     fps: float | None = None
+    model: str = "codynerf"
 
 
 @dataclass(frozen=True)

@@ -56,7 +56,7 @@ def start_from_video(jobs: JobQueue, c: StartFromVideo) -> str | None:
     if out_path.exists():
         return f"{out_path}: already exists; choose a new avatar folder"
     dataset = out_path.with_name(out_path.name + "_dataset")
-    jobs.submit(dataset, out_path, effects=c.effects, minutes=c.minutes, steps=c.steps, video=video_path,
+    jobs.submit(dataset, out_path, model=c.model, effects=c.effects, minutes=c.minutes, steps=c.steps, video=video_path,
                 head=c.head.strip() or "builtin", landmarker=Path(c.landmarker), track_size=c.size, track_fps=c.fps)
     return None
 
@@ -126,9 +126,9 @@ def draw(ctx: PanelContext) -> None:
         _, f.landmarker = imgui.input_text("landmarker (.task)", f.landmarker)
         if imgui.button("Track and train"):
             act(StartFromVideo(f.video.strip(), f.head, f.landmarker.strip(), f.out.strip(), EFFECTS[f.effects],
-                               max(f.minutes, 0.1)))
+                               max(f.minutes, 0.1), model=MODELS[f.model]))
         imgui.same_line()
-        imgui.text_disabled("(avatar folder, effects and minutes from above)")
+        imgui.text_disabled("(avatar folder, model, effects and minutes from above)")
     if imgui.collapsing_header("Drive the open avatar from a performance"):
         _, f.performance = imgui.input_text("performance", f.performance)
         if imgui.is_item_hovered():

@@ -32,7 +32,7 @@ pictures). Steps:
   {"screenshot": PNG}                     the whole window
   {"save_viewport": PNG}                  the viewport as shown (the Export panel's "Screenshot viewport")
   {"train": {"dataset": D, "out": O, "steps": N, "effects": E, "model": M}}  queue a training job
-  {"from_video": {"video": V, "head": H, "landmarker": L, "out": O, "steps": N, "size": PX, "fps": F}}
+  {"from_video": {"video": V, "head": H, "landmarker": L, "out": O, "steps": N, "size": PX, "fps": F, "model": M}}
                                           queue a new avatar from a video (track, then train)
   {"reenact": {"video": V, "landmarker": L, "out": MP4, "size": PX, "seconds": S}}
                                           queue a reenactment of the open avatar by a performance video (its
@@ -324,7 +324,8 @@ def _train(sc: Script, st: Driven, s: dict) -> bool:
 def _from_video(sc: Script, st: Driven, s: dict) -> bool:
     v = s["from_video"]
     st.act(a.StartFromVideo(v["video"], v.get("head", "builtin"), v["landmarker"], v["out"], v.get("effects", "none"),
-                            v.get("minutes"), v.get("steps"), int(v.get("size", 256)), v.get("fps")))
+                            v.get("minutes"), v.get("steps"), int(v.get("size", 256)), v.get("fps"),
+                            v.get("model", "codynerf")))
     return True
 
 

@@ -170,12 +170,12 @@ def test_jobs_end_with_the_window(display, avatar, capture, tmp_path):
 
 
 def test_new_avatar_from_video(display, avatar, tmp_path, face_video, landmarker, ict_npz):
-    """"New avatar from video": one job tracks the real video, then trains on it; the tracker's report and the
-    avatar are written and the studio opens the avatar when the job is done."""
+    """"New avatar from video": one job tracks the real video, then trains the model chosen on it; the tracker's
+    report and the avatar are written and the studio opens the avatar when the job is done."""
     out = tmp_path / "me"
     report = run_script(display, tmp_path, avatar, [
         {"from_video": {"video": str(face_video), "head": f"ict:{ict_npz}", "landmarker": str(landmarker),
-                        "out": str(out), "steps": 20, "size": 96, "fps": 3}},
+                        "out": str(out), "steps": 20, "size": 96, "fps": 3, "model": "primitives"}},
         {"wait_frames": 10},
         {"wait_job": True},
         {"wait_frames": 3},
@@ -184,6 +184,7 @@ def test_new_avatar_from_video(display, avatar, tmp_path, face_video, landmarker
     tracked = json.loads((tmp_path / "me_dataset" / "tracking" / "report.json").read_text())
     assert tracked["frames_kept"] > 30
     assert json.loads((out / "progress.jsonl").read_text().splitlines()[-1])["step"] == 20
+    assert json.loads((out / "avatar.json").read_text())["model"] == "primitives"  # the model chosen above
 
 
 def test_screenshot_option(display, avatar, tmp_path):
