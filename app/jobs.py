@@ -27,7 +27,8 @@ class Job:
     id: int
     dataset: Path
     out: Path
-    model: str = "codynerf"
+    model: str | None = None
+    """None: train's default (primitives for a tracked video, codynerf for a synthetic capture)."""
     effects: str = "all"
     minutes: float | None = None
     steps: int | None = None
@@ -69,7 +70,7 @@ class Job:
             cmd += ["--fps", str(self.track_fps)] if self.track_fps else []
             return cmd + (["--landmarker", str(self.landmarker)] if self.landmarker else [])
         cmd = [sys.executable, "-m", "app.cli", "train", str(self.dataset), "--out", str(self.out),
-               "--model", self.model, "--effects", self.effects]
+               "--effects", self.effects] + (["--model", self.model] if self.model else [])
         if self.minutes:
             cmd += ["--minutes", str(self.minutes)]
         if self.steps:

@@ -462,7 +462,8 @@ class StartFromVideo(Command):
     steps: int | None = None
     size: int = 256
     fps: float | None = None
-    model: str = "codynerf"
+    model: str | None = None
+    """None: train's default for a tracked video (primitives)."""
 
 
 @dataclass(frozen=True)

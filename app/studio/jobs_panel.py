@@ -23,10 +23,12 @@ from app.studio.actions import (
 )
 from app.studio.config import STUDIO_HOME
 from app.studio.context import PanelContext
-from models.avatars.registry import AVATARS
+from models.avatars.registry import AVATARS, DEFAULT_MODEL, VIDEO_MODEL
 from models.capture.dataset import DatasetError, load_split
 
 MODELS = tuple(AVATARS)
+VIDEO_MODELS = (VIDEO_MODEL, *(m for m in MODELS if m != VIDEO_MODEL))
+"""A new avatar from video offers train's default for tracked videos first."""
 EFFECTS = ("all", "none", "shading", "shading,specular", "shadows")
 
 
@@ -35,6 +37,7 @@ class JobForm:
     dataset: str = ""
     out: str = field(default_factory=lambda: str(STUDIO_HOME / "avatars" / "new"))
     model: int = 0
+    video_model: int = 0
     effects: int = 0
     minutes: float = 30.0
     video: str = ""
@@ -124,11 +127,13 @@ def draw(ctx: PanelContext) -> None:
         _, f.video = imgui.input_text("video", f.video)
         _, f.head = imgui.input_text("head model", f.head)
         _, f.landmarker = imgui.input_text("landmarker (.task)", f.landmarker)
+        imgui.set_next_item_width(110)
+        _, f.video_model = imgui.combo("model##video", f.video_model, list(VIDEO_MODELS))
         if imgui.button("Track and train"):
             act(StartFromVideo(f.video.strip(), f.head, f.landmarker.strip(), f.out.strip(), EFFECTS[f.effects],
-                               max(f.minutes, 0.1), model=MODELS[f.model]))
+                               max(f.minutes, 0.1), model=VIDEO_MODELS[f.video_model]))
         imgui.same_line()
-        imgui.text_disabled("(avatar folder, model, effects and minutes from above)")
+        imgui.text_disabled("(avatar folder, effects and minutes from above)")
     if imgui.collapsing_header("Drive the open avatar from a performance"):
         _, f.performance = imgui.input_text("performance", f.performance)
         if imgui.is_item_hovered():
@@ -146,7 +151,8 @@ def draw(ctx: PanelContext) -> None:
     imgui.separator()
     for job in reversed(jobs.jobs):
         imgui.push_id(job.id)
-        what = f"driven by {job.video.name}" if job.stage == "reenact" and job.video else f"{job.model} {job.effects}"
+        model = job.model or (VIDEO_MODEL if job.video else DEFAULT_MODEL)  # train's default
+        what = f"driven by {job.video.name}" if job.stage == "reenact" and job.video else f"{model} {job.effects}"
         imgui.text(f"#{job.id} {job.out.name}: {what} - {jobs.status(job)}"
                    + (" (resumed)" if job.resume else ""))
         imgui.progress_bar(job.fraction, imgui.ImVec2(-1, 0), progress_text(job))

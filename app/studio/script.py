@@ -325,7 +325,7 @@ def _from_video(sc: Script, st: Driven, s: dict) -> bool:
     v = s["from_video"]
     st.act(a.StartFromVideo(v["video"], v.get("head", "builtin"), v["landmarker"], v["out"], v.get("effects", "none"),
                             v.get("minutes"), v.get("steps"), int(v.get("size", 256)), v.get("fps"),
-                            v.get("model", "codynerf")))
+                            v.get("model")))
     return True
 
 

@@ -17,7 +17,7 @@ import torch
 from models.avatars.base import Avatar, TrainingBatch
 from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from models.avatars.effects import parse_effects
-from models.avatars.registry import DEFAULT_MODEL, ModelName, avatar_class
+from models.avatars.registry import DEFAULT_MODEL, VIDEO_MODEL, ModelName, avatar_class
 from models.capture.dataset import DatasetError, check_images, load_split
 from models.capture.frames import background_plate, view_range
 from models.device import device_of
@@ -40,9 +40,10 @@ class TrainConfig:
     effects: str | None = None
     """Lighting effects to model: none, all, or a comma list of shading, specular, shadows (default: all; with
     --resume the checkpoint's, and another set is an error)."""
-    model: ModelName = DEFAULT_MODEL
+    model: ModelName | None = None
     """The avatar model (models/avatars/registry.py): codynerf, the NerFACE baseline, or primitives (volumetric
-    primitives on the guide mesh, decoded once a frame)."""
+    primitives on the guide mesh, decoded once a frame); default: primitives for a tracked video, codynerf for a
+    synthetic capture."""
     minutes: Annotated[float, Range(0, 1e6, above=True)] | None = None
     """Time budget; training stops when it is spent (checkpointed)."""
     steps: Annotated[int, Range(1)] | None = None
@@ -104,7 +105,8 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
             raise CheckpointError(f"{cfg.out}: --effects {cfg.effects} with --resume, but the avatar was trained with "
                                   f"{avatar.describe_effects()}; leave --effects out to continue it")
     else:
-        avatar = avatar_class(cfg.model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects or "all"),
+        model = cfg.model or (VIDEO_MODEL if split.tracked else DEFAULT_MODEL)
+        avatar = avatar_class(model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects or "all"),
                                                      split.lighting, model_config)
         if plate is not None:
             avatar.set_plate(*plate)

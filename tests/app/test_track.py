@@ -138,7 +138,7 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     face = (slice(top, bottom), slice(left, right))
     assert np.abs(plate[face] - frame[face]).mean() > 0.15  # and not the face
     out = tmp_path / "avatar"
-    prepare_training(TrainConfig(dataset=d3_dataset, out=out, effects="none", steps=60), gl).run(gl)
+    prepare_training(TrainConfig(dataset=d3_dataset, out=out, model="codynerf", effects="none", steps=60), gl).run(gl)
     log = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
     assert log[-1]["photometric"] < 0.7 * log[0]["photometric"], (log[0], log[-1])
     avatar, _ = load_avatar(out)
