@@ -23,7 +23,7 @@ from app.studio.actions import (
 )
 from app.studio.config import STUDIO_HOME
 from app.studio.context import PanelContext
-from models.avatars.registry import AVATARS, DEFAULT_MODEL, VIDEO_MODEL
+from models.avatars.registry import AVATARS, VIDEO_MODEL, default_model
 from models.capture.dataset import DatasetError, load_split
 
 MODELS = tuple(AVATARS)
@@ -151,7 +151,7 @@ def draw(ctx: PanelContext) -> None:
     imgui.separator()
     for job in reversed(jobs.jobs):
         imgui.push_id(job.id)
-        model = job.model or (VIDEO_MODEL if job.video else DEFAULT_MODEL)  # train's default
+        model = job.model or default_model(tracked=job.video is not None)  # a video job trains on its tracking
         what = f"driven by {job.video.name}" if job.stage == "reenact" and job.video else f"{model} {job.effects}"
         imgui.text(f"#{job.id} {job.out.name}: {what} - {jobs.status(job)}"
                    + (" (resumed)" if job.resume else ""))

@@ -29,8 +29,13 @@ DEFAULT_MODEL = "codynerf"
 VIDEO_MODEL = "primitives"
 """What `train` makes of a tracked video when no model is named: on the three shared clips (256 px, 30 minutes,
 the last 10% held out) the primitives reach 25 dB on each (25.6-26.4 on d3 and talking_hdtf, where CoDyNeRF gives
-24.4-25.3; 31.3 on d19 against CoDyNeRF's 32.9), and a frame renders in a tenth of the time (README, Real
-people)."""
+24.4-25.3; 31.3-31.5 on d19 against CoDyNeRF's 32.9-33.3), and a 256 px frame renders in 0.25-0.36 s against
+CoDyNeRF's 1.0-5.4 s (README, Real people)."""
+
+
+def default_model(tracked: bool) -> str:
+    """The model `train` makes when none is named: VIDEO_MODEL for a tracked video, else DEFAULT_MODEL."""
+    return VIDEO_MODEL if tracked else DEFAULT_MODEL
 BASELINE_MODEL = "nerface"
 """The dense renderer `bench` times beside the others."""
 

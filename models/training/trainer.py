@@ -17,7 +17,7 @@ import torch
 from models.avatars.base import Avatar, TrainingBatch
 from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from models.avatars.effects import parse_effects
-from models.avatars.registry import DEFAULT_MODEL, VIDEO_MODEL, ModelName, avatar_class
+from models.avatars.registry import DEFAULT_MODEL, ModelName, avatar_class, default_model
 from models.capture.dataset import DatasetError, check_images, load_split
 from models.capture.frames import background_plate, view_range
 from models.device import device_of
@@ -105,7 +105,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
             raise CheckpointError(f"{cfg.out}: --effects {cfg.effects} with --resume, but the avatar was trained with "
                                   f"{avatar.describe_effects()}; leave --effects out to continue it")
     else:
-        model = cfg.model or (VIDEO_MODEL if split.tracked else DEFAULT_MODEL)
+        model = cfg.model or default_model(split.tracked)
         avatar = avatar_class(model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects or "all"),
                                                      split.lighting, model_config)
         if plate is not None:

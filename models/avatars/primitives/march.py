@@ -82,6 +82,17 @@ def box_corners(prims: Primitives) -> torch.Tensor:
     return prims.centres[:, None] + local @ prims.rotations.transpose(1, 2)
 
 
+def view_axes(fwd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Two unit axes across a unit view direction fwd (3,), at right angles to it and to each other: the first
+    horizontal where fwd is not near vertical."""
+    helper = torch.tensor([0.0, 1.0, 0.0], dtype=fwd.dtype, device=fwd.device)
+    if (fwd @ helper).abs() > 0.9:
+        helper = torch.tensor([1.0, 0.0, 0.0], dtype=fwd.dtype, device=fwd.device)
+    a = torch.linalg.cross(helper, fwd)
+    a = a / a.norm()
+    return a, torch.linalg.cross(fwd, a)
+
+
 def candidate_lists(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, rays_per_tile: int = 64
                     ) -> CandidateLists:
     """The primitives each ray may meet: rays of one pinhole (a shared origin) binned into screen tiles, each
@@ -97,12 +108,7 @@ def candidate_lists(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     if (origins - o).abs().max() > 1e-6 or fwd.norm() < 1e-6:
         return every_primitive(origins, prims)
     fwd = fwd / fwd.norm()
-    helper = torch.tensor([0.0, 1.0, 0.0], dtype=o.dtype, device=o.device)
-    if (fwd @ helper).abs() > 0.9:
-        helper = torch.tensor([1.0, 0.0, 0.0], dtype=o.dtype, device=o.device)
-    a = torch.linalg.cross(helper, fwd)
-    a = a / a.norm()
-    b = torch.linalg.cross(fwd, a)
+    a, b = view_axes(fwd)
     dz = directions @ fwd
     if dz.min() < 0.05:  # a field of view near 180 degrees: no plane to bin in
         return every_primitive(origins, prims)
@@ -320,9 +326,7 @@ def march_in_parts(origins: torch.Tensor, directions: torch.Tensor, background: 
         return march(origins, directions, background, prims, candidate_lists(origins, directions, prims), samples,
                      stop_below, **options)
     fwd = directions.mean(0)
-    across = torch.linalg.cross(fwd, torch.tensor([0.0, 1.0, 0.0], dtype=fwd.dtype, device=fwd.device))
-    if across.norm() < 1e-6 * fwd.norm():  # looking straight up or down
-        across = torch.linalg.cross(fwd, torch.tensor([1.0, 0.0, 0.0], dtype=fwd.dtype, device=fwd.device))
+    across = view_axes(fwd / fwd.norm().clamp_min(1e-12))[0]
     groups = torch.argsort(directions @ across).chunk(parts)
     grad, inference = torch.is_grad_enabled(), torch.is_inference_mode_enabled()
 
