@@ -64,6 +64,8 @@ def main() -> None:
     p.add_argument("--sizes", default="1280x800,1920x1080", help="window sizes, WxH comma-separated")
     p.add_argument("--moves", type=int, default=10)
     p.add_argument("--turntable-frames", type=int, default=120, help="0: no turntables")
+    p.add_argument("--latency-only", action="store_true",
+                   help="only the slider-move latencies (no frame rates, no training job: no dataset needed)")
     a = p.parse_args()
     avatars = a.avatar or [REPO / "resources" / "demo_avatar"]
     sizes = [tuple(int(v) for v in s.split("x")) for s in a.sizes.split(",")]
@@ -85,12 +87,19 @@ def main() -> None:
                     row = {"latency_ms": {name: summary(r["latencies"], name) for name in PRESET_NAMES},
                            "render_ms": {name: summary(r["latencies"], f"{name} render") for name in PRESET_NAMES},
                            "presets_measured_in_window": r["presets"]}
+                    if a.latency_only:
+                        window[str(avatar)] = row
+                        print(f"{size[0]}x{size[1]} {avatar.name}: {json.dumps(row)}", flush=True)
+                        continue
                     steps = [{"refine_to": "final"}, {"wait_render": "final"}, {"wait_frames": 180}, *orbit,
                              {"wait_render": "final"}]
                     r = studio_run(display, avatar, steps, work, size)
                     row["fps_idle"], row["fps_rendering"] = r["fps_idle"], r["fps_rendering"]
                     window[str(avatar.relative_to(REPO) if avatar.is_relative_to(REPO) else avatar)] = row
                     print(f"{size[0]}x{size[1]} {avatar.name}: {json.dumps(row)}", flush=True)
+                if a.latency_only:
+                    results["windows"][f"{size[0]}x{size[1]}"] = window
+                    continue
                 r = studio_run(display, avatars[0], [
                     {"train": {"dataset": str(a.dataset), "out": str(work / "job"), "minutes": 10, "effects": "all"}},
                     {"wait_frames": 600}, *orbit, {"cancel_jobs": True}, {"wait_job": True}], work, size)

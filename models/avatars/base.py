@@ -81,6 +81,8 @@ class Avatar(nn.Module, ABC):
 
     def __init__(self, head_model: HeadModel, n_frames: int, background: np.ndarray):
         super().__init__()
+        self.n_frames = n_frames
+        """The capture's training frames (each has its per-frame codes)."""
         self.head_model = head_model
         self.head = Head(head_model)
         self.register_buffer("background", torch.as_tensor(np.asarray(background, np.float32)))

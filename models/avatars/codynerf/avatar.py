@@ -26,6 +26,7 @@ from models.avatars.codynerf.prior import deformation_prior, nearest_vertices, p
 from models.avatars.codynerf.training import LossWeights, consistency_weight, ray_terms
 from models.avatars.components import losses
 from models.avatars.components.codes import frame_code
+from models.avatars.components.poses import PoseCorrected
 from models.avatars.mesh import MeshField, front_eye
 from models.avatars.quality import Quality
 from models.head.controls import Controls
@@ -77,8 +78,6 @@ class RenderConfig:
     pixel's ray, with no shortcut (0: the shell sampler)."""
 
 
-POSE_LR_SCALE = 0.02
-"""The pose corrections' learning rate against the networks' (Adam moves each by about its rate a step)."""
 MAX_REACH_M = 0.10
 """The farthest beyond the guide mesh an avatar models (hair, collar): the field's support and its sampling cost
 grow with it."""
@@ -102,7 +101,7 @@ def active_pixels(cfg: RenderConfig, camera: Camera, raster: Raster) -> np.ndarr
     return binary_dilation(raster.hit, iterations=silhouette_margin_px(cfg, camera, raster.depth))
 
 
-class CoDyNeRFAvatar(Avatar):
+class CoDyNeRFAvatar(PoseCorrected, Avatar):
     name: ClassVar[str] = "codynerf"
     quality_knobs: ClassVar[tuple[str, ...]] = ("samples", "fine", "bf16")
 
@@ -121,8 +120,7 @@ class CoDyNeRFAvatar(Avatar):
         margin = render_cfg.shell_m + 0.02
         self.occupancy = OccupancyGrid(template.min(0).values - margin, template.max(0).values + margin)
         self.pose_corrections: nn.Parameter | None = None
-        """(N,6) per training frame: a rotation (axis-angle, about the head's centre) and a translation (metres) of
-        the tracked head (correct_poses); None: the poses as given."""
+        """(N,6) per training frame (components/poses.py); None: the poses as given."""
 
     # ---- making and describing -------------------------------------------------------------------------
     def make_field(self) -> CoDyNeRFField:
@@ -165,39 +163,8 @@ class CoDyNeRFAvatar(Avatar):
         self.loss_weights = replace(self.loss_weights, cauchy=0.0, consistency_shapes_density=False,
                                     mesh_normals_first=True)
 
-    def correct_poses(self) -> None:
-        """Give every training frame a pose correction, learned with the avatar."""
-        if self.pose_corrections is None:
-            self.pose_corrections = nn.Parameter(torch.zeros(self.omega.num_embeddings, 6,
-                                                             device=self.omega.weight.device))
-
-    def parameter_groups(self) -> list[dict]:
-        """The corrections learn at POSE_LR_SCALE of the rate of the networks: a step of the networks' rate (5e-3)
-        would turn the head by 0.3 degrees and move it 5 mm at once."""
-        if self.pose_corrections is None:
-            return super().parameter_groups()
-        rest = [p for p in self.parameters() if p is not self.pose_corrections]
-        return [{"params": rest, "lr_scale": 1.0}, {"params": [self.pose_corrections], "lr_scale": POSE_LR_SCALE}]
-
-    def pose_correction(self, frame: int) -> torch.Tensor:
-        """(6,) a training frame's correction less the mean of all frames' (so that on average the avatar keeps
-        the tracker's poses, which held-out frames and new controls use as they are)."""
-        return self.pose_corrections[frame] - self.pose_corrections.mean(0)
-
-    def corrected_rays(self, rays: Rays, geo: FrameGeometry, frame: int) -> Rays:
-        """The rays in the tracked head's frame where the head truly stood at `frame`: the head turned by r about
-        its centre c and moved by t maps a world point p to R^T (p - c - t) + c. The surface distances along the
-        rays are kept (corrections are millimetres; the shell spans centimetres)."""
-        c = self.pose_correction(frame)
-        rot = rotation_matrix_from_axis_angle(c[:3])
-        centre = 0.5 * (geo.box_min + geo.box_max)
-        origins = (rays.origins - centre - c[3:]) @ rot + centre  # row vectors: p @ R = R^T p
-        return replace(rays, origins=origins, directions=rays.directions @ rot)
-
-    def pose_correction_term(self, frame: int) -> torch.Tensor:
-        """The corrections' prior: squared, in units of 0.01 rad and 2 mm."""
-        c = self.pose_correction(frame)
-        return (c[:3] / 0.01).square().sum() + (c[3:] / 0.002).square().sum()
+    def pose_centre(self, geometry: FrameGeometry) -> torch.Tensor:
+        return 0.5 * (geometry.box_min + geometry.box_max)
 
     @property
     def effects(self) -> tuple[str, ...]:

@@ -27,6 +27,7 @@ from models.avatars.base import BACKGROUND, Avatar, RayOutput, TrainingBatch
 from models.avatars.codynerf.avatar import key_light_dir
 from models.avatars.components import losses
 from models.avatars.components.codes import frame_code
+from models.avatars.components.poses import PoseCorrected
 from models.avatars.components.rigid import kabsch
 from models.avatars.mesh import MeshField
 from models.avatars.primitives import march
@@ -71,6 +72,8 @@ class PrimitivesConfig:
     offsets: Annotated[float, Range(0)] = 1e-3
     """The offsets' L2 weight."""
     codes: Annotated[float, Range(0)] = 1e-3
+    pose_corrections: Annotated[float, Range(0)] = 1e-4
+    """The weight of the per-frame pose corrections' prior (a tracked video's; components/poses.py)."""
     chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1 << 18
     """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
@@ -110,7 +113,7 @@ class PrimitivesGeometry:
                                   None if self.light is None else self.light.to(device))
 
 
-class PrimitivesAvatar(Avatar):
+class PrimitivesAvatar(PoseCorrected, Avatar):
     name: ClassVar[str] = "primitives"
     rays_per_step: ClassVar[int] = 2048
     quality_knobs: ClassVar[tuple[str, ...]] = ("samples",)
@@ -138,6 +141,8 @@ class PrimitivesAvatar(Avatar):
         self.latent = nn.Embedding(n_frames, cfg.code_dim)
         nn.init.zeros_(self.latent.weight)
         self.samples = cfg.samples
+        self.pose_corrections: nn.Parameter | None = None
+        """(N,6) per training frame, on a tracked video (components/poses.py); None: the poses as given."""
 
     def make_decoder(self) -> SlabDecoder:
         """The decoder of the frame's condition (expression and jaw/neck, code, view, the light's direction where
@@ -162,12 +167,24 @@ class PrimitivesAvatar(Avatar):
         light = None if light is None else tuple(float(v) for v in light)
         if light is not None and (len(light) != 3 or not np.isfinite(light).all() or np.linalg.norm(light) < 1e-6):
             raise ValueError(f"light_dir {meta['light_dir']}: not a direction (three finite numbers, not all 0)")
-        return cls(head_model, cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32),
-                   tuple(meta.get("effects", ())), light)
+        avatar = cls(head_model, cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32),
+                     tuple(meta.get("effects", ())), light)
+        if meta.get("pose_corrections", False):
+            avatar.correct_poses()
+        return avatar
 
     def meta(self) -> dict:
         return {"model": self.name, "effects": list(self._effects), self.config_key: asdict(self.cfg),
-                "light_dir": None if self.light_dir is None else list(self.light_dir)}
+                "light_dir": None if self.light_dir is None else list(self.light_dir),
+                "pose_corrections": self.pose_corrections is not None}
+
+    def fit_to_tracked_video(self) -> None:
+        """Learn a correction of each training frame's head pose with the avatar (components/poses.py)."""
+        self.correct_poses()
+
+    def pose_centre(self, geometry: PrimitivesGeometry) -> torch.Tensor:
+        """The middle of the posed mesh's box."""
+        return 0.5 * (geometry.posed.min(0).values + geometry.posed.max(0).values)
 
     @property
     def needs_normals(self) -> bool:
@@ -355,7 +372,7 @@ class PrimitivesAvatar(Avatar):
         code = self.codes(frame, geo.code_weights)
         if training:
             return self.decode(geo, code, eye, lit, training=True)
-        key = (frame, tuple(round(float(x), 6) for x in eye))
+        key = (frame, tuple(round(float(x), 6) for x in eye.detach()))
         if geo.decoded.get("key") != key:
             geo.decoded.clear()
             geo.decoded["key"] = key
@@ -369,6 +386,8 @@ class PrimitivesAvatar(Avatar):
         """rgb, opacity and depth of R rays marched through the primitives they meet (one pinhole's rays are
         binned in screen tiles, march.candidate_lists). lit: decoded with every texel lit (inspection)."""
         del generator  # the march is deterministic
+        if self.pose_corrections is not None and frame is not None:
+            rays = self.corrected_rays(rays, geometry, frame)
         prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit)
         if training:
             out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims,
@@ -391,8 +410,11 @@ class PrimitivesAvatar(Avatar):
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
         out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)
-        return {"photometric": losses.photometric(out.buffers["rgb"], batch.target), **self.regularisers(out),
-                "codes": self.cfg.codes * losses.code_l2(self.codes(batch.frame))}
+        terms = {"photometric": losses.photometric(out.buffers["rgb"], batch.target), **self.regularisers(out),
+                 "codes": self.cfg.codes * losses.code_l2(self.codes(batch.frame))}
+        if self.pose_corrections is not None:
+            terms["pose_corrections"] = self.cfg.pose_corrections * self.pose_correction_term(batch.frame)
+        return terms
 
     def regularisers(self, out: RayOutput) -> dict[str, torch.Tensor]:
         """MVP's volume prior (the primitives' mean volume over their starting volume) and the offsets' L2."""

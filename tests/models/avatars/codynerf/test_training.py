@@ -12,7 +12,7 @@ import torch
 from models.avatars.codynerf.training import LossWeights, ray_terms
 from models.avatars.registry import load_avatar
 from tests.conftest import CODYNERF_DEMO
-from tests.models.avatars.codynerf.test_pose_corrections import rays_at_head
+from tests.models.avatars.test_pose_corrections import rays_at_head
 
 
 def rays(seed: int = 0):

@@ -1,6 +1,6 @@
-"""Per-frame head pose corrections of a tracked video: the rays they give against an independent rotation, zero
-corrections change nothing, the photometric loss reaches them (finite gradients), they learn at their own rate,
-and they are saved with the avatar."""
+"""Per-frame head pose corrections of a tracked video, on CoDyNeRF and the primitives alike: the rays they give
+against an independent rotation, zero corrections change nothing, the photometric loss reaches them (finite
+gradients), they learn at their own rate, and they are saved with the avatar."""
 
 from __future__ import annotations
 
@@ -12,12 +12,14 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from models.avatars.checkpoint import save_checkpoint
-from models.avatars.codynerf.avatar import POSE_LR_SCALE
+from models.avatars.components.poses import POSE_LR_SCALE
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
 from render.gl.raster import Rasterizer
 from render.rays import Rays
-from tests.conftest import CODYNERF_DEMO
+from tests.conftest import CODYNERF_DEMO, DEMO
+
+AVATARS = pytest.mark.parametrize("folder", [CODYNERF_DEMO, DEMO], ids=["codynerf", "primitives"])
 
 
 def rays_at_head(avatar, gl, n: int = 64, seed: int = 0) -> tuple[Rays, object]:
@@ -25,7 +27,7 @@ def rays_at_head(avatar, gl, n: int = 64, seed: int = 0) -> tuple[Rays, object]:
     r = Rasterizer(gl)
     geo = avatar.frame_geometry(Controls(), r)  # the demo's shadow factor reads the light's depth map
     r.release()
-    centre = 0.5 * (geo.box_min + geo.box_max)
+    centre = avatar.pose_centre(geo)
     g = torch.Generator().manual_seed(seed)
     target = centre + 0.04 * torch.randn(n, 3, generator=g)
     origin = centre + torch.tensor([0.0, 0.0, 0.6])
@@ -34,8 +36,9 @@ def rays_at_head(avatar, gl, n: int = 64, seed: int = 0) -> tuple[Rays, object]:
 
 
 @pytest.mark.gl
-def test_corrected_rays_against_an_independent_rotation(gl):
-    avatar, _ = load_avatar(CODYNERF_DEMO)
+@AVATARS
+def test_corrected_rays_against_an_independent_rotation(gl, folder):
+    avatar, _ = load_avatar(folder)
     avatar.fit_to_tracked_video()
     rays, geo = rays_at_head(avatar, gl, 8)
     n = avatar.pose_corrections.shape[0]
@@ -44,7 +47,7 @@ def test_corrected_rays_against_an_independent_rotation(gl):
     effective = (avatar.pose_corrections[0] * (1 - 1 / n)).detach().numpy()  # less the mean over n frames
     out = avatar.corrected_rays(rays, geo, 0)
     rot = Rotation.from_rotvec(effective[:3].astype(np.float64)).as_matrix()
-    c = (0.5 * (geo.box_min + geo.box_max)).numpy().astype(np.float64)
+    c = avatar.pose_centre(geo).numpy().astype(np.float64)
     for s in (0.0, 0.3, 0.7):  # points along each ray map to R^T (p - c - t) + c
         p = rays.origins.numpy() + s * rays.directions.numpy()
         want = (p - c - effective[3:]) @ rot + c
@@ -53,8 +56,9 @@ def test_corrected_rays_against_an_independent_rotation(gl):
 
 
 @pytest.mark.gl
-def test_zero_corrections_change_nothing_and_the_loss_reaches_them(gl):
-    avatar, _ = load_avatar(CODYNERF_DEMO)
+@AVATARS
+def test_zero_corrections_change_nothing_and_the_loss_reaches_them(gl, folder):
+    avatar, _ = load_avatar(folder)
     rays, geo = rays_at_head(avatar, gl)
     plain = avatar.render_rays(rays, geo, 0).buffers["rgb"].detach()
     avatar.fit_to_tracked_video()
@@ -69,14 +73,16 @@ def test_zero_corrections_change_nothing_and_the_loss_reaches_them(gl):
     torch.testing.assert_close(grad[0], -grad[3] / (avatar.pose_corrections.shape[0] - 1), rtol=1e-4, atol=1e-12)
     # Held-out frames and new controls (frame None) use the tracked pose as it is.
     torch.testing.assert_close(avatar.render_rays(rays, geo, None).buffers["rgb"],
-                               load_avatar(CODYNERF_DEMO)[0].render_rays(rays, geo, None).buffers["rgb"])
+                               load_avatar(folder)[0].render_rays(rays, geo, None).buffers["rgb"])
 
 
-def test_corrections_learn_slowly_and_are_saved(tmp_path):
-    avatar, meta = load_avatar(CODYNERF_DEMO)
+@AVATARS
+def test_corrections_learn_slowly_and_are_saved(tmp_path, folder):
+    avatar, meta = load_avatar(folder)
     avatar.fit_to_tracked_video()
-    assert avatar.loss_weights.cauchy == 0.0  # an opaque head in front of the room
-    assert not avatar.loss_weights.consistency_shapes_density  # Eq. 13 pulls the normals only
+    if folder == CODYNERF_DEMO:
+        assert avatar.loss_weights.cauchy == 0.0  # an opaque head in front of the room
+        assert not avatar.loss_weights.consistency_shapes_density  # Eq. 13 pulls the normals only
     groups = avatar.parameter_groups()
     assert [g["lr_scale"] for g in groups] == [1.0, POSE_LR_SCALE]
     assert groups[1]["params"] == [avatar.pose_corrections]
