@@ -50,6 +50,26 @@ class PresetFigures:
     """The image size they were measured at: the avatar's capture's (at most 256 px), else 128."""
 
 
+FIRST_PIXELS_MS = 150.0
+"""A slider move should show its first pixels within this: a coarse pass is left out when a finer pass of the
+request, as last timed at this size, takes no longer (a primitives avatar's `final` at 128 px)."""
+
+
+def passes_to_render(passes: tuple[str, ...], timed: dict[tuple[str, int], float], size: int) -> tuple[str, ...]:
+    """The request's passes less those a finer pass within FIRST_PIXELS_MS makes pointless; `timed`: the last
+    render time (ms) of each (pass, final size).
+
+    >>> passes_to_render(("draft", "preview", "final"), {("final", 128): 90.0, ("preview", 128): 60.0}, 128)
+    ('final',)
+    >>> passes_to_render(("draft", "preview", "final"), {("final", 256): 400.0, ("preview", 256): 120.0}, 256)
+    ('preview', 'final')
+    >>> passes_to_render(("draft", "preview"), {}, 256)
+    ('draft', 'preview')
+    """
+    return tuple(name for i, name in enumerate(passes)
+                 if not any(timed.get((later, size), np.inf) <= FIRST_PIXELS_MS for later in passes[i + 1:]))
+
+
 def scaled(camera: Camera, scale: float) -> Camera:
     return camera.resized(max(8, round(camera.width_px * scale)), max(8, round(camera.height_px * scale)))
 
@@ -153,6 +173,7 @@ def serve(requests, results, latest) -> None:
     gl = GLContext.headless()
     raster = Rasterizer(gl)
     avatar, avatar_id, measure = None, 0, False
+    timed: dict[tuple[str, int], float] = {}  # the loaded avatar's passes' last render times (passes_to_render)
     stale = lambda rid: latest.value != rid
     try:
         while True:
@@ -166,7 +187,7 @@ def serve(requests, results, latest) -> None:
                     return
                 if msg[0] == "avatar":
                     _, avatar_id, folder, measure = msg
-                    render = None
+                    render, timed = None, {}
                     try:
                         avatar = None if folder is None else load_avatar(folder)[0]
                     except Exception as e:  # the window read the same folder: this is rare
@@ -182,7 +203,7 @@ def serve(requests, results, latest) -> None:
             try:
                 if render is not None:
                     _, rid, request = render
-                    render_passes(avatar, raster, request, rid, stale, results)
+                    render_passes(avatar, raster, request, rid, stale, results, timed)
                     results.put(("idle", rid))
                 elif measure:
                     figures = measure_presets(avatar, raster, lambda since=latest.value: stale(since))
@@ -202,10 +223,15 @@ def serve(requests, results, latest) -> None:
             results.put(("closed",))
 
 
-def render_passes(avatar, raster, request: Request, rid: int, stale, results) -> None:
-    """Each pass of the request, coarse to fine, its pixels sent as soon as they are made."""
-    qualities = [avatar.presets[name].quality for name in request.passes]
-    for i, name in enumerate(request.passes):
+def render_passes(avatar, raster, request: Request, rid: int, stale, results,
+                  timed: dict[tuple[str, int], float] | None = None) -> None:
+    """Each pass of the request worth rendering (passes_to_render), coarse to fine, its pixels sent as soon as they
+    are made; each pass's time goes into `timed`."""
+    timed = {} if timed is None else timed
+    size = request.camera.width_px
+    passes = passes_to_render(request.passes, timed, size)
+    qualities = [avatar.presets[name].quality for name in passes]
+    for i, name in enumerate(passes):
         if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:
             continue  # the bench may choose one setting for two presets: render it once, as the finer
         avatar.apply_preset(name, request.camera.width_px)
@@ -217,6 +243,7 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results) ->
         ms = 1e3 * (time.perf_counter() - t0)
         if stale(rid):
             return
+        timed[name, size] = ms
         results.put(("result", rid, name, buffers, ms))
 
 

@@ -12,8 +12,10 @@ pictures). Steps:
   {"timeline": FRAME}                     show a capture frame's controls (-1: the sliders)
   {"refine_to": PRESET}                   the pass the viewport refines to
   {"wait_render": PRESET}                 until the latest request's pass PRESET is on screen
-  {"record_latency": true}                the ms from the last change to each of its passes' pixels (and as
-                                          "PASS render" the pass's own render time), kept for the report's
+  {"record_latency": true}                the ms from the last change to its first pixels ("first") and to each
+                                          of its passes' pixels (passes a faster finer one made pointless are
+                                          left out: app/studio/neural.py), and as "PASS render" each pass's own
+                                          render time, kept for the report's
                                           "latencies" (benchmarks/bench_studio.py)
   {"undo": true}                          undo the last slider or camera change (Ctrl+Z)
   {"redo": true}                          redo it (Ctrl+Shift+Z)
@@ -82,6 +84,7 @@ class Driven(Protocol):
     exporter: Exporter
     viewport: Viewport
     last_submit_id: int
+    latency_ms: float | None
     pass_latency_ms: dict[str, float]
     pass_render_ms: dict[str, float]
 
@@ -288,7 +291,8 @@ def _wait_render(sc: Script, st: Driven, s: dict) -> bool:
 
 @step("record_latency")
 def _record_latency(sc: Script, st: Driven, s: dict) -> bool:
-    sc.latencies.append({**st.pass_latency_ms, **{f"{k} render": v for k, v in st.pass_render_ms.items()}})
+    first = {} if st.latency_ms is None else {"first": st.latency_ms}
+    sc.latencies.append({**first, **st.pass_latency_ms, **{f"{k} render": v for k, v in st.pass_render_ms.items()}})
     return True
 
 

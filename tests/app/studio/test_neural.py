@@ -1,0 +1,35 @@
+"""The renderer process's passes, run in this process on the shipped demo: every pass while nothing is timed, then
+only the passes worth rendering once a finer pass has shown it fits the first-pixels budget."""
+
+from __future__ import annotations
+
+import queue
+
+import pytest
+
+from app.studio.neural import FIRST_PIXELS_MS, Request, render_passes
+from models.avatars.registry import load_avatar
+from models.head.controls import Controls
+from render.camera import framing_camera
+from render.gl.raster import Rasterizer
+from tests.conftest import DEMO
+
+
+@pytest.mark.gl
+def test_a_fast_final_pass_leaves_the_coarse_passes_out(gl):
+    avatar, _ = load_avatar(DEMO)
+    raster = Rasterizer(gl)
+    cam = framing_camera(avatar.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=48, height_px=48)
+    request = Request(avatar.at_rest(Controls()), cam, ("draft", "preview", "final"))
+    results, timed = queue.Queue(), {}
+    shown = lambda: [results.get_nowait()[2] for _ in range(results.qsize())]
+    render_passes(avatar, raster, request, 1, lambda rid: False, results, timed)
+    assert shown() == ["draft", "preview", "final"]  # nothing timed yet: coarse to fine
+    assert set(timed) == {("draft", 48), ("preview", 48), ("final", 48)}
+    assert timed["final", 48] <= FIRST_PIXELS_MS  # a 48 px frame of the demo
+    render_passes(avatar, raster, request, 2, lambda rid: False, results, timed)
+    assert shown() == ["final"]
+    timed["final", 48] = FIRST_PIXELS_MS + 1  # a final too slow: the preview first, if it fits
+    render_passes(avatar, raster, request, 3, lambda rid: False, results, timed)
+    assert shown() == ["preview", "final"]
+    raster.release()
