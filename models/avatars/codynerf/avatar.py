@@ -121,6 +121,7 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
         self.occupancy = OccupancyGrid(template.min(0).values - margin, template.max(0).values + margin)
         self.pose_corrections: nn.Parameter | None = None
         """(N,6) per training frame (components/poses.py); None: the poses as given."""
+        self.expression_corrections: nn.Parameter | None = None  # (its guide mesh's trees are made once a frame)
 
     # ---- making and describing -------------------------------------------------------------------------
     def make_field(self) -> CoDyNeRFField:

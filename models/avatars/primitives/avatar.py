@@ -73,7 +73,8 @@ class PrimitivesConfig:
     """The offsets' L2 weight."""
     codes: Annotated[float, Range(0)] = 1e-3
     pose_corrections: Annotated[float, Range(0)] = 1e-4
-    """The weight of the per-frame pose corrections' prior (a tracked video's; components/poses.py)."""
+    """The weight of the per-frame pose and expression corrections' priors (a tracked video's;
+    components/poses.py)."""
     chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1 << 18
     """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
@@ -104,13 +105,14 @@ class PrimitivesGeometry:
     gaze: torch.Tensor  # (1,6)
     code_weights: torch.Tensor | None = None
     light: LightDepthMap | None = None  # the posed mesh seen from the key light, where the avatar casts shadows
+    controls: Controls | None = None  # what posed the mesh (expression corrections pose it again)
     decoded: dict = field(default_factory=dict)
 
     def to(self, device: torch.device | str) -> PrimitivesGeometry:
         w = None if self.code_weights is None else self.code_weights.to(device)
         return PrimitivesGeometry(self.posed.to(device), self.rotation.to(device), self.translation.to(device),
                                   self.condition.to(device), self.gaze.to(device), w,
-                                  None if self.light is None else self.light.to(device))
+                                  None if self.light is None else self.light.to(device), self.controls)
 
 
 class PrimitivesAvatar(PoseCorrected, Avatar):
@@ -143,6 +145,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         self.samples = cfg.samples
         self.pose_corrections: nn.Parameter | None = None
         """(N,6) per training frame, on a tracked video (components/poses.py); None: the poses as given."""
+        self.expression_corrections: nn.Parameter | None = None
+        """(N,E) per training frame, on a tracked video; None: the expressions as given."""
 
     def make_decoder(self) -> SlabDecoder:
         """The decoder of the frame's condition (expression and jaw/neck, code, view, the light's direction where
@@ -171,16 +175,21 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
                      tuple(meta.get("effects", ())), light)
         if meta.get("pose_corrections", False):
             avatar.correct_poses()
+        if meta.get("expression_corrections", False):
+            avatar.correct_expressions(head_model.num_expression)
         return avatar
 
     def meta(self) -> dict:
         return {"model": self.name, "effects": list(self._effects), self.config_key: asdict(self.cfg),
                 "light_dir": None if self.light_dir is None else list(self.light_dir),
-                "pose_corrections": self.pose_corrections is not None}
+                "pose_corrections": self.pose_corrections is not None,
+                "expression_corrections": self.expression_corrections is not None}
 
     def fit_to_tracked_video(self) -> None:
-        """Learn a correction of each training frame's head pose with the avatar (components/poses.py)."""
+        """Learn a correction of each training frame's head pose and expression weights with the avatar
+        (components/poses.py): the primitives sit on the mesh the corrected weights pose."""
         self.correct_poses()
+        self.correct_expressions(self.head_model.num_expression)
 
     def pose_centre(self, geometry: PrimitivesGeometry) -> torch.Tensor:
         """The middle of the posed mesh's box."""
@@ -260,7 +269,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         cond[E:E + 3], cond[E + 3:E + 6] = controls.rotation("jaw"), controls.rotation("neck")
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
-        return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_weights(controls))
+        return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_weights(controls),
+                                  controls=controls)
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> PrimitivesGeometry:
         """The frame's geometry; where the avatar casts shadows, with the posed mesh's depth map from the key light
@@ -334,16 +344,30 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         pairs = zip(frames.geometry, frames.origins, strict=True)
         return torch.stack([self.view_of(geo, eye.to(geo.translation)) for geo, eye in pairs])
 
+    def frame_inputs(self, geo: PrimitivesGeometry, frame: int | None) -> tuple[torch.Tensor, torch.Tensor]:
+        """The posed mesh (V,3) and the condition (1,D) the decode reads: a training frame's with its expression
+        correction (the mesh posed again with the corrected weights), else the geometry's own."""
+        if self.expression_corrections is None or frame is None or geo.controls is None:
+            return geo.posed, geo.condition
+        delta = self.expression_correction(frame)
+        batch = self.head.batch([geo.controls])
+        batch["expression"] = batch["expression"] + delta.to(batch["expression"])
+        E = len(delta)
+        condition = torch.cat([geo.condition[:, :E] + delta, geo.condition[:, E:]], -1)
+        return self.head(**batch)[0][0].to(geo.posed), condition
+
     def decode(self, geo: PrimitivesGeometry, code: torch.Tensor, eye: torch.Tensor, lit: bool = False,
-               training: bool = False) -> tuple[march.Primitives, torch.Tensor]:
+               training: bool = False, frame: int | None = None) -> tuple[march.Primitives, torch.Tensor]:
         """The frame's primitives, placed on its posed mesh, and their offsets, for a camera at `eye` (3,) (the view
         enters the decoder as the direction to the eye in the head's frame, held to the capture's cone: base.py).
-        lit: every texel lit (no cast shadows). training: colour alone (the buffers' extra channels are display's)."""
+        lit: every texel lit (no cast shadows). training: colour alone (the buffers' extra channels are display's).
+        frame: a training frame's expression correction (frame_inputs)."""
+        posed, condition = self.frame_inputs(geo, frame)
         view = self.seen_view(self.view_of(geo, eye)[None])[0]
-        inputs = [geo.condition, code, view[None]]
+        inputs = [condition, code, view[None]]
         if self.light_dir is not None:
             inputs.append((torch.as_tensor(self.light_dir, dtype=view.dtype, device=view.device) @ geo.rotation)[None])
-        centres, rotations = surface_frames(geo.posed, self.triangles, self.layout_triangles, self.layout_bary)
+        centres, rotations = surface_frames(posed, self.triangles, self.layout_triangles, self.layout_bary)
         light = None if not self.casts_shadows else torch.ones(1, 1, self.cfg.grid * self.cfg.voxels,
                                                                  self.cfg.grid * self.cfg.voxels, device=code.device) \
             if lit else self.slab_visibility(geo, centres, rotations)
@@ -371,13 +395,13 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         the batches of rays)."""
         code = self.codes(frame, geo.code_weights)
         if training:
-            return self.decode(geo, code, eye, lit, training=True)
+            return self.decode(geo, code, eye, lit, training=True, frame=frame)
         key = (frame, tuple(round(float(x), 6) for x in eye.detach()))
         if geo.decoded.get("key") != key:
             geo.decoded.clear()
             geo.decoded["key"] = key
         if lit not in geo.decoded:
-            geo.decoded[lit] = self.decode(geo, code, eye, lit)
+            geo.decoded[lit] = self.decode(geo, code, eye, lit, frame=frame)
         return geo.decoded[lit]
 
     # ---- rays ------------------------------------------------------------------------------------------
@@ -414,6 +438,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
                  "codes": self.cfg.codes * losses.code_l2(self.codes(batch.frame))}
         if self.pose_corrections is not None:
             terms["pose_corrections"] = self.cfg.pose_corrections * self.pose_correction_term(batch.frame)
+        if self.expression_corrections is not None:
+            terms["expression_corrections"] = self.cfg.pose_corrections * self.expression_correction_term(batch.frame)
         return terms
 
     def regularisers(self, out: RayOutput) -> dict[str, torch.Tensor]:

@@ -96,6 +96,9 @@ class PriorAvatar(PrimitivesAvatar):
         self._noise: torch.Generator | None = None
         self._own_biases: list[torch.Tensor] | None = None
 
+    def fit_to_tracked_video(self) -> None:
+        """No per-frame corrections: the prior keeps no per-frame anything (a frame is its maps and its mesh)."""
+
     def make_decoder(self) -> SlabDecoder:
         """The primitives' decoder with the spatial expression code in place of the controls' expression (which
         reaches it as Delta G): its condition is the view (and the light where the capture records one)."""

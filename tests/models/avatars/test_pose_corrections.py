@@ -1,6 +1,7 @@
 """Per-frame head pose corrections of a tracked video, on CoDyNeRF and the primitives alike: the rays they give
 against an independent rotation, zero corrections change nothing, the photometric loss reaches them (finite
-gradients), they learn at their own rate, and they are saved with the avatar."""
+gradients), they learn at their own rate, and they are saved with the avatar. The primitives' expression
+corrections: the mesh posed again with the corrected weights, against the head model posing those weights."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from models.avatars.checkpoint import save_checkpoint
-from models.avatars.components.poses import POSE_LR_SCALE
+from models.avatars.components.poses import EXPRESSION_LR_RATIO, POSE_LR_SCALE
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
 from render.gl.raster import Rasterizer
@@ -67,10 +68,14 @@ def test_zero_corrections_change_nothing_and_the_loss_reaches_them(gl, folder):
     target = plain.flip(0)  # some other colours
     out = avatar.render_rays(rays, geo, 3, training=True)
     ((out.buffers["rgb"] - target) ** 2).mean().backward()
-    grad = avatar.pose_corrections.grad
-    assert torch.isfinite(grad).all() and grad[3].abs().sum() > 0
-    # Every frame's correction is measured from the mean of all: the others see -1/N of frame 3's gradient.
-    torch.testing.assert_close(grad[0], -grad[3] / (avatar.pose_corrections.shape[0] - 1), rtol=1e-4, atol=1e-12)
+    corrections = [avatar.pose_corrections]
+    if folder == DEMO:
+        corrections.append(avatar.expression_corrections)
+    for c in corrections:
+        grad = c.grad
+        assert torch.isfinite(grad).all() and grad[3].abs().sum() > 0
+        # Every frame's correction is measured from the mean of all: the others see -1/N of frame 3's gradient.
+        torch.testing.assert_close(grad[0], -grad[3] / (c.shape[0] - 1), rtol=1e-4, atol=1e-12)
     # Held-out frames and new controls (frame None) use the tracked pose as it is.
     torch.testing.assert_close(avatar.render_rays(rays, geo, None).buffers["rgb"],
                                load_avatar(folder)[0].render_rays(rays, geo, None).buffers["rgb"])
@@ -84,12 +89,38 @@ def test_corrections_learn_slowly_and_are_saved(tmp_path, folder):
         assert avatar.loss_weights.cauchy == 0.0  # an opaque head in front of the room
         assert not avatar.loss_weights.consistency_shapes_density  # Eq. 13 pulls the normals only
     groups = avatar.parameter_groups()
-    assert [g["lr_scale"] for g in groups] == [1.0, POSE_LR_SCALE]
-    assert groups[1]["params"] == [avatar.pose_corrections]
+    corrections = [avatar.pose_corrections] + ([avatar.expression_corrections] if folder == DEMO else [])
+    assert [g["lr_scale"] for g in groups] == [1.0, POSE_LR_SCALE, POSE_LR_SCALE * EXPRESSION_LR_RATIO][:len(groups)]
+    assert [g["params"] for g in groups[1:]] == [[c] for c in corrections]
     assert sum(p.numel() for g in groups for p in g["params"]) == sum(p.numel() for p in avatar.parameters())
     with torch.no_grad():
-        avatar.pose_corrections.normal_(0, 0.01)
+        for c in corrections:
+            c.normal_(0, 0.01)
     save_checkpoint(tmp_path / "av", json.loads(json.dumps(meta | avatar.meta())), avatar.state_dict(), 1)
     again, saved = load_avatar(tmp_path / "av")
-    assert saved["pose_corrections"] is True
+    assert saved["pose_corrections"] is True and saved.get("expression_corrections", False) == (folder == DEMO)
     torch.testing.assert_close(again.pose_corrections, avatar.pose_corrections)
+    if folder == DEMO:
+        torch.testing.assert_close(again.expression_corrections, avatar.expression_corrections)
+
+
+def test_expression_corrections_pose_the_mesh_again():
+    """A training frame's decode reads the mesh the head model poses with the corrected weights (less the mean
+    correction), and its condition carries them; other frames and new controls read the controls as given."""
+    avatar, _ = load_avatar(DEMO)
+    avatar.fit_to_tracked_video()
+    E = avatar.head_model.num_expression
+    jaw = np.array([0.1, 0.0, 0.0], np.float32)
+    controls = Controls(expression=np.linspace(0.0, 0.4, E, dtype=np.float32), jaw=jaw)
+    geo = avatar.geometry(controls)
+    with torch.no_grad():
+        avatar.expression_corrections[2] = torch.linspace(-0.2, 0.3, E)
+    delta = (avatar.expression_corrections[2] * (1 - 1 / avatar.n_frames)).detach().numpy()
+    posed, condition = avatar.frame_inputs(geo, 2)
+    want = avatar.head.pose(Controls(expression=controls.expression + delta, jaw=controls.jaw))[0][0]
+    torch.testing.assert_close(posed.detach(), want, atol=1e-6, rtol=0)
+    torch.testing.assert_close(condition[0, :E].detach(), torch.as_tensor(controls.expression + delta))
+    torch.testing.assert_close(condition[0, E:], geo.condition[0, E:])
+    assert (posed - geo.posed).abs().max() > 1e-4  # the correction moved the mesh
+    same, cond = avatar.frame_inputs(geo, None)
+    assert same is geo.posed and cond is geo.condition
