@@ -17,6 +17,9 @@ from models.head.controls import Controls, fit_length
 NEAREST_FRAMES = 5
 """Training frames whose codes a new frame blends. Chosen on the validation frames of the three shared clips (k
 of 1, 3, 5, 10; README "Real people"), then kept for every capture."""
+LEFT_OUT_WINDOW = 12
+"""Frames each side of a training frame whose codes `left_out_weights` leaves out with it (half a second of
+video: a held-out frame's nearest training frames are not its own moment)."""
 KEY_SCALE_FLOOR = 0.01
 """The least spread (radians, or expression weight) a control's key is divided by: a control the training
 frames never moved would otherwise blow any change of it up into a distance that outweighs all the rest."""
@@ -64,4 +67,23 @@ def nearest_code_weights(keys: torch.Tensor, query: torch.Tensor, k: int = NEARE
     near = (1.0 - dist[:k] / dist[k]).clamp_min(0.0) if dist[k] > 0 else torch.zeros(k, dtype=d.dtype)
     near = near if near.sum() > 0 else torch.ones(k, dtype=d.dtype)
     w[idx[:k]] = near / near.sum()
+    return w
+
+
+def left_out_weights(keys: torch.Tensor, frame: int, window: int = LEFT_OUT_WINDOW, k: int = NEAREST_FRAMES
+                     ) -> torch.Tensor:
+    """(N,) the code weights a held-out frame with training frame `frame`'s key would get if that frame and the
+    `window` frames each side of it (in the capture's order) were not in training: a training frame decoded with
+    them asks the decoder what new controls ask of it.
+
+    >>> left_out_weights(torch.tensor([[0.0], [1.0], [2.0], [4.0], [3.0]]), 1, window=1, k=1)
+    tensor([0., 0., 0., 0., 1.])
+    """
+    n = len(keys)
+    keep = (torch.arange(n, device=keys.device) - frame).abs() > window
+    w = torch.zeros(n, dtype=keys.dtype, device=keys.device)
+    if keep.any():
+        w[keep] = nearest_code_weights(keys[keep], keys[frame], k)
+    else:
+        w[frame] = 1.0
     return w

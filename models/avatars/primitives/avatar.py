@@ -26,7 +26,7 @@ from torch import nn
 from models.avatars.base import BACKGROUND, Avatar, RayOutput, TrainingBatch
 from models.avatars.codynerf.avatar import key_light_dir
 from models.avatars.components import losses
-from models.avatars.components.codes import frame_code
+from models.avatars.components.codes import frame_code, left_out_weights
 from models.avatars.components.poses import PoseCorrected
 from models.avatars.components.rigid import kabsch
 from models.avatars.mesh import MeshField
@@ -75,6 +75,10 @@ class PrimitivesConfig:
     pose_corrections: Annotated[float, Range(0)] = 1e-4
     """The weight of the per-frame pose and expression corrections' priors (a tracked video's;
     components/poses.py)."""
+    code_swap: Annotated[float, Range(0, 1)] = 0.0
+    """Share of training steps (on a capture with code keys: a tracked video) whose frame decodes with the code a
+    held-out frame of its controls would get (components/codes.py left_out_weights), so that the decoder learns to
+    do with the codes new controls get."""
     chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1 << 18
     """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
@@ -389,11 +393,20 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
             colour = torch.cat([colour, texels.expand(-1, M, -1, -1, -1)], -1)
         return march.Primitives(centres, rotations, half, density, colour), offsets
 
+    def training_code(self, frame: int, generator: torch.Generator | None) -> torch.Tensor:
+        """(1,C) the code a training step decodes with: the frame's own, or on code_swap's share of the steps the
+        code of the frame left out (left_out_weights)."""
+        keys = getattr(self, "code_keys", None)
+        if keys is None or self.cfg.code_swap <= 0 or generator is None \
+                or float(torch.rand((), generator=generator)) >= self.cfg.code_swap:
+            return self.codes(frame)
+        return left_out_weights(keys, frame)[None] @ self.latent.weight
+
     def decoded(self, geo: PrimitivesGeometry, frame: int | None, eye: torch.Tensor, training: bool,
-                lit: bool = False):
+                lit: bool = False, code: torch.Tensor | None = None):
         """decode, cached on the geometry for display (one decode a frame, and one lit for inspection, whatever
-        the batches of rays)."""
-        code = self.codes(frame, geo.code_weights)
+        the batches of rays). code: instead of the frame's (training_code)."""
+        code = self.codes(frame, geo.code_weights) if code is None else code
         if training:
             return self.decode(geo, code, eye, lit, training=True, frame=frame)
         key = (frame, tuple(round(float(x), 6) for x in eye.detach()))
@@ -409,10 +422,10 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
                     generator: torch.Generator | None = None, training: bool = False, lit: bool = False) -> RayOutput:
         """rgb, opacity and depth of R rays marched through the primitives they meet (one pinhole's rays are
         binned in screen tiles, march.candidate_lists). lit: decoded with every texel lit (inspection)."""
-        del generator  # the march is deterministic
         if self.pose_corrections is not None and frame is not None:
             rays = self.corrected_rays(rays, geometry, frame)
-        prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit)
+        code = self.training_code(frame, generator) if training and frame is not None else None
+        prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit, code)
         if training:
             out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims,
                               march.candidate_lists(rays.origins, rays.directions, prims), self.cfg.samples)

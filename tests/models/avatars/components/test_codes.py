@@ -1,18 +1,20 @@
 """Codes for new controls: the blend of the nearest training frames' codes, worked by hand, continuous as the
-controls move, a training frame's own controls giving its own code, and the keys saved with the avatar."""
+controls move, a training frame's own controls giving its own code, and the keys saved with the avatar; a
+primitives training step that takes the code of its frame left out."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import torch
 
 from models.avatars.checkpoint import save_checkpoint
-from models.avatars.components.codes import nearest_code_weights
+from models.avatars.components.codes import LEFT_OUT_WINDOW, left_out_weights, nearest_code_weights
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
-from tests.conftest import CODYNERF_DEMO
+from tests.conftest import CODYNERF_DEMO, DEMO
 
 
 def test_weights_worked_by_hand():
@@ -61,3 +63,20 @@ def test_a_training_frames_own_controls_take_its_code_and_the_keys_are_saved(tmp
     save_checkpoint(tmp_path / "av", json.loads(json.dumps(meta)), avatar.state_dict(), 1)
     again, _ = load_avatar(tmp_path / "av")
     torch.testing.assert_close(again.code_weights(controls[j]), w)
+
+
+def test_a_swapped_training_step_decodes_with_the_left_out_frames_code():
+    """code_swap 1: every training step's code is the blend left_out_weights gives (never the frame's own or its
+    neighbours'); code_swap 0: the frame's own."""
+    avatar, _ = load_avatar(DEMO)
+    n = avatar.n_frames
+    g = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        avatar.latent.weight.copy_(torch.randn(avatar.latent.weight.shape, generator=g))
+    avatar.key_codes([Controls(expression=np.full(4, k / n, np.float32)) for k in range(n)])  # frame k at k / n
+    torch.testing.assert_close(avatar.training_code(7, g), avatar.latent.weight[7:8])  # the demo's code_swap is 0
+    avatar.cfg = replace(avatar.cfg, code_swap=1.0)
+    w = left_out_weights(avatar.code_keys, 7, window=LEFT_OUT_WINDOW)
+    assert w[7 - LEFT_OUT_WINDOW:8 + LEFT_OUT_WINDOW].sum() == 0 and abs(float(w.sum()) - 1) < 1e-6
+    assert w[8 + LEFT_OUT_WINDOW] > 0  # the nearest frame left in: the first after the window
+    torch.testing.assert_close(avatar.training_code(7, g), w[None] @ avatar.latent.weight)
