@@ -190,6 +190,8 @@ def serve(requests, results, latest) -> None:
                     render, timed = None, {}
                     try:
                         avatar = None if folder is None else load_avatar(folder)[0]
+                        if avatar is not None:
+                            avatar.display_cores = os.cpu_count() or 1
                     except Exception as e:  # the window read the same folder: this is rare
                         avatar, measure = None, False
                         results.put(("error", f"render failed: {type(e).__name__}: {e}"))

@@ -94,6 +94,12 @@ class Avatar(nn.Module, ABC):
         self.rest_translation = np.zeros(3, np.float32)
         """Where its capture held the head (avatar.json "rest_pose": the training frames' mean translation): the
         field reads world positions, so new controls (sliders, turntables, `render`) place the head there."""
+        self.should_stop: Callable[[], bool] | None = None
+        """While render_image runs: its should_stop, for models whose batches are long (the primitives' march asks
+        it between waves) to stop within a batch."""
+        self.display_cores: int | None = None
+        """Cores a display render may spread its work over where the model can (None: torch's thread count); the
+        studio's renderer keeps torch to one thread and gives the primitives' march groups the machine's cores."""
         self.view_range: dict[str, list[float]] | None = None
         """The directions its capture saw the head from (avatar.json's "view_range": yaw_deg and pitch_deg, least
         and most); None: not recorded."""
@@ -367,17 +373,21 @@ class Avatar(nn.Module, ABC):
         rays = rays.to(device)
         names = self.inspection_buffers() if inspect else ()
         parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *self.default_buffers(), *names)}
-        with self.display_mode():
-            chunk = chunk_rays or self.chunk_rays
-            for a in range(0, len(rays), chunk):
-                if should_stop is not None and should_stop():
-                    raise RenderCancelled
-                out = self.render_rays(rays[a:a + chunk], geo, frame)
-                buffers = out.buffers | self.inspect(out, geo, names)
-                buffers["depth"] = torch.where(buffers["opacity"] > 0.5, buffers["depth"],
-                                               torch.full_like(buffers["depth"], np.inf))
-                for k, v in buffers.items():
-                    parts[k].append(v.detach())
+        self.should_stop = should_stop
+        try:
+            with self.display_mode():
+                chunk = chunk_rays or self.chunk_rays
+                for a in range(0, len(rays), chunk):
+                    if should_stop is not None and should_stop():
+                        raise RenderCancelled
+                    out = self.render_rays(rays[a:a + chunk], geo, frame)
+                    buffers = out.buffers | self.inspect(out, geo, names)
+                    buffers["depth"] = torch.where(buffers["opacity"] > 0.5, buffers["depth"],
+                                                   torch.full_like(buffers["depth"], np.inf))
+                    for k, v in buffers.items():
+                        parts[k].append(v.detach())
+        finally:
+            self.should_stop = None
         background = (self.background if plate is None else plate).cpu().numpy()
         layout = {k: (c, background if fill == BACKGROUND else fill) for k, (c, fill) in self.layout().items()}
         return rays_to_images(parts, camera.height_px, camera.width_px, idx, layout)

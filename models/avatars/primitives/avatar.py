@@ -72,6 +72,8 @@ class PrimitivesConfig:
     offsets: Annotated[float, Range(0)] = 1e-3
     """The offsets' L2 weight."""
     codes: Annotated[float, Range(0)] = 1e-3
+    corrections: bool = True
+    """On a tracked video, learn per-frame pose and expression corrections (components/poses.py)."""
     pose_corrections: Annotated[float, Range(0)] = 1e-4
     """The weight of the per-frame pose and expression corrections' priors (a tracked video's;
     components/poses.py)."""
@@ -192,8 +194,9 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     def fit_to_tracked_video(self) -> None:
         """Learn a correction of each training frame's head pose and expression weights with the avatar
         (components/poses.py): the primitives sit on the mesh the corrected weights pose."""
-        self.correct_poses()
-        self.correct_expressions(self.head_model.num_expression)
+        if self.cfg.corrections:
+            self.correct_poses()
+            self.correct_expressions(self.head_model.num_expression)
 
     def pose_centre(self, geometry: PrimitivesGeometry) -> torch.Tensor:
         """The middle of the posed mesh's box."""
@@ -255,10 +258,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
 
     @property
     def interactive_chunk_rays(self) -> int:
-        """4096 rays a batch in the window: a new slider value waits for at most one batch in flight (about 30 ms of
-        a 256 px `final` frame of the demo here); measured on the demo, a 128 px draft and a 256 px final frame
-        take 96 and 505 ms in batches of 4096 rays, 82 and 530 ms in batches of 16384, 130 and 575 in 2048."""
-        return 1 << 12
+        """A 256 px frame in one batch in the window: the march's per-batch work (tile lists, packed grids, waves)
+        does not repeat, and its groups run on the renderer's cores; a new slider value waits for at most the
+        frame in flight. Measured on the demo at 256 px (`final`, the studio's 3/4 view, alone): 298 / 224 / 219
+        ms a frame in batches of 4096 / 16384 / 65536 rays on one thread, 435 / 199 / 154 ms in two groups on
+        two threads."""
+        return 1 << 16
 
     # ---- per frame -------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -438,12 +443,15 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
 
     def display_march(self, origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor,
                       prims: march.Primitives) -> march.MarchOutput:
-        """The march as display runs it (and the bench times it): the rays in as many groups as torch has threads
-        (one thread a group), each with its candidate lists; in waves with early termination, samples by the voxels
-        a segment crosses, colour looked up only where it shows."""
-        parts = torch.get_num_threads() if len(origins) >= DISPLAY_PARALLEL_RAYS else 1
+        """The march as display runs it (and the bench times it): the rays in as many groups as display_cores (else
+        torch's threads; one thread a group), each with its candidate lists; in waves with early termination,
+        samples by the voxels a segment crosses, colour looked up only where it shows; render_image's should_stop
+        asked before each wave."""
+        cores = self.display_cores or torch.get_num_threads()
+        parts = cores if len(origins) >= DISPLAY_PARALLEL_RAYS else 1
         return march.march_in_parts(origins, directions, background, prims, self.samples, self.cfg.stop_below,
-                                    parts, min_weight=march.DISPLAY_MIN_WEIGHT, adaptive=True)
+                                    parts, min_weight=march.DISPLAY_MIN_WEIGHT, adaptive=True,
+                                    should_stop=self.should_stop)
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
         out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)

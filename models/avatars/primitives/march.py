@@ -16,11 +16,14 @@ once it is opaque (early termination), so what lies behind the first surfaces is
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
+
+from models.avatars.base import RenderCancelled
 
 MAX_OPTICAL_DEPTH = 30.0
 """sigma * delta of one sample is clamped here (exp(-30) ~ 1e-13 of the light passes): a density of 1e6 per metre
@@ -276,7 +279,8 @@ termination by groups): fewer, larger operations than one candidate a wave, and 
 
 def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: Primitives,
           lists: CandidateLists, samples: int, stop_below: float = 0.0, exact_lookup: bool = False,
-          wave: int = WAVE_CANDIDATES, min_weight: float = 0.0, adaptive: bool = False) -> MarchOutput:
+          wave: int = WAVE_CANDIDATES, min_weight: float = 0.0, adaptive: bool = False,
+          should_stop: Callable[[], bool] | None = None) -> MarchOutput:
     """Composite the primitives along R rays (origins, directions (R,3), background (R,3) or (3,)), each through
     its candidate list in order, `samples` samples a segment. Without stop_below (training) every candidate in one
     pass; with stop_below > 0 (display) in waves of `wave` candidates of every live ray, and a ray takes no more
@@ -285,7 +289,7 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
     others, empty space and what lies behind opaque matter, add less than that each). adaptive (display): a segment
     takes one sample a voxel it crosses and one more, `samples` at most (voxel_counts), where training takes
     `samples` on every segment. exact_lookup: the gather-based `trilinear` instead of grid_sample (the
-    reference)."""
+    reference). should_stop: asked before each wave; yes raises RenderCancelled (a newer request won)."""
     R = len(origins)
     lookup_of = Lookups(prims, exact_lookup)
     frames = box_frames(origins, prims)
@@ -295,6 +299,8 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
     longest = int(lists.count.max()) if R else 0
     step = max(1, longest) if stop_below <= 0 else max(1, wave)
     for k0 in range(0, longest, step):
+        if should_stop is not None and should_stop():
+            raise RenderCancelled
         live = lists.count > k0
         if stop_below > 0:
             live &= trans.detach() > stop_below

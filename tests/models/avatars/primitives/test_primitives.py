@@ -7,14 +7,19 @@ import numpy as np
 import pytest
 import torch
 
+from models.avatars.base import RenderCancelled
 from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, grid_normals
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
+from models.avatars.registry import load_avatar
 from models.capture.frames import camera_of
+from models.head.controls import Controls
 from models.head.flame import load_flame
 from models.head.lbs import rotation_matrix_from_axis_angle
 from models.training.trainer import TrainConfig, prepare_training
+from render.camera import framing_camera
 from render.gl.raster import Rasterizer
+from tests.conftest import DEMO
 from tests.models.avatars.runs import photometric_before_and_after, saved_and_reloaded
 from tests.models.head.flame_files import write_flame_from_head
 
@@ -149,3 +154,31 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     moved = avatar.render_image(f.controls.with_expression(avatar.head_model, {avatar.head_model.expr_names[0]: 1.0}),
                                 cam, Rasterizer(gl))
     assert np.abs(moved["rgb"] - out["rgb"]).max() > 1e-3
+
+
+@pytest.mark.gl
+def test_a_newer_request_stops_a_frame_within_its_one_batch(gl):
+    """The studio renders a primitives frame in one batch of rays: render_image's should_stop reaches the march,
+    which asks it between waves (in every group), so a newer request need not wait for the whole frame."""
+    avatar, _ = load_avatar(DEMO)
+    raster = Rasterizer(gl)
+    cam = framing_camera(avatar.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=96, height_px=96)
+    controls = avatar.at_rest(Controls())
+    asked = []
+
+    def after_three() -> bool:
+        asked.append(1)
+        return len(asked) > 3
+
+    avatar.display_cores = 2
+    with pytest.raises(RenderCancelled):
+        avatar.render_image(controls, cam, raster, should_stop=after_three, chunk_rays=avatar.interactive_chunk_rays)
+    assert len(asked) > 3  # the one batch's check, then the waves'
+    assert avatar.should_stop is None  # the render's own, cleared
+    asked.clear()
+    image = avatar.render_image(controls, cam, raster, should_stop=lambda: bool(asked.append(1)),
+                                chunk_rays=avatar.interactive_chunk_rays)["rgb"]
+    assert len(asked) > 3 and image.shape == (96, 96, 3)  # asked between waves, and never told to stop
+    again = avatar.render_image(controls, cam, raster)["rgb"]
+    torch.testing.assert_close(torch.as_tensor(image), torch.as_tensor(again))
+    raster.release()
