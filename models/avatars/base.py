@@ -287,9 +287,10 @@ class Avatar(nn.Module, ABC):
         """Adapt the render settings to the capture: how far (metres, per foreground pixel of the masks) the
         capture's foreground reaches beyond the mesh's silhouette; None where it has no masks."""
 
-    def fit_to_tracked_video(self) -> None:
+    def fit_to_tracked_video(self, corrections: bool | None = None) -> None:
         """The capture was tracked from a video: its head poses carry the tracker's error, and its background is
-        a real room. Models adapt what they learn (the default: nothing)."""
+        a real room. Models adapt what they learn (the default: nothing). corrections: learn per-frame pose (and
+        where the model can, expression) corrections (None: the model's default)."""
 
     def parameter_groups(self) -> list[dict]:
         """The trained parameters in groups, each with its learning rate's scale (`lr_scale`)."""

@@ -58,6 +58,9 @@ class TrainConfig:
     """Rays a step; default: the model's (1024 codynerf; 256 nerface, each of whose rays costs 128 samples of an
     8x256 MLP)."""
     frames_per_step: Annotated[int, Range(1, 1024)] = 4
+    corrections: bool | None = None
+    """On a tracked video, learn each training frame's head pose correction (and the primitives' expression
+    correction) with the avatar; default: the model's (codynerf on, primitives off: README, Real people)."""
     lr: Annotated[float, Range(0, 1, above=True)] = 5e-3
     """Adam learning rate at the start; it decays tenfold over the run."""
     checkpoint_seconds: Annotated[float, Range(0, above=True)] = 60.0
@@ -111,7 +114,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
         if plate is not None:
             avatar.set_plate(*plate)
     if split.tracked:  # (a resumed avatar too: what it learns is not all in avatar.json)
-        avatar.fit_to_tracked_video()
+        avatar.fit_to_tracked_video(cfg.corrections)
         # Its codes carry what the controls miss (hair, shoulders) and follow the controls: held-out frames and
         # sliders take the nearest training frames' (components/codes.py). Synthetic captures keep the mean code.
         avatar.key_codes([f.controls for f in split.frames])

@@ -153,14 +153,16 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
                 "render": asdict(self.render_cfg), "pose_corrections": self.pose_corrections is not None}
 
     # ---- the tracked poses, corrected ------------------------------------------------------------------
-    def fit_to_tracked_video(self) -> None:
-        """Learn a correction of each training frame's head pose with the avatar (correct_poses); Eq. 13 shapes
+    def fit_to_tracked_video(self, corrections: bool | None = None) -> None:
+        """Learn a correction of each training frame's head pose with the avatar (correct_poses; corrections: None
+        or True, False: the poses as tracked); Eq. 13 shapes
         the normals only, not the density (LossWeights.consistency_shapes_density); and no Cauchy
         sparsity (Eq. 14): on the tracked d3 video (25 minutes, `none`) it held the density to a fog that let 32%
         of the light through the head (the room's plate would show through it when the head moves), against 1%
         without, at the same held-out PSNR (16.60 and 16.54 dB) and 26% less render time (the early stop ends
         rays at an opaque skin)."""
-        self.correct_poses()
+        if corrections is not False:
+            self.correct_poses()
         self.loss_weights = replace(self.loss_weights, cauchy=0.0, consistency_shapes_density=False,
                                     mesh_normals_first=True)
 

@@ -96,7 +96,7 @@ class PriorAvatar(PrimitivesAvatar):
         self._noise: torch.Generator | None = None
         self._own_biases: list[torch.Tensor] | None = None
 
-    def fit_to_tracked_video(self) -> None:
+    def fit_to_tracked_video(self, corrections: bool | None = None) -> None:
         """No per-frame corrections: the prior keeps no per-frame anything (a frame is its maps and its mesh)."""
 
     def make_decoder(self) -> SlabDecoder:
