@@ -9,7 +9,8 @@ meet (march.py). Display caches the decode on the frame's geometry, so a frame's
 
 Losses (MVP's, those that apply here): photometric (squared error, as the other models), the volume prior (the
 primitives' summed volume, relative to where they started: keeps them tight, so empty space costs nothing), the
-offsets' L2 (primitives stay near their places on the mesh), and the per-frame codes' L2.
+offsets' L2 (primitives stay near their places on the mesh), and the per-frame codes' L2; with `train
+--corrections` on a tracked video, the per-frame pose and expression corrections' priors (components/poses.py).
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ class PrimitivesConfig:
     offsets: Annotated[float, Range(0)] = 1e-3
     """The offsets' L2 weight."""
     codes: Annotated[float, Range(0)] = 1e-3
-    pose_corrections: Annotated[float, Range(0)] = 1e-4
+    correction_prior: Annotated[float, Range(0)] = 1e-4
     """The weight of the per-frame pose and expression corrections' priors (a tracked video's;
     components/poses.py)."""
     code_swap: Annotated[float, Range(0, 1)] = 0.0
@@ -459,9 +460,9 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         terms = {"photometric": losses.photometric(out.buffers["rgb"], batch.target), **self.regularisers(out),
                  "codes": self.cfg.codes * losses.code_l2(self.codes(batch.frame))}
         if self.pose_corrections is not None:
-            terms["pose_corrections"] = self.cfg.pose_corrections * self.pose_correction_term(batch.frame)
+            terms["pose_corrections"] = self.cfg.correction_prior * self.pose_correction_term(batch.frame)
         if self.expression_corrections is not None:
-            terms["expression_corrections"] = self.cfg.pose_corrections * self.expression_correction_term(batch.frame)
+            terms["expression_corrections"] = self.cfg.correction_prior * self.expression_correction_term(batch.frame)
         return terms
 
     def regularisers(self, out: RayOutput) -> dict[str, torch.Tensor]:
