@@ -144,13 +144,12 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
         check_config(render_cfg)
         avatar = cls(head_model, field_cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32),
                      render_cfg)
-        if meta.get("pose_corrections", False):
-            avatar.correct_poses()
+        avatar.restore_corrections(meta)
         return avatar
 
     def meta(self) -> dict:
         return {"model": self.name, "effects": list(self.field_cfg.effects), "field": asdict(self.field_cfg),
-                "render": asdict(self.render_cfg), "pose_corrections": self.pose_corrections is not None}
+                "render": asdict(self.render_cfg), **self.corrections_meta()}
 
     # ---- the tracked poses, corrected ------------------------------------------------------------------
     def fit_to_tracked_video(self, corrections: bool | None = None) -> None:
@@ -167,6 +166,8 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
                                     mesh_normals_first=True)
 
     def pose_centre(self, geometry: FrameGeometry) -> torch.Tensor:
+        """The middle of the head's box. Corrected rays keep the frame's surface distances (corrections are
+        millimetres; the shell spans centimetres)."""
         return 0.5 * (geometry.box_min + geometry.box_max)
 
     @property

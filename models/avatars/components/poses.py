@@ -24,6 +24,7 @@ import torch
 from torch import nn
 
 from models.head.lbs import rotation_matrix_from_axis_angle
+from models.head.model import HeadModel
 from render.rays import Rays
 
 POSE_LR_SCALE = 0.02
@@ -43,12 +44,25 @@ class PoseCorrected:
     pose_corrections: nn.Parameter | None
     expression_corrections: nn.Parameter | None
     n_frames: int
+    head_model: HeadModel
 
     def correct_poses(self) -> None:
         """Give every training frame a pose correction (N,6), learned with the avatar."""
         if self.pose_corrections is None:
             device = next(self.parameters()).device
             self.pose_corrections = nn.Parameter(torch.zeros(self.n_frames, 6, device=device))
+
+    def corrections_meta(self) -> dict:
+        """avatar.json's record of which corrections the weights hold."""
+        return {"pose_corrections": self.pose_corrections is not None,
+                "expression_corrections": self.expression_corrections is not None}
+
+    def restore_corrections(self, meta: dict) -> None:
+        """Make the corrections avatar.json says the weights hold (before they are loaded)."""
+        if meta.get("pose_corrections", False):
+            self.correct_poses()
+        if meta.get("expression_corrections", False):
+            self.correct_expressions(self.head_model.num_expression)
 
     def correct_expressions(self, count: int) -> None:
         """Give every training frame a correction of its `count` expression weights (N,count), learned with the

@@ -178,17 +178,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
             raise ValueError(f"light_dir {meta['light_dir']}: not a direction (three finite numbers, not all 0)")
         avatar = cls(head_model, cfg, int(meta["frames"]), np.asarray(meta["background"], np.float32),
                      tuple(meta.get("effects", ())), light)
-        if meta.get("pose_corrections", False):
-            avatar.correct_poses()
-        if meta.get("expression_corrections", False):
-            avatar.correct_expressions(head_model.num_expression)
+        avatar.restore_corrections(meta)
         return avatar
 
     def meta(self) -> dict:
         return {"model": self.name, "effects": list(self._effects), self.config_key: asdict(self.cfg),
-                "light_dir": None if self.light_dir is None else list(self.light_dir),
-                "pose_corrections": self.pose_corrections is not None,
-                "expression_corrections": self.expression_corrections is not None}
+                "light_dir": None if self.light_dir is None else list(self.light_dir), **self.corrections_meta()}
 
     def fit_to_tracked_video(self, corrections: bool | None = None) -> None:
         """corrections (default off): learn a correction of each training frame's head pose and expression weights
