@@ -48,6 +48,32 @@ INSPECT = {"rgb_no_shadows": "rgb_no_shadows", "rgb_light": "rgb_light", "shadow
            "shading": "rgb_flat"}
 """Buffers shown from an avatar's inspection buffers (render_image(inspect=True)): which one each needs."""
 
+PLAIN = ("rgb", "depth", "opacity")
+"""Buffers every render makes."""
+
+
+def render_needs(buffer: str) -> tuple[tuple[str, ...], bool]:
+    """What a render must make to show `buffer`: the optional buffers (render_image's `buffers`) and whether the
+    inspection buffers (`inspect`). Nothing else is made: a primitives avatar's colour render composites 3 channels
+    where its normals and light make 7.
+
+    >>> render_needs("rgb"), render_needs("normals"), render_needs("shadow_change")
+    (((), False), (('normals',), False), ((), True))
+    """
+    if buffer in INSPECT:
+        return (), True
+    return ((), False) if buffer in PLAIN else ((buffer,), False)
+
+
+def needs_covered(shown: str, wanted: str) -> bool:
+    """Whether a render made to show `shown` has what `wanted` needs (no new render when switching to it).
+
+    >>> needs_covered("normals", "rgb"), needs_covered("rgb", "normals"), needs_covered("rgb_light", "shading")
+    (True, False, True)
+    """
+    (have, inspect), (need, inspecting) = render_needs(shown), render_needs(wanted)
+    return set(need) <= set(have) and (inspect or not inspecting)
+
 
 def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:
     """A buffer of the neural render as (H,W,3) uint8 for display."""

@@ -24,7 +24,7 @@ from app.animation import (
 from app.studio import poses as pose_file
 from app.studio.poses import PosesError, apply_pose, avatar_key, pose_of, read_poses, write_poses
 from app.studio.session import AvatarFiles, History, Session, Sliders, View, expression_groups
-from app.turntable import INSPECT, TurntableConfig
+from app.turntable import TurntableConfig, needs_covered
 
 
 class Action:
@@ -394,8 +394,8 @@ class ShowBuffer(Action):
     name: str
 
     def apply(self, s: Session) -> None:
-        if self.name in INSPECT and s.display.buffer not in INSPECT:
-            s.dirty = True  # render again with the inspection buffers this one is made of
+        if not needs_covered(s.display.buffer, self.name):
+            s.dirty = True  # render again with the buffers this one is made of (a render makes what it shows)
         s.display.buffer = self.name
 
 

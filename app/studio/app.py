@@ -28,6 +28,7 @@ from app.studio.exporting import Exporter
 from app.studio.neural import NeuralWorker, Request
 from app.studio.script import Script
 from app.studio.session import AvatarFiles, Session, read_avatar_folder, remember_recent, sliders_json
+from app.turntable import render_needs
 from render.gl.context import GLContext
 
 REPO = Path(__file__).resolve().parents[2]
@@ -229,8 +230,9 @@ class Studio:
         cam = s.render_camera(s.display.neural_size)
         passes = ("draft", "preview", "final")[: ("draft", "preview", "final").index(s.display.refine_to) + 1]
         frame = s.timeline_frame if s.timeline_frame >= 0 else None
-        self.last_submit_id = self.worker.submit(Request(s.controls(), cam, passes, frame,
-                                                         inspect=s.display.buffer in viewport.INSPECT))
+        buffers, inspect = render_needs(s.display.buffer)
+        self.last_submit_id = self.worker.submit(Request(s.controls(), cam, passes, frame, inspect=inspect,
+                                                         buffers=buffers))
         self.last_submit_time = time.perf_counter()
         s.dirty = False
 

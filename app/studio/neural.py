@@ -30,6 +30,7 @@ class Request:
     passes: tuple[str, ...] = ("draft", "preview")
     frame: int | None = None  # a training frame's codes (timeline), or the mean code
     inspect: bool = False  # also the colour variants behind the shadow and shading buffers
+    buffers: tuple[str, ...] | None = None  # the avatar's optional buffers to make (render_image's; None: all)
 
 
 @dataclass
@@ -245,7 +246,7 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
         t0 = time.perf_counter()
         buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
                                       should_stop=lambda: stale(rid), inspect=request.inspect,
-                                      chunk_rays=avatar.interactive_chunk_rays)
+                                      chunk_rays=avatar.interactive_chunk_rays, buffers=request.buffers)
         ms = 1e3 * (time.perf_counter() - t0)
         if stale(rid):
             return
@@ -255,7 +256,8 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
 
 def measure_presets(avatar, raster, should_stop) -> PresetFigures:
     """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`, at the size of
-    the avatar's capture (a tracked video's 256 px costs four times a synthetic capture's 128)."""
+    the avatar's capture (a tracked video's 256 px costs four times a synthetic capture's 128): the colour render
+    the studio shows first (no optional buffers: render_image's buffers=())."""
     from models.training.metrics import psnr
 
     size = min(avatar.capture_px or 128, 256)
@@ -269,7 +271,7 @@ def measure_presets(avatar, raster, should_stop) -> PresetFigures:
         for _ in range(3):
             t0 = time.perf_counter()
             images[name] = avatar.render_image(avatar.at_rest(Controls()), c, raster, should_stop=should_stop,
-                                               chunk_rays=avatar.interactive_chunk_rays)["rgb"]
+                                               chunk_rays=avatar.interactive_chunk_rays, buffers=())["rgb"]
             times.append(1e3 * (time.perf_counter() - t0))
         figures.ms[name] = float(np.median(times))
         reference = images["final"]

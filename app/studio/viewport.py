@@ -14,7 +14,7 @@ from app.studio import actions as a
 from app.studio.context import PanelContext
 from app.studio.neural import Result
 from app.studio.session import Session
-from app.turntable import INSPECT, buffer_image
+from app.turntable import INSPECT, PLAIN, buffer_image
 from models.avatars.base import Avatar
 from models.head.head import posed_mesh
 from render.gl.context import GLContext
@@ -43,11 +43,11 @@ def buffer_label(name: str, avatar: Avatar | None) -> str:
     return LEGACY_LABELS.get(name, BUFFER_LABELS[name]) if legacy else BUFFER_LABELS[name]
 
 
-def buffer_available(name: str, avatar: Avatar | None, buffers: dict | None) -> bool:
-    """A plain buffer the last render has; an inspection buffer the avatar offers."""
+def buffer_available(name: str, avatar: Avatar | None) -> bool:
+    """A buffer every render has, or one the avatar offers (a render makes it once it is shown)."""
     if name in INSPECT:
         return avatar is not None and INSPECT[name] in avatar.inspection_buffers()
-    return buffers is None or name in buffers
+    return name in PLAIN or (avatar is not None and name in avatar.default_buffers())
 
 
 class Viewport:
@@ -154,7 +154,7 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         imgui.text("No avatar open: open one in the Avatar panel.")
         return
     # What to show.
-    available = [b for b in BUFFERS if buffer_available(b, s.avatar, None if r is None else r.buffers)]
+    available = [b for b in BUFFERS if buffer_available(b, s.avatar)]
     # Three short lines, so that nothing is clipped in the viewport a 1280 px window leaves (about 530 px).
     imgui.set_next_item_width(230)
     if imgui.begin_combo("buffer", buffer_label(d.buffer, s.avatar)):

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import contextlib
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -97,6 +97,9 @@ class Avatar(nn.Module, ABC):
         self.should_stop: Callable[[], bool] | None = None
         """While render_image runs: its should_stop, for models whose batches are long (the primitives' march asks
         it between waves) to stop within a batch."""
+        self.display_buffers: tuple[str, ...] | None = None
+        """While render_image runs: the optional buffers it makes (of default_buffers and the inspection buffers,
+        those asked for), for models that can leave out the work of the others; None: all of them."""
         self.display_cores: int | None = None
         """Cores a display render may spread its work over where the model can (None: torch's thread count); the
         studio's renderer keeps torch to one thread and gives the primitives' march groups the machine's cores."""
@@ -359,11 +362,12 @@ class Avatar(nn.Module, ABC):
 
     def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer | None, frame: int | None = None,
                      should_stop: Callable[[], bool] | None = None, inspect: bool = False,
-                     chunk_rays: int | None = None) -> dict[str, np.ndarray]:
+                     chunk_rays: int | None = None, buffers: Collection[str] | None = None) -> dict[str, np.ndarray]:
         """The avatar's buffers as images (H,W,...). `frame` picks a training frame's codes; None uses the mean
         code (novel controls). `should_stop` is asked between batches of rays; when it says yes,
         RenderCancelled is raised (a newer request won). `inspect` adds the inspection buffers. `chunk_rays`: rays a
-        batch (default the avatar's; smaller batches let a newer request in sooner)."""
+        batch (default the avatar's; smaller batches let a newer request in sooner). `buffers`: which of
+        default_buffers to make (None: all; rgb, opacity and depth always come)."""
         device = self.background.device
         geo = self.frame_geometry(controls, rasterizer).to(device)
         camera = clipping_around(camera, geo.posed.cpu().numpy())  # the head may be anywhere (a translation)
@@ -373,8 +377,9 @@ class Avatar(nn.Module, ABC):
             rays = replace(rays, background=plate[torch.as_tensor(idx, device=plate.device)].cpu())
         rays = rays.to(device)
         names = self.inspection_buffers() if inspect else ()
-        parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *self.default_buffers(), *names)}
-        self.should_stop = should_stop
+        wanted = tuple(b for b in self.default_buffers() if buffers is None or b in buffers)
+        parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *wanted, *names)}
+        self.should_stop, self.display_buffers = should_stop, (*wanted, *names)
         try:
             with self.display_mode():
                 chunk = chunk_rays or self.chunk_rays
@@ -382,13 +387,14 @@ class Avatar(nn.Module, ABC):
                     if should_stop is not None and should_stop():
                         raise RenderCancelled
                     out = self.render_rays(rays[a:a + chunk], geo, frame)
-                    buffers = out.buffers | self.inspect(out, geo, names)
-                    buffers["depth"] = torch.where(buffers["opacity"] > 0.5, buffers["depth"],
-                                                   torch.full_like(buffers["depth"], np.inf))
-                    for k, v in buffers.items():
-                        parts[k].append(v.detach())
+                    made = out.buffers | self.inspect(out, geo, names)
+                    made["depth"] = torch.where(made["opacity"] > 0.5, made["depth"],
+                                                torch.full_like(made["depth"], np.inf))
+                    for k, v in made.items():
+                        if k in parts:  # a model that makes a buffer anyway: kept where asked for
+                            parts[k].append(v.detach())
         finally:
-            self.should_stop = None
+            self.should_stop, self.display_buffers = None, None
         background = (self.background if plate is None else plate).cpu().numpy()
         layout = {k: (c, background if fill == BACKGROUND else fill) for k, (c, fill) in self.layout().items()}
         return rays_to_images(parts, camera.height_px, camera.width_px, idx, layout)

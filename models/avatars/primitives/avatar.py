@@ -209,6 +209,15 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         `shadows` on a capture that records its key light."""
         return "shadows" in self._effects and self.light_dir is not None
 
+    def shown_channels(self, lit: bool = False) -> tuple[str, ...]:
+        """The colour grids' channels beyond rgb that display composites: the normals (3, from the opacity grid's
+        gradient) and the key light's visibility (1, for rgb_light), each where the avatar has it and the render
+        makes the buffer (display_buffers); none for the lit inspection pass (its rgb alone)."""
+        want = self.display_buffers
+        names = [name for name, has in (("normals", self.needs_normals), ("rgb_light", self.casts_shadows))
+                 if has and not lit and (want is None or name in want)]
+        return tuple(names)
+
     def layout(self) -> dict[str, tuple[int, float | str]]:
         return super().layout() | {"normals": (3, 0.0), "rgb_light": (3, 1.0), "rgb_no_shadows": (3, BACKGROUND)}
 
@@ -363,7 +372,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return self.head(**batch)[0][0].to(geo.posed), condition
 
     def decode(self, geo: PrimitivesGeometry, code: torch.Tensor, eye: torch.Tensor, lit: bool = False,
-               training: bool = False, frame: int | None = None) -> tuple[march.Primitives, torch.Tensor]:
+               training: bool = False, frame: int | None = None, extras: tuple[str, ...] | None = None
+               ) -> tuple[march.Primitives, torch.Tensor]:
         """The frame's primitives, placed on its posed mesh, and their offsets, for a camera at `eye` (3,) (the view
         enters the decoder as the direction to the eye in the head's frame, held to the capture's cone: base.py).
         lit: every texel lit (no cast shadows). training: colour alone (the buffers' extra channels are display's).
@@ -385,11 +395,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         rotations = rotations @ rotation_matrix_from_axis_angle(offsets[:, 3:6])
         density = F.softplus(density_raw - 1.0) * self.cfg.density_scale
         colour = torch.sigmoid(colour_raw)
+        extras = self.shown_channels(lit) if extras is None else extras
         if training:  # no loss reads the normals or the visibility: the march composites colour alone
             return march.Primitives(centres, rotations, half, density, colour), offsets
-        if self.needs_normals:
+        if "normals" in extras:
             colour = torch.cat([colour, grid_normals(density, rotations, half)], -1)
-        if light is not None:  # each texel's visibility through its column of voxels: the rgb_light buffer
+        if "rgb_light" in extras:  # each texel's visibility through its column of voxels: the rgb_light buffer
             K, M = self.cfg.grid, self.cfg.voxels
             texels = light.reshape(K, M, K, M).permute(0, 2, 1, 3).reshape(K * K, 1, M, M, 1)[cells]
             colour = torch.cat([colour, texels.expand(-1, M, -1, -1, -1)], -1)
@@ -407,7 +418,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     def decoded(self, geo: PrimitivesGeometry, frame: int | None, eye: torch.Tensor, training: bool,
                 lit: bool = False, code: torch.Tensor | None = None):
         """decode, cached on the geometry for display (one decode a frame, and one lit for inspection, whatever
-        the batches of rays). code: instead of the frame's (training_code)."""
+        the batches of rays), with the channels the render shows (shown_channels). code: instead of the frame's
+        (training_code)."""
         code = self.codes(frame, geo.code_weights) if code is None else code
         if training:
             return self.decode(geo, code, eye, lit, training=True, frame=frame)
@@ -415,9 +427,10 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         if geo.decoded.get("key") != key:
             geo.decoded.clear()
             geo.decoded["key"] = key
-        if lit not in geo.decoded:
-            geo.decoded[lit] = self.decode(geo, code, eye, lit, frame=frame)
-        return geo.decoded[lit]
+        extras = self.shown_channels(lit)
+        if (lit, extras) not in geo.decoded:
+            geo.decoded[lit, extras] = self.decode(geo, code, eye, lit, frame=frame, extras=extras)
+        return geo.decoded[lit, extras]
 
     # ---- rays ------------------------------------------------------------------------------------------
     def render_rays(self, rays: Rays, geometry: PrimitivesGeometry, frame: int | None,
@@ -434,7 +447,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         else:
             out = self.display_march(rays.origins, rays.directions, self.ray_background(rays), prims)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
-        if self.needs_normals and not training:
+        if not training and "normals" in self.shown_channels(lit):
             buffers["normals"] = out.extra[:, :3]
         return RayOutput(buffers, (prims, offsets, out, rays, frame))
 

@@ -150,8 +150,8 @@ def candidate_lists(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
 
 @dataclass
 class BoxFrames:
-    """The primitives' unit frames, made once per march: to_box (P,3,3), rows R^T / h, and where the rays share
-    one origin, that origin in every box's frame (P,3)."""
+    """The primitives' unit frames, made once per march: to_box (P,9), the rows of R^T / h one after another, and
+    where the rays share one origin, that origin in every box's frame (P,3)."""
 
     to_box: torch.Tensor
     eye: torch.Tensor | None
@@ -161,7 +161,23 @@ def box_frames(origins: torch.Tensor, prims: Primitives) -> BoxFrames:
     to_box = prims.rotations.transpose(1, 2) / prims.half_sizes.clamp_min(1e-9)[..., None]
     shared = len(origins) and bool((origins - origins[0]).abs().max() == 0)
     eye = (to_box @ (origins[0] - prims.centres)[..., None])[..., 0] if shared else None
-    return BoxFrames(to_box, eye)
+    return BoxFrames(to_box.reshape(-1, 9), eye)
+
+
+def in_box_frames(to_box: torch.Tensor, pair_prim: torch.Tensor, vectors: torch.Tensor) -> torch.Tensor:
+    """(Q,3) vectors (Q,3) in the unit frames of primitives pair_prim (Q,) (to_box: BoxFrames.to_box): each row of
+    a box's matrix gathered once and multiplied out column by column (a third of the time of gathering whole
+    (Q,3,3) matrices and summing their products, on the demo avatar's 256 px march).
+
+    >>> frames = box_frames(torch.zeros(1, 3), Primitives(torch.zeros(1, 3), torch.eye(3)[None], torch.tensor(
+    ...     [[1.0, 2.0, 4.0]]), torch.zeros(1, 1, 1, 1), torch.zeros(1, 1, 1, 1, 3)))
+    >>> in_box_frames(frames.to_box, torch.tensor([0]), torch.tensor([[1.0, 1.0, 1.0]]))
+    tensor([[1.0000, 0.5000, 0.2500]])
+    """
+    rows = to_box.index_select(0, pair_prim)  # (Q,9)
+    out = rows[:, 0::3] * vectors[:, :1]
+    out.addcmul_(rows[:, 1::3], vectors[:, 1:2])
+    return out.addcmul_(rows[:, 2::3], vectors[:, 2:3])
 
 
 def ray_box_segments(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, pair_ray: torch.Tensor,
@@ -172,15 +188,15 @@ def ray_box_segments(origins: torch.Tensor, directions: torch.Tensor, prims: Pri
     there). An axis the ray runs parallel to (|d'| < 1e-9) is met everywhere or nowhere, by the sign of 1 - |o'|.
     frames: box_frames of these origins and primitives (made here if not given)."""
     frames = frames or box_frames(origins, prims)
-    to_box = frames.to_box[pair_prim]  # (Q,3,3)
     if frames.eye is not None:  # one pinhole: o' once a primitive
-        o = frames.eye[pair_prim]
+        o = frames.eye.index_select(0, pair_prim)
     else:
-        o = (to_box * (origins[pair_ray] - prims.centres[pair_prim])[:, None]).sum(-1)
-    d = (to_box * directions[pair_ray][:, None]).sum(-1)
+        o = in_box_frames(frames.to_box, pair_prim, origins.index_select(0, pair_ray)
+                          - prims.centres.index_select(0, pair_prim))
+    d = in_box_frames(frames.to_box, pair_prim, directions.index_select(0, pair_ray))
     parallel = d.abs() < 1e-9
-    safe = torch.where(parallel, torch.ones_like(d), d)
-    ta, tb = (-1.0 - o) / safe, (1.0 - o) / safe
+    inverse = 1.0 / torch.where(parallel, torch.ones_like(d), d)
+    ta, tb = (-1.0 - o) * inverse, (1.0 - o) * inverse
     lo = torch.where(parallel, torch.where(o.abs() <= 1.0, -torch.inf, torch.inf), torch.minimum(ta, tb))
     hi = torch.where(parallel, torch.where(o.abs() <= 1.0, torch.inf, -torch.inf), torch.maximum(ta, tb))
     t_in = lo.max(1).values.clamp_min(0.0)
@@ -294,8 +310,8 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
     lookup_of = Lookups(prims, exact_lookup)
     frames = box_frames(origins, prims)
     dtype, device = prims.density.dtype, origins.device
-    trans = torch.ones(R, dtype=dtype, device=device)
     total = Composited.empty(R, prims.colour.shape[-1], dtype, device)
+    trans = torch.ones(R, dtype=dtype, device=device)
     longest = int(lists.count.max()) if R else 0
     step = max(1, longest) if stop_below <= 0 else max(1, wave)
     for k0 in range(0, longest, step):
@@ -310,10 +326,9 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
         n = (lists.count[r] - k0).clamp(max=step)
         ray = torch.repeat_interleave(r, n)
         k = k0 + torch.arange(len(ray), device=device) - torch.repeat_interleave(n.cumsum(0) - n, n)
-        part = composite_pairs(origins, directions, prims, lookup_of, frames, ray,
-                               lists.prims[lists.start[ray] + k], samples, trans, min_weight, adaptive)
-        total = total + part
-        trans = trans * torch.exp(-part.optical_depth).to(dtype)
+        total = composite_pairs(origins, directions, prims, lookup_of, frames, ray,
+                                lists.prims[lists.start[ray] + k], samples, trans, total, min_weight, adaptive)
+        trans = torch.exp(-total.optical_depth).to(dtype)
     depth = torch.where(total.opacity > 1e-10, total.depth / total.opacity.clamp_min(1e-10),
                         torch.zeros_like(total.depth))
     return MarchOutput(total.values[:, :3] + trans[:, None] * background, total.values[:, 3:], total.opacity, depth,
@@ -428,20 +443,26 @@ class Composited:
         return Composited(torch.zeros(R, channels, dtype=dtype, device=device), z, z,
                           torch.zeros(R, dtype=torch.float64, device=device))
 
-    def __add__(self, other: Composited) -> Composited:
-        return Composited(self.values + other.values, self.opacity + other.opacity, self.depth + other.depth,
-                          self.optical_depth + other.optical_depth, self.lookups + other.lookups,
-                          self.segments + other.segments)
+    def added(self, value_ray: torch.Tensor, values: torch.Tensor, ray: torch.Tensor, opacity: torch.Tensor,
+              depth: torch.Tensor, optical_depth: torch.Tensor, lookups: int, segments: int) -> Composited:
+        """These sums with values (V,C) added to rays value_ray (V,) and the segments' opacity, depth and optical
+        depth (S,) to rays ray (S,): in place where no gradient is recorded (display: a wave's few rays into the
+        whole image's sums), else as new tensors (training's one pass)."""
+        add = torch.Tensor.index_add if torch.is_grad_enabled() else torch.Tensor.index_add_
+        return Composited(add(self.values, 0, value_ray, values), add(self.opacity, 0, ray, opacity),
+                          add(self.depth, 0, ray, depth), add(self.optical_depth, 0, ray, optical_depth),
+                          self.lookups + lookups, self.segments + segments)
 
 
 def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, lookups: Lookups,
                     frames: BoxFrames, ray: torch.Tensor, prim: torch.Tensor, samples: int, trans: torch.Tensor,
-                    min_weight: float = 0.0, adaptive: bool = False) -> Composited:
-    """The (ray, primitive) pairs (Q,) in order (ray by ray, each ray's front to back), composited over the light
-    `trans` (R,) that reaches each ray's first: the slab test, `samples` samples a segment where they meet, each
-    segment's light exp(-) the optical depth of the ray's earlier segments here (an exclusive running sum
-    restarted at every ray); the colour looked up only where a sample's weight reaches min_weight; adaptive: a
-    segment takes one sample a voxel it crosses and one more, `samples` at most (voxel_counts)."""
+                    total: Composited, min_weight: float = 0.0, adaptive: bool = False) -> Composited:
+    """`total` (the sums of the rays' earlier segments) with the (ray, primitive) pairs (Q,) in order (ray by ray,
+    each ray's front to back) composited over the light `trans` (R,) that reaches each ray's first: the slab test,
+    `samples` samples a segment where they meet, each segment's light exp(-) the optical depth of the ray's earlier
+    segments here (an exclusive running sum restarted at every ray); the colour looked up only where a sample's
+    weight reaches min_weight; adaptive: a segment takes one sample a voxel it crosses and one more, `samples` at
+    most (voxel_counts)."""
     R = len(origins)
     t0, t1, meet, o_box, d_box = ray_box_segments(origins, directions, prims, ray, prim, frames)
     hit = torch.nonzero(meet).squeeze(1)
@@ -469,18 +490,14 @@ def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     reach = trans[ray] * torch.exp(-(before - start[ray])).to(tau.dtype)  # (S,) the light reaching each segment
     inside = torch.exp(-(tau.cumsum(1) - tau))  # within the segment
     w = reach[:, None] * inside * (1.0 - torch.exp(-tau))
-    C = prims.colour.shape[-1]
-    values = torch.zeros(R, C, dtype=tau.dtype, device=origins.device)
     if min_weight > 0:  # each shown sample's colour straight onto its ray
         shows = torch.nonzero(w.reshape(-1) >= min_weight).squeeze(1)
         colour = lookups.colour(lookups.pick(points, shows)).to(tau.dtype)
-        values.index_add_(0, ray[torch.div(shows, samples, rounding_mode="floor")], w.reshape(-1)[shows, None] * colour)
+        value_ray = ray[torch.div(shows, samples, rounding_mode="floor")]
+        values = w.reshape(-1)[shows, None] * colour
         looked = len(shows)
     else:
-        colour = lookups.colour(points).reshape(S, samples, C)
-        values.index_add_(0, ray, (w[..., None] * colour).sum(1))
+        colour = lookups.colour(points).reshape(S, samples, prims.colour.shape[-1])
+        value_ray, values = ray, (w[..., None] * colour).sum(1)
         looked = S * samples
-    zeros = torch.zeros(R, dtype=tau.dtype, device=origins.device)
-    return Composited(values, zeros.index_add(0, ray, w.sum(1)), zeros.index_add(0, ray, (w * t).sum(1)),
-                      torch.zeros(R, dtype=torch.float64, device=origins.device).index_add(0, ray, seg),
-                      looked_density + looked, S)
+    return total.added(value_ray, values, ray, w.sum(1), (w * t).sum(1), seg, looked_density + looked, S)

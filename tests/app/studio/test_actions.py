@@ -199,13 +199,18 @@ def test_camera_actions(session):
     assert session.view.fov_deg == 30.0 and session.view.yaw_deg == 20.0
 
 
-def test_inspection_buffers_render_again_only_when_first_asked_for(session):
-    a.ShowBuffer("normals").apply(session)
-    assert not session.dirty and session.display.buffer == "normals"
+def test_buffers_render_again_only_when_first_asked_for(session):
+    a.ShowBuffer("normals").apply(session)  # a render makes what it shows: the colour's has no normals
+    assert session.dirty and session.display.buffer == "normals"
+    session.dirty = False
+    a.ShowBuffer("depth").apply(session)  # every render has depth
+    assert not session.dirty
     a.ShowBuffer("shading").apply(session)  # made of the render with normals to the viewer: a new render
     assert session.dirty
     session.dirty = False
     a.ShowBuffer("rgb_light").apply(session)  # the request already asked for every inspection buffer
+    assert not session.dirty
+    a.ShowBuffer("rgb").apply(session)
     assert not session.dirty
     a.SetDisplay({"layout": "over", "overlay_alpha": 0.25}).apply(session)
     assert (session.display.layout, session.display.overlay_alpha, session.dirty) == ("over", 0.25, False)

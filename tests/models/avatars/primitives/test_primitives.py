@@ -146,9 +146,20 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     rays, _ = avatar.image_rays(geo, cam, r)
     with torch.inference_mode():
         avatar.render_rays(rays[:50], geo, None)
-        cached = geo.decoded[False]
+        cached = geo.decoded[False, ("normals", "rgb_light")]
         avatar.render_rays(rays[50:], geo, None)
-        assert geo.decoded[False] is cached
+        assert geo.decoded[False, ("normals", "rgb_light")] is cached
+        assert cached[0].colour.shape[-1] == 3 + 3 + 1
+    # A render makes the buffers asked for alone: the colour render composites rgb, 3 of the grids' 7 channels,
+    # and gives the same pixels.
+    plain = avatar.render_image(f.controls, cam, r, buffers=())
+    assert "normals" not in plain and "normals" in out
+    np.testing.assert_array_equal(plain["rgb"], out["rgb"])
+    avatar.display_buffers = ()
+    assert avatar.shown_channels() == () and avatar.shown_channels(lit=True) == ()
+    with torch.inference_mode():
+        assert avatar.decode(geo, avatar.codes(None, geo.code_weights), rays.origins[0])[0].colour.shape[-1] == 3
+    avatar.display_buffers = None
     r.release()
     # A new expression changes the render (the decoder reads the controls).
     moved = avatar.render_image(f.controls.with_expression(avatar.head_model, {avatar.head_model.expr_names[0]: 1.0}),
