@@ -2,7 +2,9 @@
 frame), the screen tiles' candidate lists (the whole image's, timed apart), the march as display runs it (the rays
 in one group a torch thread, each group's lists and waves: slab tests, lookups and compositing) and within it the
 lookups (one timed march; with groups on threads, the sum of the threads' lookup times), and the whole
-`render_image` (posing the mesh, rays, images); with the lookups made and the lookups a second.
+`render_image` (posing the mesh, rays, images); with the lookups made and the lookups a second. Each size twice:
+the colour render the studio shows first ("rgb": the grids' rgb channels alone) and with every buffer the avatar
+offers ("all": its normals and the key light's visibility composited too).
 
     .venv/bin/python -m benchmarks.bench_primitives AVATAR [--out benchmarks/results/primitives.json]
 """
@@ -26,9 +28,11 @@ from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
 
-def measure(avatar, raster: Rasterizer, controls: Controls, size: int) -> dict:
-    """One size's row: the parts' median times and the lookups."""
+def measure(avatar, raster: Rasterizer, controls: Controls, size: int, buffers: tuple[str, ...] | None) -> dict:
+    """One size's row: the parts' median times and the lookups, making `buffers` (render_image's: () the colour
+    alone, None every buffer)."""
     cam = framing_camera(avatar.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=size, height_px=size)
+    avatar.display_buffers = buffers
     geo = avatar.frame_geometry(controls, raster)
     rays, _ = avatar.image_rays(geo, cam, raster)
     eye = rays.origins[0]
@@ -58,8 +62,9 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int) -> dict:
             out = run()
         finally:
             march.lookup = plain
-    whole = median_seconds(lambda: avatar.render_image(controls, cam, raster))
-    return {"size": size, "rays": len(rays), "decode_ms": 1e3 * decode, "lists_ms": 1e3 * lists_s,
+    whole = median_seconds(lambda: avatar.render_image(controls, cam, raster, buffers=buffers))
+    return {"size": size, "buffers": "all" if buffers is None else "rgb", "channels": prims.colour.shape[-1],
+            "rays": len(rays), "decode_ms": 1e3 * decode, "lists_ms": 1e3 * lists_s,
             "march_ms": 1e3 * march_s, "lookup_ms": 1e3 * sum(looked), "render_image_ms": 1e3 * whole,
             "candidates": lists.pairs, "segments": out.segments, "lookups": out.samples,
             "lookups_per_s": out.samples / march_s}
@@ -78,8 +83,9 @@ def main() -> None:
     controls = avatar.at_rest(Controls())
     rows = []
     for size in args.sizes:
-        rows.append(measure(avatar, raster, controls, size))
-        print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in rows[-1].items()}))
+        for buffers in ((), None):
+            rows.append(measure(avatar, raster, controls, size, buffers))
+            print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in rows[-1].items()}))
     report = {"avatar": str(args.avatar), "primitives": avatar.count, "voxels": avatar.cfg.voxels,
               "samples": avatar.samples, "threads": torch.get_num_threads(), "cpus": os.cpu_count(), "rows": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)
