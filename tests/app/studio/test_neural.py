@@ -7,7 +7,7 @@ import queue
 
 import pytest
 
-from app.studio.neural import PASS_BUDGET_MS, Request, render_passes
+from app.studio.neural import PASS_BUDGET_MS, Request, measure_presets, render_passes
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
 from render.camera import framing_camera
@@ -33,3 +33,17 @@ def test_a_fast_final_pass_leaves_the_coarse_passes_out(gl):
     render_passes(avatar, raster, request, 3, lambda rid: False, results, timed)
     assert shown() == ["preview", "final"]
     raster.release()
+
+
+@pytest.mark.gl
+def test_the_quality_panels_figures_compare_every_preset_at_the_final_size(gl):
+    """The demo's presets render at 1/4, 3/8 and all of its 256 px capture size: 64 and 96 px images are compared
+    with the final's 256 px (nearest upsampling by any ratio, not only whole ones)."""
+    avatar, _ = load_avatar(DEMO)
+    raster = Rasterizer(gl)
+    figures = measure_presets(avatar, raster, lambda: False)
+    raster.release()
+    assert figures.size_px == avatar.capture_px == 256
+    assert set(figures.ms) == {"draft", "preview", "final"} and all(ms > 0 for ms in figures.ms.values())
+    assert figures.psnr_vs_final["final"] == float("inf")
+    assert 15.0 < figures.psnr_vs_final["draft"] < figures.psnr_vs_final["preview"] < 60.0
