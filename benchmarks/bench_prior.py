@@ -5,6 +5,10 @@ avatar trained from scratch on the same frames for the same minutes; one run at 
     .venv/bin/python -m benchmarks.bench_prior --prior resources/prior --scan out/scan1000 \
         [--minutes 0 1 3] [--scratch-minutes 1 3 10] [--out benchmarks/results/prior.json]
 
+Two halves may run side by side on the two cores, one thread each (`--threads 1`; `--minutes` with no value runs
+no prior rows, `--scratch-minutes` with none no from-scratch rows), the second joining the first's rows (`--join
+FIRST.json`) into one table and chart.
+
 The scan: `avatar-studio synth --identity 1000 --frames 60 --size 128 --scene ambient --out out/scan1000` (seeds
 from 1000 up are never in a corpus). Writes the JSON and a chart beside it (PNG)."""
 
@@ -12,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -22,9 +27,14 @@ REPO = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "app.cli"]
 
 
+THREADS: int | None = None
+"""Torch threads of every command run (OMP_NUM_THREADS; None: torch's default)."""
+
+
 def run(args: list[str]) -> float:
+    env = os.environ | ({"OMP_NUM_THREADS": str(THREADS)} if THREADS else {})
     t0 = time.perf_counter()
-    subprocess.run(CLI + args, check=True, cwd=REPO, stdout=subprocess.DEVNULL)
+    subprocess.run(CLI + args, check=True, cwd=REPO, stdout=subprocess.DEVNULL, env=env)
     return time.perf_counter() - t0
 
 
@@ -43,8 +53,8 @@ def evaluate(avatar: Path, scan: Path, round_views: Path | None) -> dict:
     return row
 
 
-def chart(results: dict, path: Path, x: str = "minutes", xlabel: str = "minutes of training on the scan (2 CPU cores)",
-          title: str | None = None) -> None:
+def chart(results: dict, path: Path, x: str = "minutes", xlabel: str | None = None, title: str | None = None
+          ) -> None:
     """The prior's and the from-scratch avatars' held-out PSNR against `x` (minutes, or a scan's frames: a log axis
     at the values measured), and where measured from cameras all round the head."""
     import matplotlib
@@ -63,7 +73,9 @@ def chart(results: dict, path: Path, x: str = "minutes", xlabel: str = "minutes 
     if x == "frames":
         ax.set_xscale("log")
         ax.set_xticks(results["frames"], [str(f) for f in results["frames"]])
-    ax.set_xlabel(xlabel)
+    threads = results.get("threads")
+    ax.set_xlabel(xlabel or "minutes of training on the scan "
+                  + (f"({threads} thread{'s' if threads > 1 else ''} a run)" if threads else "(2 CPU cores)"))
     ax.set_ylabel("held-out PSNR (dB)")
     ax.set_title(title or f"A held-out person ({results['scan_frames']} scan frames): what the prior buys",
                  fontsize=10)
@@ -77,15 +89,26 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--prior", type=Path, default=REPO / "resources" / "prior")
     p.add_argument("--scan", type=Path, required=True)
-    p.add_argument("--minutes", type=float, nargs="+", default=[0.0, 1.0, 3.0])
-    p.add_argument("--scratch-minutes", type=float, nargs="+", default=[1.0, 3.0, 10.0])
+    p.add_argument("--minutes", type=float, nargs="*", default=[0.0, 1.0, 3.0])
+    p.add_argument("--scratch-minutes", type=float, nargs="*", default=[1.0, 3.0, 10.0])
+    p.add_argument("--threads", type=int, help="torch threads of each command (default: torch's)")
+    p.add_argument("--join", type=Path, help="a results JSON of this benchmark whose rows join this run's")
     p.add_argument("--round-views", type=Path, help="a capture of the same person from cameras all round the head "
                    "(synth --views 4): each avatar is measured on its test frames too")
     p.add_argument("--keep", type=Path, help="keep the avatars in this folder (default: a temporary one)")
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "prior.json")
     a = p.parse_args()
+    global THREADS
+    THREADS = a.threads
     train = json.loads((a.scan / "transforms_train.json").read_text())
-    results: dict = {"prior": [], "scratch": [], "scan": str(a.scan), "scan_frames": len(train["frames"])}
+    results: dict = {"prior": [], "scratch": [], "scan": str(a.scan), "scan_frames": len(train["frames"]),
+                     "threads": a.threads}
+    if a.join is not None:
+        joined = json.loads(a.join.read_text())
+        if joined.get("scan_frames") != results["scan_frames"] or joined.get("threads") != a.threads:
+            raise SystemExit(f"{a.join}: another scan or thread count ({joined.get('scan_frames')} frames, "
+                             f"{joined.get('threads')} threads), not this run's")
+        results["prior"], results["scratch"] = joined["prior"], joined["scratch"]
     with tempfile.TemporaryDirectory() as scratch_dir:
         tmp = a.keep or Path(scratch_dir)
         for m in a.minutes:
@@ -94,6 +117,7 @@ def main() -> None:
                            str(m)])
             results["prior"].append({"minutes": m, "seconds": round(seconds, 1),
                                      **evaluate(out, a.scan, a.round_views)})
+            results["prior"].sort(key=lambda r: r["minutes"])
             print("prior", results["prior"][-1], flush=True)
         for m in a.scratch_minutes:
             out = Path(tmp) / f"scratch_{m:g}"
@@ -101,6 +125,7 @@ def main() -> None:
                            "--out", str(out)])
             results["scratch"].append({"minutes": m, "seconds": round(seconds, 1),
                                        **evaluate(out, a.scan, a.round_views)})
+            results["scratch"].sort(key=lambda r: r["minutes"])
             print("scratch", results["scratch"][-1], flush=True)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(results, indent=1))
