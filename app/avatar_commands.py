@@ -16,7 +16,7 @@ import torch
 from app.errors import UserInputError
 from app.head_commands import save_png
 from app.progress import Progress
-from app.turntable import INSPECT, TurntableConfig, buffer_image, turntable_frames
+from app.turntable import INSPECT, TurntableConfig, buffer_image, render_needs, turntable_frames
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
 from models.capture.dataset import check_images, load_split
@@ -228,7 +228,8 @@ def run_render(cfg: RenderCommandConfig) -> int:
                              f"{avatar.describe_effects()}) has no such buffer{why}")
     gl = GLContext.headless()
     t0 = time.perf_counter()
-    out = avatar.render_image(controls, cam, Rasterizer(gl), inspect=cfg.buffer in INSPECT)
+    buffers, inspect = render_needs(cfg.buffer)
+    out = avatar.render_image(controls, cam, Rasterizer(gl), inspect=inspect, buffers=buffers)
     ms = 1e3 * (time.perf_counter() - t0)
     if cfg.buffer not in out and cfg.buffer not in INSPECT:
         raise UserInputError(f"--buffer {cfg.buffer}: this avatar's effect set has no normals network")
@@ -381,7 +382,7 @@ def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, o
         controls = avatar.at_rest(sliders.controls())
         if on_pose:
             on_pose(k, controls)
-        yield buffer_image(avatar.render_image(controls, cam, raster, should_stop=should_stop), "rgb")
+        yield buffer_image(avatar.render_image(controls, cam, raster, should_stop=should_stop, buffers=()), "rgb")
         if on_frame:
             on_frame(k)
 

@@ -159,17 +159,17 @@ class TestFrames:
 
 def measure(avatar: Avatar, quality: Quality, frames: TestFrames, raster: Rasterizer
             ) -> tuple[dict, list[np.ndarray]]:
-    """Time per frame (median over the frames, after one warm-up render) and errors against the ground truth of
-    one setting; the renders at full size."""
+    """Time per frame (median over the frames, after one warm-up render; the colour render alone, no optional
+    buffers) and errors against the ground truth of one setting; the renders at full size."""
     images, times = [], []
     for i, (f, cam) in enumerate(zip(frames.frames, frames.cameras, strict=True)):
         avatar.set_quality(quality)
         size = quality.size(cam.width_px)
         c = cam.resized(size, max(8, round(cam.height_px * size / cam.width_px)))
         if i == 0:
-            avatar.render_image(f.controls, c, raster)
+            avatar.render_image(f.controls, c, raster, buffers=())
         t0 = time.perf_counter()
-        out = avatar.render_image(f.controls, c, raster)
+        out = avatar.render_image(f.controls, c, raster, buffers=())  # the colour, as the studio shows it first
         times.append(time.perf_counter() - t0)
         images.append(upsample(out["rgb"], frames.truth[i].shape[:2]))
     finite = all(bool(np.isfinite(im).all()) for im in images)

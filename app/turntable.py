@@ -126,6 +126,6 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
         cam = turntable_camera(avatar.rest_vertices(), yaw, cfg.elevation_deg, fov_y_deg=18.0,
                                width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
-        yield buffer_image(avatar.render_image(c, cam, rasterizer, should_stop=should_stop), "rgb")
+        yield buffer_image(avatar.render_image(c, cam, rasterizer, should_stop=should_stop, buffers=()), "rgb")
         if on_frame:
             on_frame(k)
