@@ -38,6 +38,33 @@ def run(args: list[str]) -> float:
     return time.perf_counter() - t0
 
 
+def add_halves_options(p: argparse.ArgumentParser) -> None:
+    """--threads and --join: a benchmark's prior and from-scratch halves run side by side, one thread each."""
+    p.add_argument("--threads", type=int, help="torch threads of each command (default: torch's)")
+    p.add_argument("--join", type=Path, help="a results JSON of this benchmark whose rows join this run's")
+
+
+def start_results(a: argparse.Namespace, results: dict, same: tuple[str, ...]) -> dict:
+    """This run's results, the thread count set for every command, with the rows of --join's run where given (its
+    `same` keys and thread count must be this run's)."""
+    global THREADS
+    THREADS = a.threads
+    results["threads"] = a.threads
+    if a.join is not None:
+        joined = json.loads(a.join.read_text())
+        if any(joined.get(k) != results[k] for k in (*same, "threads")):
+            raise SystemExit(f"{a.join}: not a half of this run ({', '.join(f'{k} {joined.get(k)}' for k in same)}, "
+                             f"{joined.get('threads')} threads)")
+        results["prior"], results["scratch"] = joined["prior"], joined["scratch"]
+    return results
+
+
+def add_row(results: dict, key: str, x: str, row: dict) -> None:
+    """A row of `key`'s rows, kept in order of `x`, and shown."""
+    results[key] = sorted([*results[key], row], key=lambda r: r[x])
+    print(key, row, flush=True)
+
+
 def evaluate(avatar: Path, scan: Path, round_views: Path | None) -> dict:
     """Held-out metrics on the scan's test frames, and where given on a capture of the same person from cameras
     all round the head (views the scan never had)."""
@@ -91,42 +118,29 @@ def main() -> None:
     p.add_argument("--scan", type=Path, required=True)
     p.add_argument("--minutes", type=float, nargs="*", default=[0.0, 1.0, 3.0])
     p.add_argument("--scratch-minutes", type=float, nargs="*", default=[1.0, 3.0, 10.0])
-    p.add_argument("--threads", type=int, help="torch threads of each command (default: torch's)")
-    p.add_argument("--join", type=Path, help="a results JSON of this benchmark whose rows join this run's")
+    add_halves_options(p)
     p.add_argument("--round-views", type=Path, help="a capture of the same person from cameras all round the head "
                    "(synth --views 4): each avatar is measured on its test frames too")
     p.add_argument("--keep", type=Path, help="keep the avatars in this folder (default: a temporary one)")
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "prior.json")
     a = p.parse_args()
-    global THREADS
-    THREADS = a.threads
     train = json.loads((a.scan / "transforms_train.json").read_text())
-    results: dict = {"prior": [], "scratch": [], "scan": str(a.scan), "scan_frames": len(train["frames"]),
-                     "threads": a.threads}
-    if a.join is not None:
-        joined = json.loads(a.join.read_text())
-        if joined.get("scan_frames") != results["scan_frames"] or joined.get("threads") != a.threads:
-            raise SystemExit(f"{a.join}: another scan or thread count ({joined.get('scan_frames')} frames, "
-                             f"{joined.get('threads')} threads), not this run's")
-        results["prior"], results["scratch"] = joined["prior"], joined["scratch"]
+    results = start_results(a, {"prior": [], "scratch": [], "scan": str(a.scan), "scan_frames": len(train["frames"])},
+                            ("scan", "scan_frames"))
     with tempfile.TemporaryDirectory() as scratch_dir:
         tmp = a.keep or Path(scratch_dir)
         for m in a.minutes:
             out = Path(tmp) / f"prior_{m:g}"
             seconds = run(["personalize", str(a.scan), "--prior", str(a.prior), "--out", str(out), "--minutes",
                            str(m)])
-            results["prior"].append({"minutes": m, "seconds": round(seconds, 1),
-                                     **evaluate(out, a.scan, a.round_views)})
-            results["prior"].sort(key=lambda r: r["minutes"])
-            print("prior", results["prior"][-1], flush=True)
+            add_row(results, "prior", "minutes", {"minutes": m, "seconds": round(seconds, 1),
+                                                  **evaluate(out, a.scan, a.round_views)})
         for m in a.scratch_minutes:
             out = Path(tmp) / f"scratch_{m:g}"
             seconds = run(["train", str(a.scan), "--model", "primitives", "--effects", "none", "--minutes", str(m),
                            "--out", str(out)])
-            results["scratch"].append({"minutes": m, "seconds": round(seconds, 1),
-                                       **evaluate(out, a.scan, a.round_views)})
-            results["scratch"].sort(key=lambda r: r["minutes"])
-            print("scratch", results["scratch"][-1], flush=True)
+            add_row(results, "scratch", "minutes", {"minutes": m, "seconds": round(seconds, 1),
+                                                    **evaluate(out, a.scan, a.round_views)})
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(results, indent=1))
     chart(results, a.out.with_suffix(".png"))

@@ -7,7 +7,8 @@ else running.
         [--frames 1 3 9 33] [--minutes 3] [--out benchmarks/results/prior_frames.json]
 
 The scan as for benchmarks/bench_prior.py (`synth --identity 1000 --frames 60 --size 128 --scene ambient`). Writes
-the JSON and a chart beside it (PNG)."""
+the JSON and a chart beside it (PNG). As bench_prior, the halves may run side by side at one thread each
+(`--kinds prior` beside `--kinds scratch`, `--threads 1`, the second with `--join FIRST.json`)."""
 
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench_prior import REPO, chart, evaluate, run
+from benchmarks.bench_prior import REPO, add_halves_options, add_row, chart, evaluate, run, start_results
 
 
 def scan_with(scan: Path, frames: int, out: Path) -> Path:
@@ -34,9 +35,10 @@ def scan_with(scan: Path, frames: int, out: Path) -> Path:
 
 
 def frames_chart(results: dict, path: Path) -> None:
-    chart(results, path, "frames",
-          f"training frames in the scan ({results['minutes']:g} minutes of training each, 2 CPU cores)",
-          "A held-out person from few frames: what the prior buys")
+    threads = results.get("threads")
+    cores = f"{threads} thread{'s' if threads > 1 else ''} a run" if threads else "2 CPU cores"
+    chart(results, path, "frames", f"training frames in the scan ({results['minutes']:g} minutes of training each, "
+          f"{cores})", "A held-out person from few frames: what the prior buys")
 
 
 def main() -> None:
@@ -45,18 +47,23 @@ def main() -> None:
     p.add_argument("--scan", type=Path, required=True)
     p.add_argument("--frames", type=int, nargs="+", default=[1, 3, 9, 33])
     p.add_argument("--minutes", type=float, default=3.0)
+    p.add_argument("--kinds", nargs="+", choices=("prior", "scratch"), default=["prior", "scratch"])
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "prior_frames.json")
+    add_halves_options(p)
     a = p.parse_args()
-    results: dict = {"scan": str(a.scan), "frames": a.frames, "minutes": a.minutes, "prior": [], "scratch": []}
+    results = start_results(a, {"scan": str(a.scan), "frames": a.frames, "minutes": a.minutes, "prior": [],
+                                "scratch": []}, ("scan", "frames", "minutes"))
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.frames:
             scan = scan_with(a.scan, n, Path(tmp) / f"scan_{n}")
             for key, args in (("prior", ["personalize", str(scan), "--prior", str(a.prior)]),
                               ("scratch", ["train", str(scan), "--model", "primitives", "--effects", "none"])):
+                if key not in a.kinds:
+                    continue
                 out = Path(tmp) / f"{key}_{n}"
                 seconds = run([*args, "--out", str(out), "--minutes", str(a.minutes)])
-                results[key].append({"frames": n, "seconds": round(seconds, 1), **evaluate(out, a.scan, None)})
-                print(key, results[key][-1], flush=True)
+                add_row(results, key, "frames", {"frames": n, "seconds": round(seconds, 1),
+                                                 **evaluate(out, a.scan, None)})
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(results, indent=1))
     frames_chart(results, a.out.with_suffix(".png"))
