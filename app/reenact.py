@@ -181,7 +181,7 @@ def driver_from_video(cfg: ReenactConfig, head: HeadModel, head_spec: str) -> Dr
               "crop": {"x0": tracked.crop.x0, "y0": tracked.crop.y0, "side": tracked.crop.side},
               "source_frames": [f["source_frame"] for f in tracked.kept]}
     return Driver(tracked.result.controls, times, min(cfg.fps or tracked.info.fps, tracked.info.fps), head, head_spec,
-                  lambda k: tracked.crop.image(tracked.kept[k]["rgb"]), report, time.perf_counter() - t0)
+                  lambda k: tracked.kept[k]["image"], report, time.perf_counter() - t0)
 
 
 def capture_of(folder: Path) -> Path:

@@ -42,7 +42,7 @@ from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
 from models.tracking.landmarker import Face, Landmarker
 from models.tracking.masks import background_plate, foreground_mask
-from models.tracking.video import VideoInfo, face_crop, sampled_frames, video_info
+from models.tracking.video import VideoInfo, cropped_frames, face_crop, sampled_frames, video_info
 from render.video import write_video
 
 
@@ -111,7 +111,10 @@ def detect_faces(cfg: TrackConfig, bundle: Path, info, progress) -> tuple[list[d
                 if len(faces) > 1:
                     several += 1
                 face = max(faces, key=lambda f: np.ptp(f.landmarks_px[:, 0]))
-                kept.append({"source_frame": index, "time_s": t, "rgb": rgb, "face": face})
+                # The full frame is not kept (a minute of 1080p is 11 GB): its crop is read again once the crop
+                # that serves every frame is known.
+                kept.append({"source_frame": index, "time_s": t, "face": face,
+                             "sharpness": sharpness(rgb, face.landmarks_px)})
             progress(read, expected)
     if read == 0:
         raise UserInputError(f"{cfg.video}: no frames could be decoded")
@@ -151,8 +154,9 @@ def split_of(k: int, n: int, n_test: int) -> str:
 
 @dataclass
 class Tracked:
-    """A video tracked: the kept frames (source index, time, RGB, MediaPipe face), the crop they share, its
-    intrinsics, the head model's fit, and where the fitted head puts every landmark."""
+    """A video tracked: the kept frames (source index, time, MediaPipe face, sharpness, and the frame's crop as
+    "image", RGB uint8), the crop they share, its intrinsics, the head model's fit, and where the fitted head puts
+    every landmark."""
 
     kept: list[dict]
     dropped: list[dict]
@@ -186,6 +190,9 @@ def track_video(cfg: TrackConfig, model) -> Tracked:
     print(f"{cfg.video}: {len(kept)} of {read} frames kept ({len(dropped)} dropped) in {t_landmarks:.1f} s",
           flush=True)
     crop = face_crop([f["face"].landmarks_px for f in kept], cfg.size, (info.width, info.height))
+    for f, image in zip(kept, cropped_frames(cfg.video, cfg.fps, crop, [f["source_frame"] for f in kept]),
+                        strict=True):
+        f["image"] = image
     f_full = 0.5 * info.width / math.tan(math.radians(cfg.fov_deg) / 2)
     cx, cy = crop.points(np.array([info.width / 2, info.height / 2], np.float32))
     k = Intrinsics(f_full * crop.scale, f_full * crop.scale, float(cx), float(cy))
@@ -213,7 +220,7 @@ def run_track(cfg: TrackConfig) -> int:
         (partial / "tracking").mkdir(parents=True)
         print("cutting masks...", flush=True)
         t_masks = time.perf_counter()
-        crops = [crop.image(f["rgb"]) for f in kept]
+        crops = [f["image"] for f in kept]
         masks = [foreground_mask(img, crop.points(face.landmarks_px[:468]))
                  for img, face in zip(crops, faces, strict=True)]
         t_masks = time.perf_counter() - t_masks
@@ -275,7 +282,7 @@ def sharp_faces(cfg: TrackConfig, bundle: Path, info) -> tuple[list[dict], list[
 
     kept, dropped, read = detect_faces(cfg, bundle, info, progress)
     bar.close()
-    sharp = np.array([sharpness(f["rgb"], f["face"].landmarks_px) for f in kept])
+    sharp = np.array([f["sharpness"] for f in kept])
     limit = cfg.blur * float(np.median(sharp))
     for f, s in zip(list(kept), sharp, strict=True):
         if s < limit:

@@ -77,21 +77,57 @@ class Crop:
         return (px - np.array([self.x0, self.y0], np.float32)) * self.scale
 
     def image(self, rgb: np.ndarray) -> np.ndarray:
-        """The crop of one frame at size x size."""
-        M = np.array([[self.scale, 0, -self.x0 * self.scale], [0, self.scale, -self.y0 * self.scale]], np.float64)
-        return cv2.warpAffine(rgb, M, (self.size, self.size), flags=cv2.INTER_AREA if self.scale < 1
-                              else cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        """The crop of one frame at size x size, each output pixel the source's mean over its footprint.
+
+        Coordinates are continuous, as the landmarks, the intrinsics and the rays have them (pixel k spans k to
+        k + 1, its centre at k + 0.5): crop = (source - x0) scale. `warpAffine` has no area filter (INTER_AREA
+        falls back to bilinear there), so a crop shrunk more than 2x would alias (2-pixel stripes shrunk 4x came
+        out white, not grey): the frame is first reduced by the whole factor f = floor(1 / scale) with block means
+        (reduced pixel i spans source f i to f i + f), then warped the rest of the way (at most 2x). warpAffine
+        maps pixel indices, centre to centre: crop pixel d's centre d + 0.5 = (f (i + 0.5) - x0) scale, so
+            d = f scale i + (f / 2 - x0) scale - 0.5."""
+        f = int(1.0 / self.scale + 1e-6) if self.scale < 1 else 1
+        if f >= 2:
+            h, w = rgb.shape[0] // f * f, rgb.shape[1] // f * f
+            rgb = cv2.resize(rgb[:h, :w], (w // f, h // f), interpolation=cv2.INTER_AREA)
+        s = self.scale * f
+        M = np.array([[s, 0, (f / 2 - self.x0) * self.scale - 0.5], [0, s, (f / 2 - self.y0) * self.scale - 0.5]])
+        return cv2.warpAffine(rgb, M, (self.size, self.size), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
-def face_crop(landmarks_px: list[np.ndarray], size: int, frame_wh: tuple[int, int], margin: float = 1.9) -> Crop:
-    """One square crop about the face over all frames: centred on the median face centre, `margin` times the
-    largest face extent seen (room for hair, ears, neck and head motion), kept inside the frame where the frame
-    allows (no invented pixels)."""
+def cropped_frames(path: Path, fps: float | None, crop: Crop, wanted: list[int]) -> list[np.ndarray]:
+    """The crops of the source frames numbered `wanted` (indices as `sampled_frames` gives them at `fps`), read
+    again from the file: a tracked video keeps only these small images, never its full frames (a minute of 4K
+    video is 45 GB of RGB)."""
+    want = set(wanted)
+    out: dict[int, np.ndarray] = {}
+    for index, _, rgb in sampled_frames(path, fps):
+        if index in want:
+            out[index] = crop.image(rgb)
+            if len(out) == len(want):
+                break
+    missing = want - out.keys()
+    if missing:
+        raise VideoError(f"{path}: frame {min(missing)} could not be decoded a second time (the file changed?)")
+    return [out[i] for i in wanted]
+
+
+def face_crop(landmarks_px: list[np.ndarray], size: int, frame_wh: tuple[int, int], margin: float = 1.9,
+              reach: float = 0.3) -> Crop:
+    """One square crop about the face over all frames: centred on the median face centre (a little lower: the
+    neck rather than the air), `margin` times the largest face extent seen (room for hair, ears and neck), and
+    wider where the head travels: every frame's face box with `reach` times the face's extent beyond it (its
+    hair and ears) stays inside. Kept inside the frame where the frame allows (no invented pixels).
+
+    A face 100 px across that never moves: side 190 px; the same face 120 px right of its median place in one
+    frame: that box's far edge is 50 + 120 = 170 px from the centre, so side = 2 (170 + 30) = 400 px."""
     lo = np.stack([p.min(0) for p in landmarks_px])
     hi = np.stack([p.max(0) for p in landmarks_px])
+    extent = float(np.max(hi - lo))
     centre = np.median(0.5 * (lo + hi), 0)
-    centre[1] += 0.08 * float(np.median(hi[:, 1] - lo[:, 1]))  # a little lower: the neck rather than the air
-    side = min(margin * float(np.max(hi - lo)), float(min(frame_wh)))
+    centre[1] += 0.08 * float(np.median(hi[:, 1] - lo[:, 1]))
+    travel = float(np.max(np.maximum(hi - centre, centre - lo)))  # farthest any face's edge gets from the centre
+    side = min(max(margin * extent, 2 * (travel + reach * extent)), float(min(frame_wh)))
     x0 = float(np.clip(centre[0] - side / 2, 0, frame_wh[0] - side))
     y0 = float(np.clip(centre[1] - side / 2, 0, frame_wh[1] - side))
     return Crop(x0, y0, side, size)
