@@ -91,9 +91,15 @@ def landmarker_path(cfg: TrackConfig) -> Path:
     return path
 
 
+OTHER_PERSON = 0.5
+"""A second face at least this share of the main face's width is another person in the shot; a smaller one (a
+photograph on the wall, someone far behind) is part of the room, and the largest face is tracked."""
+
+
 def detect_faces(cfg: TrackConfig, bundle: Path, info, progress) -> tuple[list[dict], list[dict], int]:
-    """Landmarks of the one face in each sampled frame; frames without a face are dropped (with the reason).
-    Several faces in more than a tenth of the frames is an error: track needs a video of one person."""
+    """Landmarks of the one face in each sampled frame (the largest); frames without a face are dropped (with
+    the reason). Another person (a second face at least OTHER_PERSON as wide) in more than a tenth of the frames
+    is an error: track needs a video of one person."""
     share = min(cfg.fps / info.fps, 1.0) if cfg.fps else 1.0
     expected = max(1, round(info.frames * share)) if info.frames > 0 else None
     if expected and cfg.seconds:
@@ -105,12 +111,13 @@ def detect_faces(cfg: TrackConfig, bundle: Path, info, progress) -> tuple[list[d
                 break
             read += 1
             faces = landmarker.detect(rgb, round(1000 * t))
+            widths = [float(np.ptp(f.landmarks_px[:, 0])) for f in faces]
             if not faces:
                 dropped.append({"source_frame": index, "time_s": round(t, 3), "reason": "no face found"})
             else:
-                if len(faces) > 1:
+                face = faces[int(np.argmax(widths))]
+                if len(faces) > 1 and sorted(widths)[-2] >= OTHER_PERSON * max(widths):
                     several += 1
-                face = max(faces, key=lambda f: np.ptp(f.landmarks_px[:, 0]))
                 # The full frame is not kept (a minute of 1080p is 11 GB): its crop is read again once the crop
                 # that serves every frame is known.
                 kept.append({"source_frame": index, "time_s": t, "face": face,
@@ -119,8 +126,8 @@ def detect_faces(cfg: TrackConfig, bundle: Path, info, progress) -> tuple[list[d
     if read == 0:
         raise UserInputError(f"{cfg.video}: no frames could be decoded")
     if several > 0.1 * read:
-        raise UserInputError(f"{cfg.video}: several people (two or more faces in {several} of {read} frames); "
-                             "track needs a video of one face")
+        raise UserInputError(f"{cfg.video}: several people (a second face at least {OTHER_PERSON:.0%} as wide as the "
+                             f"first in {several} of {read} frames); track needs a video of one face")
     if read < 10:
         raise UserInputError(f"{cfg.video}: only {read} frames taken (at least 10 are needed: a longer part of the "
                              "video, or a higher --fps)")

@@ -253,6 +253,30 @@ def test_bad_videos_are_clear_errors_and_leave_nothing(tmp_path, landmarker, fac
     assert (out / "keep.txt").read_text() == "mine"
 
 
+def test_a_small_face_in_the_room_is_not_a_second_person(tmp_path, landmarker, face_video):
+    """The real clip with a copy of itself at a third of its size in the corner (a photograph on the wall): the
+    small face is found in every frame, yet the video tracks, on the large face (the crop about it, not the
+    photograph). The same copy at full size is another person (test_bad_videos_are_clear_errors...)."""
+    from models.tracking.landmarker import Landmarker
+
+    frames = []
+    for _, _, rgb in sampled_frames(face_video, 10):
+        frame = np.concatenate([cv2.resize(rgb, (256, 256), interpolation=cv2.INTER_AREA),
+                                np.full((256, 128, 3), 200, np.uint8)], 1)
+        frame[8:93, 160:245] = cv2.resize(rgb, (85, 85), interpolation=cv2.INTER_AREA)
+        frames.append(frame)
+        if len(frames) == 12:
+            break
+    video = _write_video(tmp_path / "photo.mp4", frames)
+    with Landmarker(landmarker, max_faces=2) as lm:
+        assert all(len(lm.detect(f, 100 * i)) == 2 for i, f in enumerate(frames))
+    out = tmp_path / "d"
+    assert main(["track", str(video), "--head", "builtin", "--out", str(out), "--landmarker", str(landmarker),
+                 "--size", "64", "--no-overlay", "--iterations", "50"]) == 0
+    crop = json.loads((out / "tracking" / "report.json").read_text())["crop"]
+    assert abs(crop["x0"] + crop["side"] / 2 - 128) < 16  # centred on the large face (x 128), not the photo (202)
+
+
 def test_no_landmarker_bundle_is_a_clear_error(tmp_path, face_video, capsys, monkeypatch):
     monkeypatch.delenv("AVATAR_STUDIO_LANDMARKER", raising=False)
     assert main(["track", str(face_video), "--out", str(tmp_path / "d")]) == 2
