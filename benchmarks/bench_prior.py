@@ -7,7 +7,7 @@ avatar trained from scratch on the same frames for the same minutes; one run at 
 
 Two halves may run side by side on the two cores, one thread each (`--threads 1`; `--minutes` with no value runs
 no prior rows, `--scratch-minutes` with none no from-scratch rows), the second joining the first's rows (`--join
-FIRST.json`) into one table and chart.
+FIRST.json`: it waits for that file) into one table and chart.
 
 The scan: `avatar-studio synth --identity 1000 --frames 60 --size 128 --scene ambient --out out/scan1000` (seeds
 from 1000 up are never in a corpus). Writes the JSON and a chart beside it (PNG)."""
@@ -45,17 +45,41 @@ def add_halves_options(p: argparse.ArgumentParser) -> None:
 
 
 def start_results(a: argparse.Namespace, results: dict, same: tuple[str, ...]) -> dict:
-    """This run's results, the thread count set for every command, with the rows of --join's run where given (its
-    `same` keys and thread count must be this run's)."""
+    """This run's results, with the thread count set for every command; `same`: the keys a --join'ed half must
+    share with it (checked when the rows are joined, at the end: the halves run side by side)."""
     global THREADS
     THREADS = a.threads
     results["threads"] = a.threads
+    results["_same"] = same
+    return results
+
+
+POLL_S = 10.0
+"""How often a half looks for the other half's file."""
+
+
+def write_results(a: argparse.Namespace, results: dict, order: tuple[str, ...]) -> dict:
+    """Writes the results to --out, with the rows of --join's half where given, every key's rows in `order`: that
+    half runs beside this one, so its file is waited for (it must share this run's `same` keys and thread
+    count)."""
+    same = results.pop("_same")
     if a.join is not None:
+        if not a.join.is_file():
+            print(f"waiting for {a.join} (the other half)", flush=True)
+        while not a.join.is_file():
+            time.sleep(POLL_S)
         joined = json.loads(a.join.read_text())
         if any(joined.get(k) != results[k] for k in (*same, "threads")):
             raise SystemExit(f"{a.join}: not a half of this run ({', '.join(f'{k} {joined.get(k)}' for k in same)}, "
                              f"{joined.get('threads')} threads)")
-        results["prior"], results["scratch"] = joined["prior"], joined["scratch"]
+        for key in ("prior", "scratch"):
+            results[key] = [*joined.get(key, []), *results.get(key, [])]
+    for key in ("prior", "scratch"):
+        results[key] = sorted(results.get(key, []), key=lambda r: tuple(r[k] for k in order))
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = a.out.with_name(a.out.name + ".partial")
+    tmp.write_text(json.dumps(results, indent=1))
+    tmp.replace(a.out)  # whole or absent: the other half may be polling for it
     return results
 
 
@@ -141,8 +165,7 @@ def main() -> None:
                            "--out", str(out)])
             add_row(results, "scratch", "minutes", {"minutes": m, "seconds": round(seconds, 1),
                                                     **evaluate(out, a.scan, a.round_views)})
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps(results, indent=1))
+    results = write_results(a, results, ("minutes",))
     chart(results, a.out.with_suffix(".png"))
     print(f"wrote {a.out} and {a.out.with_suffix('.png')}")
 

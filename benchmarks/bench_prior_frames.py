@@ -8,7 +8,8 @@ else running.
 
 The scan as for benchmarks/bench_prior.py (`synth --identity 1000 --frames 60 --size 128 --scene ambient`). Writes
 the JSON and a chart beside it (PNG). As bench_prior, the halves may run side by side at one thread each
-(`--kinds prior` beside `--kinds scratch`, `--threads 1`, the second with `--join FIRST.json`)."""
+(`--kinds prior` beside `--kinds scratch`, `--threads 1`, the second with `--join FIRST.json`: it waits for
+that file and writes the joined table)."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench_prior import REPO, add_halves_options, add_row, chart, evaluate, run, start_results
+from benchmarks.bench_prior import REPO, add_halves_options, add_row, chart, evaluate, run, start_results, write_results
 
 
 def scan_with(scan: Path, frames: int, out: Path) -> Path:
@@ -64,8 +65,7 @@ def main() -> None:
                 seconds = run([*args, "--out", str(out), "--minutes", str(a.minutes)])
                 add_row(results, key, "frames", {"frames": n, "seconds": round(seconds, 1),
                                                  **evaluate(out, a.scan, None)})
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps(results, indent=1))
+    results = write_results(a, results, ("frames",))
     frames_chart(results, a.out.with_suffix(".png"))
     print(f"wrote {a.out} and {a.out.with_suffix('.png')}")
 

@@ -8,16 +8,16 @@ from cameras all round the head.
         [--out benchmarks/results/prior_tuning.json]
 
 The scan and the round views as for benchmarks/bench_prior.py. `--threads 1` with `--tune all` beside `--tune
-decoder --join FIRST.json` runs the two halves side by side."""
+decoder --join FIRST.json` runs the two halves side by side (the second waits for the first's file and writes
+the joined table)."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import tempfile
 from pathlib import Path
 
-from benchmarks.bench_prior import REPO, add_halves_options, evaluate, run, start_results
+from benchmarks.bench_prior import REPO, add_halves_options, evaluate, run, start_results, write_results
 
 
 def main() -> None:
@@ -40,10 +40,9 @@ def main() -> None:
                 seconds = run(["personalize", str(a.scan), "--prior", str(a.prior), "--out", str(out), "--minutes",
                                str(a.minutes), "--lr", str(lr), "--tune", tune])
                 row = {"tune": tune, "lr": lr, "seconds": round(seconds, 1), **evaluate(out, a.scan, a.round_views)}
-                results["prior"] = sorted([*results["prior"], row], key=lambda r: (r["tune"], r["lr"]))
+                results["prior"].append(row)
                 print(row, flush=True)
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps(results, indent=1))
+    write_results(a, results, ("tune", "lr"))
     print(f"wrote {a.out}")
 
 
