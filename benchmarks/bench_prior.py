@@ -44,13 +44,11 @@ def add_halves_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--join", type=Path, help="a results JSON of this benchmark whose rows join this run's")
 
 
-def start_results(a: argparse.Namespace, results: dict, same: tuple[str, ...]) -> dict:
-    """This run's results, with the thread count set for every command; `same`: the keys a --join'ed half must
-    share with it (checked when the rows are joined, at the end: the halves run side by side)."""
+def start_results(a: argparse.Namespace, results: dict) -> dict:
+    """This run's results, with the thread count set for every command."""
     global THREADS
     THREADS = a.threads
     results["threads"] = a.threads
-    results["_same"] = same
     return results
 
 
@@ -58,11 +56,10 @@ POLL_S = 10.0
 """How often a half looks for the other half's file."""
 
 
-def write_results(a: argparse.Namespace, results: dict, order: tuple[str, ...]) -> dict:
+def write_results(a: argparse.Namespace, results: dict, same: tuple[str, ...], order: tuple[str, ...]) -> dict:
     """Writes the results to --out, with the rows of --join's half where given, every key's rows in `order`: that
     half runs beside this one, so its file is waited for (it must share this run's `same` keys and thread
     count)."""
-    same = results.pop("_same")
     if a.join is not None:
         if not a.join.is_file():
             print(f"waiting for {a.join} (the other half)", flush=True)
@@ -83,9 +80,9 @@ def write_results(a: argparse.Namespace, results: dict, order: tuple[str, ...]) 
     return results
 
 
-def add_row(results: dict, key: str, x: str, row: dict) -> None:
-    """A row of `key`'s rows, kept in order of `x`, and shown."""
-    results[key] = sorted([*results[key], row], key=lambda r: r[x])
+def add_row(results: dict, key: str, row: dict) -> None:
+    """A row of `key`'s rows, shown as it comes (write_results puts them in order)."""
+    results[key].append(row)
     print(key, row, flush=True)
 
 
@@ -149,23 +146,22 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "prior.json")
     a = p.parse_args()
     train = json.loads((a.scan / "transforms_train.json").read_text())
-    results = start_results(a, {"prior": [], "scratch": [], "scan": str(a.scan), "scan_frames": len(train["frames"])},
-                            ("scan", "scan_frames"))
+    results = start_results(a, {"prior": [], "scratch": [], "scan": str(a.scan), "scan_frames": len(train["frames"])})
     with tempfile.TemporaryDirectory() as scratch_dir:
         tmp = a.keep or Path(scratch_dir)
         for m in a.minutes:
             out = Path(tmp) / f"prior_{m:g}"
             seconds = run(["personalize", str(a.scan), "--prior", str(a.prior), "--out", str(out), "--minutes",
                            str(m)])
-            add_row(results, "prior", "minutes", {"minutes": m, "seconds": round(seconds, 1),
+            add_row(results, "prior", {"minutes": m, "seconds": round(seconds, 1),
                                                   **evaluate(out, a.scan, a.round_views)})
         for m in a.scratch_minutes:
             out = Path(tmp) / f"scratch_{m:g}"
             seconds = run(["train", str(a.scan), "--model", "primitives", "--effects", "none", "--minutes", str(m),
                            "--out", str(out)])
-            add_row(results, "scratch", "minutes", {"minutes": m, "seconds": round(seconds, 1),
+            add_row(results, "scratch", {"minutes": m, "seconds": round(seconds, 1),
                                                     **evaluate(out, a.scan, a.round_views)})
-    results = write_results(a, results, ("minutes",))
+    results = write_results(a, results, ("scan", "scan_frames"), ("minutes",))
     chart(results, a.out.with_suffix(".png"))
     print(f"wrote {a.out} and {a.out.with_suffix('.png')}")
 

@@ -53,7 +53,7 @@ def main() -> None:
     add_halves_options(p)
     a = p.parse_args()
     results = start_results(a, {"scan": str(a.scan), "frames": a.frames, "minutes": a.minutes, "prior": [],
-                                "scratch": []}, ("scan", "frames", "minutes"))
+                                "scratch": []})
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.frames:
             scan = scan_with(a.scan, n, Path(tmp) / f"scan_{n}")
@@ -63,9 +63,9 @@ def main() -> None:
                     continue
                 out = Path(tmp) / f"{key}_{n}"
                 seconds = run([*args, "--out", str(out), "--minutes", str(a.minutes)])
-                add_row(results, key, "frames", {"frames": n, "seconds": round(seconds, 1),
+                add_row(results, key, {"frames": n, "seconds": round(seconds, 1),
                                                  **evaluate(out, a.scan, None)})
-    results = write_results(a, results, ("frames",))
+    results = write_results(a, results, ("scan", "frames", "minutes"), ("frames",))
     frames_chart(results, a.out.with_suffix(".png"))
     print(f"wrote {a.out} and {a.out.with_suffix('.png')}")
 

@@ -17,7 +17,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from benchmarks.bench_prior import REPO, add_halves_options, evaluate, run, start_results, write_results
+from benchmarks.bench_prior import REPO, add_halves_options, add_row, evaluate, run, start_results, write_results
 
 
 def main() -> None:
@@ -32,17 +32,16 @@ def main() -> None:
     add_halves_options(p)
     a = p.parse_args()
     results = start_results(a, {"scan": str(a.scan), "prior_folder": str(a.prior), "minutes": a.minutes,
-                                "prior": [], "scratch": []}, ("scan", "prior_folder", "minutes"))
+                                "prior": [], "scratch": []})
     with tempfile.TemporaryDirectory() as tmp:
         for tune in a.tune:
             for lr in a.lr:
                 out = Path(tmp) / f"{tune}_{lr:g}"
                 seconds = run(["personalize", str(a.scan), "--prior", str(a.prior), "--out", str(out), "--minutes",
                                str(a.minutes), "--lr", str(lr), "--tune", tune])
-                row = {"tune": tune, "lr": lr, "seconds": round(seconds, 1), **evaluate(out, a.scan, a.round_views)}
-                results["prior"].append(row)
-                print(row, flush=True)
-    write_results(a, results, ("tune", "lr"))
+                add_row(results, "prior", {"tune": tune, "lr": lr, "seconds": round(seconds, 1),
+                                           **evaluate(out, a.scan, a.round_views)})
+    write_results(a, results, ("scan", "prior_folder", "minutes"), ("tune", "lr"))
     print(f"wrote {a.out}")
 
 
