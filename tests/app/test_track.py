@@ -302,9 +302,8 @@ def test_a_landscape_or_rotated_hd_video_tracks_to_the_same_face(stored, face_vi
     the turn in the file's metadata, as phones store a portrait video: each tracks, and every dataset image is
     the file's frame mapped through the report's crop (the crop exact, the shrinking area-averaged, the rotation
     undone): at least 38 dB PSNR against the decoded frame's window shrunk with OpenCV's area filter
-    (measured 41-43 dB, the window's corner rounded to whole pixels; with the old pixel centres, 0.4 px off, 28)."""
-    import imageio_ffmpeg
-
+    (measured 41-43 dB, the window's corner rounded to whole pixels; with the old pixel centres, 0.4 px off,
+    28-29)."""
     frames = [rgb for _, _, rgb in sampled_frames(face_video, 10)][:10]
     canvases = []
     for rgb in frames:
