@@ -60,13 +60,22 @@ def into_cone(v: torch.Tensor, axis: torch.Tensor, cos_max: float) -> torch.Tens
     tensor([[0.8660, 0.0000, 0.5000],
             [0.0000, 0.0000, 1.0000]])
     """
-    axis = axis.to(v)
-    c = v @ axis
-    side = v - c[:, None] * axis
+    # Worked in double: a direction nearly opposite the axis leaves a side component of order 1e-3 after
+    # cancellation, too few float bits for a unit vector in the axis's plane. The side is made orthogonal to
+    # the axis again after it is normalised, and the rim normalised last.
+    a = axis.to(v).double()
+    a = a / a.norm()
+    u = v.double()
+    c = u @ a
+    side = u - c[:, None] * a
     length = side.norm(dim=-1, keepdim=True)
-    spare = torch.zeros_like(axis)
-    spare[int(axis.abs().argmin())] = 1.0
-    spare = spare - (spare @ axis) * axis
-    side = torch.where(length > 1e-6, side / length.clamp_min(1e-6), spare / spare.norm())
-    rim = cos_max * axis + math.sqrt(max(0.0, 1.0 - cos_max * cos_max)) * side
-    return torch.where((c >= cos_max)[:, None], v, rim)
+    spare = torch.zeros_like(a)
+    spare[int(a.abs().argmin())] = 1.0
+    spare = spare - (spare @ a) * a
+    side = torch.where(length > 1e-9, side / length.clamp_min(1e-9), spare / spare.norm())
+    side = side - (side @ a)[:, None] * a
+    side = side / side.norm(dim=-1, keepdim=True)
+    rim = cos_max * a + math.sqrt(max(0.0, 1.0 - cos_max * cos_max)) * side
+    rim = (rim / rim.norm(dim=-1, keepdim=True)).to(v.dtype)
+    inside = v @ axis.to(v) >= cos_max  # in the caller's precision: what it holds inside stays bit for bit
+    return torch.where(inside[:, None], v, rim)
