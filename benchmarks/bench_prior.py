@@ -98,7 +98,42 @@ def evaluate(avatar: Path, scan: Path, round_views: Path | None) -> dict:
         m = json.loads((out / "metrics.json").read_text())
         row |= {f"{key}psnr": round(m["metrics"]["psnr"], 2), f"{key}ssim": round(m["metrics"]["ssim"], 4),
                 f"{key}test_frames": m["frames"]}
+        if key == "round_":
+            behind = views_behind(data)
+            row |= {"behind_psnr": round(sum(m["per_frame"][k]["psnr"] for k in behind) / max(1, len(behind)), 2),
+                    "behind_test_frames": len(behind)}
     return row
+
+
+def views_behind(data: Path, split: str = "test") -> list[int]:
+    """The frames of a capture's split whose camera sees the back of the head: more than 90 degrees from where the
+    face looks (the head's +z turned by the frame's root pose), seen from the head's place (its translation).
+
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> cams = [[0, 0, 1.2], [1.2, 0, 0], [0, 0, -1.2]]
+    >>> frames = [{"transform_matrix": [[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]], "controls": {"pose":
+    ...     {"root": [0.0, 0.7, 0.0]}, "translation": [0.0, 0.0, 0.0]}} for x, y, z in cams]  # the face turned 40 deg
+    >>> _ = (d / "transforms_test.json").write_text(json.dumps({"frames": frames}))
+    >>> views_behind(d)  # the side camera is 50 degrees from the face, the back one 140
+    [2]
+    """
+    import numpy as np
+    import torch
+
+    from models.head.lbs import rotation_matrix_from_axis_angle
+
+    frames = json.loads((data / f"transforms_{split}.json").read_text())["frames"]
+    behind = []
+    for k, f in enumerate(frames):
+        controls = f["controls"]
+        turn = rotation_matrix_from_axis_angle(torch.tensor([controls["pose"]["root"]], dtype=torch.float64))[0]
+        facing = turn.numpy() @ np.array([0.0, 0.0, 1.0])
+        to_camera = np.asarray(f["transform_matrix"], dtype=float)[:3, 3] - np.asarray(controls.get(
+            "translation", [0.0, 0.0, 0.0]), dtype=float)
+        if facing @ to_camera < 0:
+            behind.append(k)
+    return behind
 
 
 def chart(results: dict, path: Path, x: str = "minutes", xlabel: str | None = None, title: str | None = None
@@ -118,6 +153,9 @@ def chart(results: dict, path: Path, x: str = "minutes", xlabel: str | None = No
         if rows and "round_psnr" in rows[0]:
             ax.plot([r[x] for r in rows], [r["round_psnr"] for r in rows], "s--", color=colour,
                     label=label + ": cameras all round")
+        if rows and "behind_psnr" in rows[0]:
+            ax.plot([r[x] for r in rows], [r["behind_psnr"] for r in rows], "^:", color=colour,
+                    label=label + ": cameras behind the head")
     if x == "frames":
         ax.set_xscale("log")
         ax.set_xticks(results["frames"], [str(f) for f in results["frames"]])
