@@ -1,7 +1,7 @@
 """Hard cases for the volumetric primitives (DESIGN 6), swept by hypothesis: primitives collapsed to zero size or
 flat, densities of 0 and 1e6, rays from kilometres away, along the boxes' faces and from inside a box, decoder
 offsets far beyond their range: every output finite, opacity within [0, 1], and the gradients training takes
-finite too."""
+finite too; the display march in C (native.py) finite on the same cases."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from models.avatars.primitives import march
+from models.avatars.primitives import march, native
 from models.head.lbs import rotation_matrix_from_axis_angle
 
 SWEEP = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -53,6 +53,12 @@ def test_march_stays_finite(halves, densities, centres, eye, directions, shared)
     for t in (out.rgb, out.opacity, out.depth):
         assert torch.isfinite(t).all()
     assert (out.opacity >= -1e-6).all() and (out.opacity <= 1 + 1e-5).all()
+    if native.library() is not None:  # the display march in C: the same hard cases, finite and within [0, 1]
+        with torch.no_grad():
+            shown = native.march(origins, dirs, torch.tensor([0.5, 0.5, 0.5]), prims, lists, 4, 1e-3, 1e-4)
+        for t in (shown.rgb, shown.opacity, shown.depth):
+            assert torch.isfinite(t).all()
+        assert (shown.opacity >= 0).all() and (shown.opacity <= 1 + 1e-5).all()
     if out.segments:  # some ray met a primitive (else nothing depends on them)
         (out.rgb.sum() + out.opacity.sum() + out.depth.sum()).backward()
         assert torch.isfinite(half.grad).all() and torch.isfinite(dens.grad).all()

@@ -489,8 +489,8 @@ class Composited:
 
     @staticmethod
     def empty(R: int, channels: int, dtype: torch.dtype, device: torch.device | str) -> Composited:
-        z = torch.zeros(R, dtype=dtype, device=device)
-        return Composited(torch.zeros(R, channels, dtype=dtype, device=device), z, z,
+        z = lambda: torch.zeros(R, dtype=dtype, device=device)  # a tensor each: display adds into them in place
+        return Composited(torch.zeros(R, channels, dtype=dtype, device=device), z(), z(),
                           torch.zeros(R, dtype=torch.float64, device=device))
 
     def added(self, value_ray: torch.Tensor, values: torch.Tensor, ray: torch.Tensor, opacity: torch.Tensor,

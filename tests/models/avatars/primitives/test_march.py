@@ -235,3 +235,20 @@ def test_marching_in_parts_on_threads_renders_what_one_march_renders():
             for a, b in ((split.rgb, whole.rgb), (split.opacity, whole.opacity)):
                 torch.testing.assert_close(a, b, atol=atol, rtol=0)
             assert torch.get_num_threads() == threads  # restored after the groups' one-thread marches
+
+
+def test_display_keeps_opacity_and_depth_apart():
+    """Display adds each wave into the image's sums in place: opacity (sum w, at most 1) and depth (sum w t over sum
+    w, in metres along the ray) must each have a tensor of their own (they once shared one: opacity came out as
+    sum w (1 + t) and the depth as 1 everywhere)."""
+    prims = random_primitives(seed=8)
+    origins, dirs = camera_rays(size=32, yaw=15.0)
+    lists = march.candidate_lists(origins, dirs, prims)
+    bg = torch.tensor([0.2, 0.3, 0.4], dtype=origins.dtype)
+    with torch.inference_mode():
+        shown = march.march(origins, dirs, bg, prims, lists, 6, 1e-3, min_weight=march.DISPLAY_MIN_WEIGHT)
+    whole = march.march(origins, dirs, bg, prims, lists, 6)  # one pass, new tensors: the reference
+    assert whole.opacity.max() > 0.9 and (shown.opacity <= 1 + 1e-9).all()
+    torch.testing.assert_close(shown.opacity, whole.opacity, atol=1e-3, rtol=0)
+    hit = whole.opacity > 0.5
+    torch.testing.assert_close(shown.depth[hit], whole.depth[hit], atol=2e-3, rtol=0)

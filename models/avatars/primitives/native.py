@@ -1,0 +1,166 @@
+"""The display march in C (native_march.c), for the CPU: built once with the system's C compiler into the user's
+cache, called through ctypes on two threads at once (ctypes lets go of Python's lock for the call).
+
+Why: the torch march (march.py) runs each wave as tens of small tensor operations, gathering and scattering every
+sample's values between them; on the demo avatar at 256 px its colour frame took 92 ms of marching after its
+decode on two threads, where the studio asks for full-quality pixels 150 ms after a slider moves, their way to
+the window included. One ray at a time, the C loop keeps a ray's light, sums and lookups in registers and stops
+at the sample where the ray turns opaque. The torch march stays the reference (tests hold the two together), the
+path for gradients (training) and for CUDA.
+
+`AVATAR_STUDIO_NATIVE=0` turns it off (the torch march then displays, as on a machine without a C compiler)."""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import torch
+
+from models.avatars.base import RenderCancelled
+from models.avatars.primitives import march as m
+
+SOURCE = Path(__file__).with_name("native_march.c")
+MAX_CHANNELS = 64
+"""native_march.c's colour channels at most (its per-ray sums live on the stack)."""
+CHUNK_RAYS = 2048
+"""Rays a call: should_stop is asked between calls (a few milliseconds of marching each)."""
+
+FLAGS = ("-O3", "-fPIC", "-shared", "-std=c11")
+"""The compiler's flags (with the source, what names the built library)."""
+
+_lock = threading.Lock()
+_library: ctypes.CDLL | None = None
+_failure: str | None = None
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "avatar-studio" / "native"
+
+
+def compiler() -> str | None:
+    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+
+
+def build(source: Path = SOURCE, out_dir: Path | None = None) -> Path:
+    """The shared library of `source`, compiled once per source text (its hash names the file), atomically (a
+    temporary file renamed into place: another process building it at once is harmless). Raises RuntimeError
+    naming the problem where it cannot be built."""
+    out_dir = out_dir or cache_dir()
+    key = hashlib.sha256(source.read_bytes() + " ".join(FLAGS).encode()).hexdigest()[:16]
+    lib = out_dir / f"{source.stem}-{key}.so"
+    if lib.is_file():
+        return lib
+    cc = compiler()
+    if cc is None:
+        raise RuntimeError("no C compiler found (cc, gcc or clang; install build-essential)")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=out_dir, suffix=".so")
+    os.close(fd)
+    try:
+        done = subprocess.run([cc, *FLAGS, "-o", tmp, str(source), "-lm"],
+                              capture_output=True, text=True, timeout=120)
+        if done.returncode != 0:
+            raise RuntimeError(f"{cc} failed on {source}: {done.stderr.strip()[-2000:]}")
+        os.replace(tmp, lib)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return lib
+
+
+def library() -> ctypes.CDLL | None:
+    """The built march, or None (turned off, or it could not be built: `failure()` says why)."""
+    global _library, _failure
+    if os.environ.get("AVATAR_STUDIO_NATIVE", "1") == "0":
+        return None
+    with _lock:
+        if _library is None and _failure is None:
+            try:
+                lib = ctypes.CDLL(str(build()))
+                p, i64, i32, f32 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_int, ctypes.c_float
+                lib.march_rays.argtypes = [i64, p, p, p, p, i32, i64, i32, i32, p, p, p, p, p, p, p, i32, f32, f32,
+                                           p, p, p, p]
+                lib.march_rays.restype = None
+                _library = lib
+            except (OSError, RuntimeError, subprocess.SubprocessError) as e:
+                _failure = str(e)
+        return _library
+
+
+def failure() -> str | None:
+    return _failure
+
+
+def available(prims: m.Primitives, origins: torch.Tensor) -> bool:
+    """Whether the C march can display these: CPU tensors, no gradient wanted, few enough channels, built."""
+    return (origins.device.type == "cpu" and prims.density.device.type == "cpu" and not torch.is_grad_enabled()
+            and prims.colour.shape[-1] <= MAX_CHANNELS and library() is not None)
+
+
+def _ptr(t: torch.Tensor) -> ctypes.c_void_p:
+    return ctypes.c_void_p(t.data_ptr())
+
+
+def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: m.Primitives,
+          lists: m.CandidateLists, samples: int, stop_below: float, min_weight: float, parts: int = 1,
+          should_stop: Callable[[], bool] | None = None) -> m.MarchOutput:
+    """The display march (march.march with adaptive samples, early termination and colour looked up only where it
+    shows) of R rays in C, on `parts` threads (the screen dealt in stripes as march_in_parts deals it);
+    should_stop is asked between calls of CHUNK_RAYS rays and yes raises RenderCancelled."""
+    lib = library()
+    assert lib is not None, failure()
+    R, C = len(origins), prims.colour.shape[-1]
+    f32 = lambda t: t.detach().to(torch.float32).contiguous()
+    o, d = f32(origins), f32(directions)
+    bg = f32(background if background.dim() == 2 else background.reshape(3))
+    frames = m.box_frames(origins, prims)
+    to_box, centres = f32(frames.to_box), f32(prims.centres)
+    density, colour = f32(prims.density), f32(prims.colour)
+    P, M = density.shape[:2]
+    i64 = lambda t: t.detach().to(torch.int64).contiguous()
+    list_prims, start, count = i64(lists.prims), i64(lists.start), i64(lists.count)
+    out = torch.empty(R, C, dtype=torch.float32)
+    opacity, depth = torch.empty(R, dtype=torch.float32), torch.empty(R, dtype=torch.float32)
+    if R == 0:
+        return m.MarchOutput(out[:, :3], out[:, 3:], opacity, depth, 0, 0)
+    if parts > 1 and R >= 2 * parts:
+        fwd = directions.mean(0)
+        across = m.view_axes(fwd / fwd.norm().clamp_min(1e-12))[0]
+        order = torch.argsort(directions @ across)
+        band = -(-R // (parts * m.STRIPES))
+        group = torch.div(torch.arange(R), band, rounding_mode="floor") % parts
+        groups = [i64(order[group == k]) for k in range(parts)]
+    else:
+        groups = [torch.arange(R, dtype=torch.int64)]
+    stats = [torch.zeros(2, dtype=torch.int64) for _ in groups]
+
+    def one(k: int) -> None:
+        rays = groups[k]
+        for a in range(0, len(rays), CHUNK_RAYS):
+            if should_stop is not None and should_stop():
+                raise RenderCancelled
+            chunk = rays[a:a + CHUNK_RAYS]
+            lib.march_rays(len(chunk), _ptr(chunk), _ptr(o), _ptr(d), _ptr(bg), int(bg.dim() == 2), P, M, C,
+                           _ptr(centres), _ptr(to_box), _ptr(density), _ptr(colour), _ptr(list_prims), _ptr(start),
+                           _ptr(count), int(samples), float(stop_below), float(min_weight), _ptr(out),
+                           _ptr(opacity), _ptr(depth), _ptr(stats[k]))
+
+    if len(groups) == 1:
+        one(0)
+    else:
+        with ThreadPoolExecutor(len(groups)) as pool:
+            for f in [pool.submit(one, k) for k in range(len(groups))]:
+                f.result()
+    dtype = prims.density.dtype
+    lookups, segments = (int(sum(s[i] for s in stats)) for i in (0, 1))
+    return m.MarchOutput(out[:, :3].to(dtype), out[:, 3:].to(dtype), opacity.to(dtype), depth.to(dtype), lookups,
+                         segments)

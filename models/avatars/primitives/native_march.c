@@ -1,0 +1,133 @@
+/* The display march of models/avatars/primitives/march.py, one ray at a time: for display only (no gradients).
+
+   Each ray takes its candidate primitives in their list's order (front to back), meets each box by the slab test
+   in the box's unit frame, takes one sample a voxel spacing it crosses and one more (2 at least, `most` at most)
+   at the midpoints of equal steps, looks the density up trilinearly (voxel centres at -1 + 2k/(M-1), clamped to
+   the grid, as grid_sample's align_corners and border padding do), composites front to back (w = T (1 - exp(-tau)),
+   tau = sigma delta clamped to [0, 30], the optical depth summed in double), looks the colour channels up only
+   where w reaches min_weight, and stops once no more than stop_below of its light gets through (checked before
+   each candidate, where the torch march checks between waves of them). The torch march (march.py) is the
+   reference: tests hold the two to each other's images.
+
+   Built by native.py with the system's C compiler; called through ctypes, which lets go of Python's lock, so
+   that two threads each march their own rays at once. */
+
+#include <math.h>
+#include <stdint.h>
+
+static inline float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
+
+/* The trilinear weights and the first corner's offset of local (3) in an M^3 grid [z][y][x]. */
+static inline void corner(const float local[3], int M, int64_t *base, float f[3]) {
+    int64_t idx[3];
+    for (int a = 0; a < 3; a++) {
+        float g = clampf((local[a] + 1.0f) * 0.5f * (float)(M - 1), 0.0f, (float)(M - 1));
+        int64_t i0 = M > 1 ? (int64_t)floorf(g) : 0;
+        if (M > 1 && i0 > M - 2) i0 = M - 2;
+        idx[a] = i0;
+        f[a] = M > 1 ? g - (float)i0 : 0.0f;
+    }
+    *base = (idx[2] * M + idx[1]) * M + idx[0];
+}
+
+/* values (M^3 * C, [z][y][x][c]) at the corner's cell, channels [c0, c0 + n) into out. */
+static inline void trilinear(const float *values, int M, int C, int64_t base, const float f[3], int c0, int n,
+                             float *out) {
+    for (int c = 0; c < n; c++) out[c] = 0.0f;
+    int steps = M > 1 ? 2 : 1;
+    for (int dz = 0; dz < steps; dz++) {
+        float wz = dz ? f[2] : 1.0f - f[2];
+        for (int dy = 0; dy < steps; dy++) {
+            float wy = dy ? f[1] : 1.0f - f[1];
+            for (int dx = 0; dx < steps; dx++) {
+                float w = (dx ? f[0] : 1.0f - f[0]) * wy * wz;
+                if (M == 1) w = 1.0f;
+                const float *v = values + (base + ((int64_t)dz * M + dy) * M + dx) * C + c0;
+                for (int c = 0; c < n; c++) out[c] += w * v[c];
+            }
+        }
+    }
+}
+
+/* Marches rays[0..n) (indices into the R rays) and writes their rows of out (R x C: the colour channels over the
+   background, rgb first), opacity and depth (R). stats: lookups and segments made, added to. */
+void march_rays(int64_t n, const int64_t *rays, const float *origins, const float *directions,
+                const float *background, int background_per_ray,
+                int64_t P, int M, int C, const float *centres, const float *to_box, const float *density,
+                const float *colour, const int64_t *list_prims, const int64_t *start, const int64_t *count,
+                int most, float stop_below, float min_weight,
+                float *out, float *opacity, float *depth, int64_t *stats) {
+    const int64_t cells = (int64_t)M * M * M;
+    const int least = most < 2 ? most : 2;
+    float acc[64];
+    int64_t lookups = 0, segments = 0;
+    for (int64_t i = 0; i < n; i++) {
+        const int64_t r = rays[i];
+        const float *o = origins + 3 * r, *d = directions + 3 * r;
+        for (int c = 0; c < C; c++) acc[c] = 0.0f;
+        double optical = 0.0, sum_w = 0.0, sum_wt = 0.0;
+        float T = 1.0f;
+        for (int64_t k = 0; k < count[r]; k++) {
+            if (stop_below > 0.0f && T <= stop_below) break;
+            const int64_t p = list_prims[start[r] + k];
+            if (p < 0 || p >= P) continue;
+            const float *m = to_box + 9 * p, *cp = centres + 3 * p;
+            const float v[3] = {o[0] - cp[0], o[1] - cp[1], o[2] - cp[2]};
+            float ob[3], db[3], t_in = 0.0f, t_out = INFINITY;
+            for (int a = 0; a < 3; a++) {
+                ob[a] = m[3 * a] * v[0] + m[3 * a + 1] * v[1] + m[3 * a + 2] * v[2];
+                db[a] = m[3 * a] * d[0] + m[3 * a + 1] * d[1] + m[3 * a + 2] * d[2];
+                float lo, hi;
+                if (fabsf(db[a]) < 1e-9f) {
+                    int inside = fabsf(ob[a]) <= 1.0f;
+                    lo = inside ? -INFINITY : INFINITY;
+                    hi = inside ? INFINITY : -INFINITY;
+                } else {
+                    float inv = 1.0f / db[a];
+                    float ta = (-1.0f - ob[a]) * inv, tb = (1.0f - ob[a]) * inv;
+                    lo = ta < tb ? ta : tb;
+                    hi = ta < tb ? tb : ta;
+                }
+                if (lo > t_in) t_in = lo;
+                if (hi < t_out) t_out = hi;
+            }
+            if (!(t_out > t_in)) continue;
+            segments++;
+            float length = sqrtf(db[0] * db[0] + db[1] * db[1] + db[2] * db[2]);
+            float spacings = length * (t_out - t_in) * 0.5f * (float)(M > 1 ? M - 1 : 1);
+            float steps_f = ceilf(spacings) + 1.0f;
+            int steps = steps_f > (float)most ? most : (int)steps_f;
+            if (steps < least) steps = least;
+            float step = (t_out - t_in) / (float)steps;
+            const float *dens = density + p * cells, *col = colour + p * cells * C;
+            for (int s = 0; s < steps; s++) {
+                float t = t_in + step * ((float)s + 0.5f);
+                float local[3], f[3], sigma;
+                int64_t base;
+                for (int a = 0; a < 3; a++) local[a] = clampf(ob[a] + db[a] * t, -1.0f, 1.0f);
+                corner(local, M, &base, f);
+                trilinear(dens, M, 1, base, f, 0, 1, &sigma);
+                lookups++;
+                float tau = clampf(sigma * step, 0.0f, 30.0f);
+                if (isnan(tau)) tau = 0.0f;
+                float w = T * (1.0f - expf(-tau));
+                if (w >= min_weight) {
+                    float value[64];
+                    trilinear(col, M, C, base, f, 0, C, value);
+                    for (int c = 0; c < C; c++) acc[c] += w * value[c];
+                    lookups++;
+                }
+                sum_w += w;
+                sum_wt += (double)w * t;
+                optical += tau;
+                T = (float)exp(-optical);
+            }
+        }
+        const float *bg = background + (background_per_ray ? 3 * r : 0);
+        for (int c = 0; c < C; c++) out[r * C + c] = acc[c] + (c < 3 ? T * bg[c] : 0.0f);
+        opacity[r] = (float)sum_w;
+        depth[r] = sum_w > 1e-10 ? (float)(sum_wt / sum_w) : 0.0f;
+    }
+    stats[0] += lookups;
+    stats[1] += segments;
+}
