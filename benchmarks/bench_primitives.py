@@ -2,7 +2,8 @@
 frame), the screen tiles' candidate lists (the whole image's, timed apart), the march as display runs it (the rays
 in one group a torch thread, each group's lists and waves: slab tests, lookups and compositing) and within it the
 lookups (one timed march; with groups on threads, the sum of the threads' lookup times), and the whole
-`render_image` (posing the mesh, rays, images); with the lookups made and the lookups a second. Each size twice:
+`render_image` (posing the mesh, rays, images); with the lookups made and the lookups a second. Each row with the
+march in C (native.py, what display runs where it is built) and in torch (the reference). Each size twice:
 the colour render the studio shows first ("rgb": the grids' rgb channels alone) and with every buffer the avatar
 offers ("all": its normals and the key light's visibility composited too).
 
@@ -20,7 +21,7 @@ from pathlib import Path
 import torch
 
 from benchmarks.bench_render import median_seconds
-from models.avatars.primitives import march
+from models.avatars.primitives import march, native
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
 from render.camera import framing_camera
@@ -28,9 +29,11 @@ from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
 
-def measure(avatar, raster: Rasterizer, controls: Controls, size: int, buffers: tuple[str, ...] | None) -> dict:
+def measure(avatar, raster: Rasterizer, controls: Controls, size: int, buffers: tuple[str, ...] | None,
+            in_c: bool) -> dict:
     """One size's row: the parts' median times and the lookups, making `buffers` (render_image's: () the colour
-    alone, None every buffer)."""
+    alone, None every buffer), the march in C (native.py) or in torch (its lookups timed apart)."""
+    os.environ["AVATAR_STUDIO_NATIVE"] = "1" if in_c else "0"
     cam = framing_camera(avatar.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=size, height_px=size)
     avatar.display_buffers = buffers
     geo = avatar.frame_geometry(controls, raster)
@@ -63,9 +66,10 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int, buffers: 
         finally:
             march.lookup = plain
     whole = median_seconds(lambda: avatar.render_image(controls, cam, raster, buffers=buffers))
-    return {"size": size, "buffers": "all" if buffers is None else "rgb", "channels": prims.colour.shape[-1],
+    return {"size": size, "buffers": "all" if buffers is None else "rgb", "march": "C" if in_c else "torch",
+            "channels": prims.colour.shape[-1],
             "rays": len(rays), "decode_ms": 1e3 * decode, "lists_ms": 1e3 * lists_s,
-            "march_ms": 1e3 * march_s, "lookup_ms": 1e3 * sum(looked), "render_image_ms": 1e3 * whole,
+            "march_ms": 1e3 * march_s, "lookup_ms": None if in_c else 1e3 * sum(looked), "render_image_ms": 1e3 * whole,
             "candidates": lists.pairs, "segments": out.segments, "lookups": out.samples,
             "lookups_per_s": out.samples / march_s}
 
@@ -82,10 +86,14 @@ def main() -> None:
     raster = Rasterizer(GLContext.headless())
     controls = avatar.at_rest(Controls())
     rows = []
+    marches = (True, False) if native.library() is not None else (False,)
+    if not marches[0]:
+        print(f"the C march is not built ({native.failure() or 'AVATAR_STUDIO_NATIVE=0'}): torch's alone")
     for size in args.sizes:
         for buffers in ((), None):
-            rows.append(measure(avatar, raster, controls, size, buffers))
-            print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in rows[-1].items()}))
+            for in_c in marches:
+                rows.append(measure(avatar, raster, controls, size, buffers, in_c))
+                print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in rows[-1].items()}))
     report = {"avatar": str(args.avatar), "primitives": avatar.count, "voxels": avatar.cfg.voxels,
               "samples": avatar.samples, "threads": torch.get_num_threads(), "cpus": os.cpu_count(), "rows": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -379,6 +379,22 @@ TASKS_PER_THREAD = 1
 one, so a thread that the window's drawing slows takes fewer."""
 
 
+def stripe_groups(directions: torch.Tensor, groups: int) -> list[torch.Tensor]:
+    """The rays' indices in `groups` groups of about equal work: the screen cut across the view into STRIPES bands
+    a group, dealt round the groups in turn, so each group has a share of every part of the head.
+
+    >>> [g.tolist() for g in stripe_groups(torch.tensor([[x / 10, 0.0, 1.0] for x in range(6)]), 3)]
+    [[0, 3], [1, 4], [2, 5]]
+    """
+    R = len(directions)
+    fwd = directions.mean(0)
+    across = view_axes(fwd / fwd.norm().clamp_min(1e-12))[0]
+    ray = torch.argsort(directions @ across)
+    band = -(-R // (groups * STRIPES))
+    group = torch.div(torch.arange(R, device=ray.device), band, rounding_mode="floor") % groups
+    return [ray[group == k] for k in range(groups)]
+
+
 def march_in_parts(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: Primitives,
                    samples: int, stop_below: float, parts: int, **options) -> MarchOutput:
     """`march` of R rays in `parts` groups of about equal work, each on a thread of its own with one torch thread:
@@ -391,13 +407,7 @@ def march_in_parts(origins: torch.Tensor, directions: torch.Tensor, background: 
     lists = candidate_lists(origins, directions, prims)
     if parts <= 1 or R < 2 * parts:
         return march(origins, directions, background, prims, lists, samples, stop_below, **options)
-    fwd = directions.mean(0)
-    across = view_axes(fwd / fwd.norm().clamp_min(1e-12))[0]
-    ray = torch.argsort(directions @ across)
-    tasks = parts * TASKS_PER_THREAD
-    band = -(-R // (tasks * STRIPES))
-    group = torch.div(torch.arange(R, device=ray.device), band, rounding_mode="floor") % tasks
-    groups = [ray[group == k] for k in range(tasks)]
+    groups = stripe_groups(directions, parts * TASKS_PER_THREAD)
     ray = torch.cat(groups)
     grad, inference = torch.is_grad_enabled(), torch.is_inference_mode_enabled()
 

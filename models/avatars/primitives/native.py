@@ -133,12 +133,7 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
     if R == 0:
         return m.MarchOutput(out[:, :3], out[:, 3:], opacity, depth, 0, 0)
     if parts > 1 and R >= 2 * parts:
-        fwd = directions.mean(0)
-        across = m.view_axes(fwd / fwd.norm().clamp_min(1e-12))[0]
-        order = torch.argsort(directions @ across)
-        band = -(-R // (parts * m.STRIPES))
-        group = torch.div(torch.arange(R), band, rounding_mode="floor") % parts
-        groups = [i64(order[group == k]) for k in range(parts)]
+        groups = [i64(g) for g in m.stripe_groups(directions, parts)]
     else:
         groups = [torch.arange(R, dtype=torch.int64)]
     stats = [torch.zeros(2, dtype=torch.int64) for _ in groups]
