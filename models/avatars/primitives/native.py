@@ -87,7 +87,7 @@ def library() -> ctypes.CDLL | None:
             try:
                 lib = ctypes.CDLL(str(build()))
                 p, i64, i32, f32 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_int, ctypes.c_float
-                lib.march_rays.argtypes = [i64, p, p, p, p, i32, i64, i32, i32, p, p, p, p, p, p, p, i32, f32, f32,
+                lib.march_rays.argtypes = [i64, p, p, p, p, i32, i64, i32, i32, p, p, p, p, p, p, i32, f32, f32,
                                            p, p, p, p]
                 lib.march_rays.restype = None
                 _library = lib
@@ -124,8 +124,8 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
     bg = f32(background if background.dim() == 2 else background.reshape(3))
     frames = m.box_frames(origins, prims)
     to_box, centres = f32(frames.to_box), f32(prims.centres)
-    density, colour = f32(prims.density), f32(prims.colour)
-    P, M = density.shape[:2]
+    values = f32(torch.cat([prims.density[..., None], prims.colour], -1))  # (P,M,M,M,1+C)
+    P, M = values.shape[:2]
     i64 = lambda t: t.detach().to(torch.int64).contiguous()
     list_prims, start, count = i64(lists.prims), i64(lists.start), i64(lists.count)
     out = torch.empty(R, C, dtype=torch.float32)
@@ -145,7 +145,7 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
                 raise RenderCancelled
             chunk = rays[a:a + CHUNK_RAYS]
             lib.march_rays(len(chunk), _ptr(chunk), _ptr(o), _ptr(d), _ptr(bg), int(bg.dim() == 2), P, M, C,
-                           _ptr(centres), _ptr(to_box), _ptr(density), _ptr(colour), _ptr(list_prims), _ptr(start),
+                           _ptr(centres), _ptr(to_box), _ptr(values), _ptr(list_prims), _ptr(start),
                            _ptr(count), int(samples), float(stop_below), float(min_weight), _ptr(out),
                            _ptr(opacity), _ptr(depth), _ptr(stats[k]))
 

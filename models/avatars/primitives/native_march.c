@@ -4,7 +4,7 @@
    in the box's unit frame, takes one sample a voxel spacing it crosses and one more (2 at least, `most` at most)
    at the midpoints of equal steps, looks the density up trilinearly (voxel centres at -1 + 2k/(M-1), clamped to
    the grid, as grid_sample's align_corners and border padding do), composites front to back (w = T (1 - exp(-tau)),
-   tau = sigma delta clamped to [0, 30], the optical depth summed in double), looks the colour channels up only
+   tau = sigma delta clamped to [0, 30], the light left multiplied down sample by sample), looks the colour channels up only
    where w reaches min_weight, and stops once no more than stop_below of its light gets through (checked before
    each candidate, where the torch march checks between waves of them). The torch march (march.py) is the
    reference: tests hold the two to each other's images.
@@ -30,31 +30,26 @@ static inline void corner(const float local[3], int M, int64_t *base, float f[3]
     *base = (idx[2] * M + idx[1]) * M + idx[0];
 }
 
-/* values (M^3 * C, [z][y][x][c]) at the corner's cell, channels [c0, c0 + n) into out. */
-static inline void trilinear(const float *values, int M, int C, int64_t base, const float f[3], int c0, int n,
-                             float *out) {
-    for (int c = 0; c < n; c++) out[c] = 0.0f;
-    int steps = M > 1 ? 2 : 1;
-    for (int dz = 0; dz < steps; dz++) {
-        float wz = dz ? f[2] : 1.0f - f[2];
-        for (int dy = 0; dy < steps; dy++) {
-            float wy = dy ? f[1] : 1.0f - f[1];
-            for (int dx = 0; dx < steps; dx++) {
-                float w = (dx ? f[0] : 1.0f - f[0]) * wy * wz;
-                if (M == 1) w = 1.0f;
-                const float *v = values + (base + ((int64_t)dz * M + dy) * M + dx) * C + c0;
-                for (int c = 0; c < n; c++) out[c] += w * v[c];
-            }
-        }
+/* The eight corners of the cell at base (their offsets in an M^3 grid) and their trilinear weights. */
+static inline void cell(int M, int64_t base, const float f[3], int64_t offset[8], float weight[8]) {
+    if (M == 1) {
+        for (int k = 0; k < 8; k++) offset[k] = base, weight[k] = k == 0 ? 1.0f : 0.0f;
+        return;
+    }
+    for (int k = 0; k < 8; k++) {
+        int dx = k & 1, dy = (k >> 1) & 1, dz = k >> 2;
+        offset[k] = base + ((int64_t)dz * M + dy) * M + dx;
+        weight[k] = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
     }
 }
 
-/* Marches rays[0..n) (indices into the R rays) and writes their rows of out (R x C: the colour channels over the
+/* values: each primitive's grid [z][y][x] of its density then its C colour channels, side by side (a sample's
+   density and colour share cache lines). Marches rays[0..n) (indices into the R rays) and writes their rows of out (R x C: the colour channels over the
    background, rgb first), opacity and depth (R). stats: lookups and segments made, added to. */
 void march_rays(int64_t n, const int64_t *rays, const float *origins, const float *directions,
                 const float *background, int background_per_ray,
-                int64_t P, int M, int C, const float *centres, const float *to_box, const float *density,
-                const float *colour, const int64_t *list_prims, const int64_t *start, const int64_t *count,
+                int64_t P, int M, int C, const float *centres, const float *to_box, const float *values,
+                const int64_t *list_prims, const int64_t *start, const int64_t *count,
                 int most, float stop_below, float min_weight,
                 float *out, float *opacity, float *depth, int64_t *stats) {
     const int64_t cells = (int64_t)M * M * M;
@@ -65,7 +60,7 @@ void march_rays(int64_t n, const int64_t *rays, const float *origins, const floa
         const int64_t r = rays[i];
         const float *o = origins + 3 * r, *d = directions + 3 * r;
         for (int c = 0; c < C; c++) acc[c] = 0.0f;
-        double optical = 0.0, sum_w = 0.0, sum_wt = 0.0;
+        double sum_w = 0.0, sum_wt = 0.0;
         float T = 1.0f;
         for (int64_t k = 0; k < count[r]; k++) {
             if (stop_below > 0.0f && T <= stop_below) break;
@@ -99,28 +94,33 @@ void march_rays(int64_t n, const int64_t *rays, const float *origins, const floa
             int steps = steps_f > (float)most ? most : (int)steps_f;
             if (steps < least) steps = least;
             float step = (t_out - t_in) / (float)steps;
-            const float *dens = density + p * cells, *col = colour + p * cells * C;
+            const float *grid = values + p * cells * (C + 1);
             for (int s = 0; s < steps; s++) {
                 float t = t_in + step * ((float)s + 0.5f);
                 float local[3], f[3], sigma;
                 int64_t base;
                 for (int a = 0; a < 3; a++) local[a] = clampf(ob[a] + db[a] * t, -1.0f, 1.0f);
+                int64_t offset[8];
+                float weight[8];
                 corner(local, M, &base, f);
-                trilinear(dens, M, 1, base, f, 0, 1, &sigma);
+                cell(M, base, f, offset, weight);
+                sigma = 0.0f;
+                for (int q = 0; q < 8; q++) sigma += weight[q] * grid[offset[q] * (C + 1)];
                 lookups++;
                 float tau = clampf(sigma * step, 0.0f, 30.0f);
                 if (isnan(tau)) tau = 0.0f;
-                float w = T * (1.0f - expf(-tau));
+                float pass = expf(-tau);
+                float w = T * (1.0f - pass);
                 if (w >= min_weight) {
-                    float value[64];
-                    trilinear(col, M, C, base, f, 0, C, value);
-                    for (int c = 0; c < C; c++) acc[c] += w * value[c];
+                    for (int q = 0; q < 8; q++) {
+                        const float wq = w * weight[q], *v = grid + offset[q] * (C + 1) + 1;
+                        for (int c = 0; c < C; c++) acc[c] += wq * v[c];
+                    }
                     lookups++;
                 }
                 sum_w += w;
                 sum_wt += (double)w * t;
-                optical += tau;
-                T = (float)exp(-optical);
+                T *= pass;
             }
         }
         const float *bg = background + (background_per_ray ? 3 * r : 0);
