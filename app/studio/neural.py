@@ -57,13 +57,29 @@ DELIVERY_MS = 60.0
 """Of a pass's latency, what is not its render: the pixels' way to the window and the window's next frame
 (measured in the window: 28-57 ms)."""
 PASS_BUDGET_MS = FIRST_PIXELS_MS - DELIVERY_MS
-"""A coarse pass is left out when a finer pass of the request, as last timed at this size, renders within this
+"""A coarse pass is left out when a finer pass of the request, as lately timed at this size, renders within this
 (the demo primitives avatar's preview at 256 px in a 1280x800 window, 85-110 ms: the draft goes as often as not)."""
 
 
+TIMES_KEPT = 3
+"""passes_to_render goes by the median of a pass's last this many render times: one slow frame (the window busy
+at that moment) does not bring the coarse passes back (on the demo at 256 px in the C march, the final's own
+render took 79 ms median and up to 94 in the window: by the last time alone, a third of the moves rendered the
+preview first and put the final on screen 175 ms after the move)."""
+
+
+def recent_ms(timed: dict[tuple[str, int], list[float]]) -> dict[tuple[str, int], float]:
+    """The median of each pass's kept render times.
+
+    >>> recent_ms({("final", 256): [79.0, 94.0, 81.0], ("preview", 256): [45.0]})
+    {('final', 256): 81.0, ('preview', 256): 45.0}
+    """
+    return {k: float(np.median(v)) for k, v in timed.items() if v}
+
+
 def passes_to_render(passes: tuple[str, ...], timed: dict[tuple[str, int], float], size: int) -> tuple[str, ...]:
-    """The request's passes less those a finer pass within PASS_BUDGET_MS makes pointless; `timed`: the last
-    render time (ms) of each (pass, final size).
+    """The request's passes less those a finer pass within PASS_BUDGET_MS makes pointless; `timed`: the recent
+    render time (ms) of each (pass, final size): the median of its last TIMES_KEPT (`recent_ms`).
 
     >>> passes_to_render(("draft", "preview", "final"), {("final", 128): 80.0, ("preview", 128): 50.0}, 128)
     ('final',)
@@ -179,7 +195,7 @@ def serve(requests, results, latest) -> None:
     gl = GLContext.headless()
     raster = Rasterizer(gl)
     avatar, avatar_id, measure = None, 0, False
-    timed: dict[tuple[str, int], float] = {}  # the loaded avatar's passes' last render times (passes_to_render)
+    timed: dict[tuple[str, int], list[float]] = {}  # the loaded avatar's passes' last render times (recent_ms)
     stale = lambda rid: latest.value != rid
     try:
         while True:
@@ -232,11 +248,11 @@ def serve(requests, results, latest) -> None:
 
 
 def render_passes(avatar, raster, request: Request, rid: int, stale, results,
-                  timed: dict[tuple[str, int], float]) -> None:
+                  timed: dict[tuple[str, int], list[float]]) -> None:
     """Each pass of the request worth rendering (passes_to_render), coarse to fine, its pixels sent as soon as they
-    are made; each pass's time goes into `timed`."""
+    are made; each pass's time goes into `timed` (its last TIMES_KEPT kept)."""
     size = request.camera.width_px
-    passes = passes_to_render(request.passes, timed, size)
+    passes = passes_to_render(request.passes, recent_ms(timed), size)
     qualities = [avatar.presets[name].quality for name in passes]
     for i, name in enumerate(passes):
         if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:
@@ -250,7 +266,7 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
         ms = 1e3 * (time.perf_counter() - t0)
         if stale(rid):
             return
-        timed[name, size] = ms
+        timed[name, size] = [*timed.get((name, size), [])[1 - TIMES_KEPT:], ms]
         results.put(("result", rid, name, buffers, ms))
 
 
