@@ -93,7 +93,7 @@ def evaluate(avatar: Path, scan: Path, round_views: Path | None) -> dict:
     for key, data in (("", scan), ("round_", round_views)):
         if data is None:
             continue
-        out = avatar / f"eval_{key or 'scan'}"
+        out = avatar / f"eval_{key.rstrip('_') or 'scan'}"
         run(["eval", str(avatar), str(data), "--split", "test", "--out", str(out)])
         m = json.loads((out / "metrics.json").read_text())
         row |= {f"{key}psnr": round(m["metrics"]["psnr"], 2), f"{key}ssim": round(m["metrics"]["ssim"], 4),
