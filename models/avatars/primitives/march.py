@@ -440,10 +440,17 @@ class Lookups:
     reads."""
 
     def __init__(self, prims: Primitives, exact: bool = False):
+        from models.avatars.primitives import native
+
         self.exact = exact
         P, M = prims.density.shape[:2]
-        if exact:
-            self.values = torch.cat([prims.density[..., None], prims.colour], -1)
+        # float32 grids on the CPU (training's): looked up in C, gradients and all (native.TrilinearLookup: the 3D
+        # grid_sample's backward took a quarter of a training step); the float64 of tests by grid_sample.
+        self.native = (not exact and prims.density.dtype == torch.float32 and prims.density.device.type == "cpu"
+                       and native.library() is not None)
+        if exact or self.native:
+            self.trilinear = native.trilinear if self.native else trilinear
+            self.density_grid, self.colour_grid = prims.density[..., None], prims.colour
             return
         self.packed_density = pack(prims.density[..., None])
         self.packed_colour = pack(prims.colour)
@@ -461,7 +468,7 @@ class Lookups:
         t = samples.t
         local = torch.addcmul(samples.of_segments(o_box), samples.of_segments(d_box), t[:, None]).clamp_(-1.0, 1.0)
         prim = samples.of_segments(prim)
-        if self.exact:
+        if self.exact or self.native:
             return local, prim
         x = torch.addcmul(prim.to(t.dtype) * self.shift[0] + self.shift[1], local[:, 0], self.scale[0].to(t.dtype))
         return torch.cat([x[:, None], local[:, 1:]], 1), None
@@ -474,14 +481,14 @@ class Lookups:
 
     def density(self, points: tuple[torch.Tensor, torch.Tensor | None]) -> torch.Tensor:
         coords, prim = points
-        if self.exact:
-            return trilinear(self.values[..., :1], prim, coords)[:, 0]
+        if self.exact or self.native:
+            return self.trilinear(self.density_grid, prim, coords)[:, 0]
         return lookup(self.packed_density, coords)[:, 0]
 
     def colour(self, points: tuple[torch.Tensor, torch.Tensor | None]) -> torch.Tensor:
         coords, prim = points
-        if self.exact:
-            return trilinear(self.values[..., 1:], prim, coords)
+        if self.exact or self.native:
+            return self.trilinear(self.colour_grid, prim, coords)
         return lookup(self.packed_colour, coords)
 
 

@@ -131,3 +131,68 @@ void march_rays(int64_t n, const int64_t *rays, const float *origins, const floa
     stats[0] += lookups;
     stats[1] += segments;
 }
+
+/* Training's lookups: values (P x M^3 x C, [z][y][x][c]) of primitives prim[i] at box coordinates local[i] (3, in
+   [-1, 1]: voxel centres at -1 + 2k/(M-1), clamped to the grid as grid_sample's align_corners and border padding
+   read them), trilinearly, into out (n x C). */
+void lookup_forward(int64_t n, const int64_t *prim, const float *local, const float *values, int M, int C,
+                    float *out) {
+    const int64_t cells = (int64_t)M * M * M;
+    for (int64_t i = 0; i < n; i++) {
+        int64_t base, offset[8];
+        float f[3], weight[8];
+        corner(local + 3 * i, M, &base, f);
+        cell(M, base, f, offset, weight);
+        const float *grid = values + prim[i] * cells * C;
+        float *o = out + i * C;
+        for (int c = 0; c < C; c++) o[c] = 0.0f;
+        for (int q = 0; q < 8; q++) {
+            const float *v = grid + offset[q] * C;
+            for (int c = 0; c < C; c++) o[c] += weight[q] * v[c];
+        }
+    }
+}
+
+/* The gradients of lookup_forward: grad_out (n x C) added into grad_values (P x M^3 x C) and written to
+   grad_local (n x 3; zero along an axis where the coordinate lies beyond the grid's outer voxel centres, where the
+   lookup is clamped). */
+void lookup_backward(int64_t n, const int64_t *prim, const float *local, const float *values, int M, int C,
+                     const float *grad_out, float *grad_values, float *grad_local) {
+    const int64_t cells = (int64_t)M * M * M;
+    const float scale = 0.5f * (float)(M > 1 ? M - 1 : 0);
+    for (int64_t i = 0; i < n; i++) {
+        int64_t base, offset[8];
+        float f[3], weight[8];
+        const float *x = local + 3 * i;
+        corner(x, M, &base, f);
+        cell(M, base, f, offset, weight);
+        const int64_t g0 = prim[i] * cells * C;
+        const float *go = grad_out + i * C;
+        float dot[8];
+        for (int q = 0; q < 8; q++) {
+            float *gv = grad_values + g0 + offset[q] * C;
+            const float *v = values + g0 + offset[q] * C;
+            dot[q] = 0.0f;
+            for (int c = 0; c < C; c++) {
+                gv[c] += weight[q] * go[c];
+                dot[q] += v[c] * go[c];
+            }
+        }
+        for (int a = 0; a < 3; a++) {
+            float g = (x[a] + 1.0f) * scale;
+            if (M <= 1 || g < 0.0f || g > (float)(M - 1)) {
+                grad_local[3 * i + a] = 0.0f;
+                continue;
+            }
+            float d = 0.0f;
+            for (int q = 0; q < 8; q++) {
+                int bit[3] = {q & 1, (q >> 1) & 1, q >> 2};
+                float dw = bit[a] ? 1.0f : -1.0f;
+                for (int b = 0; b < 3; b++)
+                    if (b != a) dw *= bit[b] ? f[b] : 1.0f - f[b];
+                d += dw * dot[q];
+            }
+            grad_local[3 * i + a] = d * scale;
+        }
+    }
+}

@@ -118,3 +118,44 @@ def demo_avatar_and_raster():
     yield avatar, raster, avatar.at_rest(Controls()), cam
     raster.release()
     gl.release()
+
+
+def test_trilinear_lookups_and_their_gradients_match_the_gathered_reference():
+    """Training's lookups in C (native.trilinear) against march.trilinear (explicit gathers, autograd): values and
+    the gradients for the grids and the coordinates, inside the grid and clamped at its faces."""
+    g = torch.Generator().manual_seed(0)
+    P, M, C, N = 5, 4, 3, 300
+    values = torch.rand(P, M, M, M, C, generator=g, dtype=torch.float64, requires_grad=True)
+    prim = torch.randint(P, (N,), generator=g)
+    local = (torch.rand(N, 3, generator=g, dtype=torch.float64) * 2.4 - 1.2).requires_grad_(True)
+    outs, grads = [], []
+    for fn in (native.trilinear, march.trilinear):
+        out = fn(values, prim, local.clamp(-1.0, 1.0))  # as Lookups.points clamps them
+        outs.append(out)
+        grads.append(torch.autograd.grad((out * torch.linspace(-1, 2, C, dtype=out.dtype)).square().sum(),
+                                         (values, local)))
+    assert (local.detach().abs() > 1).any(1).sum() > 50  # many clamped at a face
+    torch.testing.assert_close(outs[0], outs[1], atol=1e-6, rtol=0)
+    for a, b in zip(grads[0], grads[1], strict=True):
+        assert b.abs().max() > 0.1
+        torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-5)
+
+
+def test_training_marches_with_c_lookups_as_with_grid_sample(monkeypatch):
+    """The training march (one pass, gradients) on float32 grids looks up in C; with it off, by grid_sample: the
+    same image and the same gradients for the grids and the boxes."""
+    prims = random_primitives(P=30, M=6, seed=9, dtype=torch.float32)
+    origins, dirs = camera_rays(size=24, yaw=10.0, dtype=torch.float32)
+    bg = torch.tensor([0.2, 0.3, 0.4])
+    results = []
+    for setting in ("1", "0"):
+        monkeypatch.setenv("AVATAR_STUDIO_NATIVE", setting)
+        leaves = [t.detach().clone().requires_grad_(True) for t in (prims.half_sizes, prims.density, prims.colour)]
+        p = march.Primitives(prims.centres, prims.rotations, *leaves)
+        assert march.Lookups(p).native == (setting == "1")
+        out = march.march(origins, dirs, bg, p, march.candidate_lists(origins, dirs, p), 6)
+        (out.rgb.square().sum() + out.depth.sum()).backward()
+        results.append((out.rgb.detach(), *(t.grad for t in leaves)))
+    assert results[0][0].std() > 0.05
+    for a, b in zip(*results, strict=True):
+        torch.testing.assert_close(a, b, atol=2e-5 * max(1.0, float(b.abs().max())), rtol=1e-4)
