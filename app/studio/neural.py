@@ -49,6 +49,8 @@ class PresetFigures:
     psnr_vs_final: dict[str, float] = field(default_factory=dict)
     size_px: int = 0
     """The image size they were measured at: the avatar's capture's (at most 256 px), else 128."""
+    march: str = ""
+    """A primitives avatar's display march: "C", or why torch's (no compiler, turned off); "" for other models."""
 
 
 FIRST_PIXELS_MS = 150.0
@@ -270,6 +272,17 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
         results.put(("result", rid, name, buffers, ms))
 
 
+def display_march_name(avatar) -> str:
+    """What marches a primitives avatar's display here: "C", or torch and why; "" for other models."""
+    if not hasattr(avatar, "display_march"):
+        return ""
+    from models.avatars.primitives import native
+
+    if native.library() is not None:
+        return "C"
+    return f"torch ({native.failure() or 'AVATAR_STUDIO_NATIVE=0'})"
+
+
 def measure_presets(avatar, raster, should_stop) -> PresetFigures:
     """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`, at the size of
     the avatar's capture (a tracked video's 256 px costs four times a synthetic capture's 128): the colour render
@@ -278,7 +291,7 @@ def measure_presets(avatar, raster, should_stop) -> PresetFigures:
 
     size = min(avatar.capture_px or 128, 256)
     cam = framing_camera(avatar.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
-    figures = PresetFigures(size_px=size)
+    figures = PresetFigures(size_px=size, march=display_march_name(avatar))
     images = {}
     for name in ("final", "preview", "draft"):
         avatar.apply_preset(name, size)

@@ -50,6 +50,8 @@ def draw(ctx: PanelContext) -> None:
         imgui.end_table()
     imgui.text_wrapped(f"ms now: measured on this avatar at {fig.size_px or '...'} px (its capture's size) when it "
                        "opened (median of 3 renders, this machine).")
+    if fig.march:
+        imgui.text_wrapped(f"march: {fig.march}" + ("" if fig.march == "C" else ": slower; install a C compiler"))
     measured = avatar.presets_measured
     if benched:
         where = f"{measured.get('image_px', '?')} px, {measured.get('machine', 'machine unknown')}"

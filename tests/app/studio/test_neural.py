@@ -53,3 +53,17 @@ def test_the_quality_panels_figures_compare_every_preset_at_the_final_size(gl):
     assert set(figures.ms) == {"draft", "preview", "final"} and all(ms > 0 for ms in figures.ms.values())
     assert figures.psnr_vs_final["final"] == float("inf")
     assert 15.0 < figures.psnr_vs_final["draft"] < figures.psnr_vs_final["preview"] < 60.0
+
+
+@pytest.mark.gl
+def test_the_quality_panel_says_which_march_displays(gl, monkeypatch):
+    from app.studio.neural import display_march_name
+    from models.avatars.primitives import native
+    from tests.conftest import CODYNERF_DEMO
+
+    avatar, _ = load_avatar(DEMO)
+    assert display_march_name(avatar) == ("C" if native.library() is not None else f"torch ({native.failure()})")
+    if native.failure() is None:  # built: turned off, the torch march and why
+        monkeypatch.setenv("AVATAR_STUDIO_NATIVE", "0")
+        assert display_march_name(avatar) == "torch (AVATAR_STUDIO_NATIVE=0)"
+    assert display_march_name(load_avatar(CODYNERF_DEMO)[0]) == ""
