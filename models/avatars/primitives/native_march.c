@@ -91,7 +91,7 @@ void march_rays(int64_t n, const int64_t *rays, const float *origins, const floa
             float length = sqrtf(db[0] * db[0] + db[1] * db[1] + db[2] * db[2]);
             float spacings = length * (t_out - t_in) * 0.5f * (float)(M > 1 ? M - 1 : 1);
             float steps_f = ceilf(spacings) + 1.0f;
-            int steps = steps_f > (float)most ? most : (int)steps_f;
+            int steps = steps_f <= (float)most ? (int)steps_f : most;  /* NaN and inf: most */
             if (steps < least) steps = least;
             float step = (t_out - t_in) / (float)steps;
             const float *grid = values + p * cells * (C + 1);
