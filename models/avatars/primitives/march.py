@@ -435,9 +435,9 @@ def march_in_parts(origins: torch.Tensor, directions: torch.Tensor, background: 
 
 
 class Lookups:
-    """The primitives' density (N,) and colour channels (N,C) at sample points: by grid_sample on packed volumes,
-    or (exact) by the gather-based `trilinear`. `points` places segments' samples in the coordinates the lookup
-    reads."""
+    """The primitives' density (N,) and colour channels (N,C) at sample points: in C (`native.trilinear`) for
+    float32 grids on the CPU where it is built, else by grid_sample on packed volumes, or (exact) by the
+    gather-based `trilinear`. `points` places segments' samples in the coordinates the lookup reads."""
 
     def __init__(self, prims: Primitives, exact: bool = False):
         from models.avatars.primitives import native
@@ -445,7 +445,7 @@ class Lookups:
         self.exact = exact
         P, M = prims.density.shape[:2]
         # float32 grids on the CPU (training's): looked up in C, gradients and all (native.TrilinearLookup: the 3D
-        # grid_sample's backward took a quarter of a training step); the float64 of tests by grid_sample.
+        # grid_sample's forward and backward took a quarter of a training step's CPU time); float64 by grid_sample.
         self.native = (not exact and prims.density.dtype == torch.float32 and prims.density.device.type == "cpu"
                        and native.library() is not None)
         if exact or self.native:
