@@ -57,12 +57,13 @@ FIRST_PIXELS_MS = 150.0
 """A slider move should show its first pixels within this."""
 DELIVERY_MS = 45.0
 """Of a pass's latency, what is not its render: the pixels' way to the window and the window's next frame
-(measured in the window: 28-57 ms with the torch march; with the C march, a final pass alone on screen 31-44 ms
-after its render ended, medians of 6 moves at 1280x800 and 1920x1080)."""
+(measured in the window: 28-57 ms with the torch march; with the C march, a final pass alone reached the screen
+26-50 ms after its render ended, about 35 typically: the medians of 6 moves, on screen less rendered, in six
+windows of three runs at 1280x800 and 1920x1080)."""
 PASS_BUDGET_MS = FIRST_PIXELS_MS - DELIVERY_MS
 """A coarse pass is left out when a finer pass of the request, as lately timed at this size, renders within this
-(105 ms; the demo primitives avatar's final at 256 px in the window, with the C march: 75-99 ms, medians of 6
-moves in three runs, one run 110)."""
+(105 ms; the demo primitives avatar's final at 256 px in the window with the C march took 73-110 ms, the medians
+of 6 moves in fourteen windows of seven runs)."""
 
 
 TIMES_KEPT = 3
