@@ -98,9 +98,9 @@ def evaluate(avatar: Path, scan: Path, round_views: Path | None) -> dict:
         m = json.loads((out / "metrics.json").read_text())
         row |= {f"{key}psnr": round(m["metrics"]["psnr"], 2), f"{key}ssim": round(m["metrics"]["ssim"], 4),
                 f"{key}test_frames": m["frames"]}
-        if key == "round_":
-            behind = views_behind(data)
-            row |= {"behind_psnr": round(sum(m["per_frame"][k]["psnr"] for k in behind) / max(1, len(behind)), 2),
+        behind = views_behind(data) if key == "round_" else []
+        if behind:  # (no frame from behind: no figure, not 0 dB)
+            row |= {"behind_psnr": round(sum(m["per_frame"][k]["psnr"] for k in behind) / len(behind), 2),
                     "behind_test_frames": len(behind)}
     return row
 
@@ -192,13 +192,13 @@ def main() -> None:
             seconds = run(["personalize", str(a.scan), "--prior", str(a.prior), "--out", str(out), "--minutes",
                            str(m)])
             add_row(results, "prior", {"minutes": m, "seconds": round(seconds, 1),
-                                                  **evaluate(out, a.scan, a.round_views)})
+                                       **evaluate(out, a.scan, a.round_views)})
         for m in a.scratch_minutes:
             out = Path(tmp) / f"scratch_{m:g}"
             seconds = run(["train", str(a.scan), "--model", "primitives", "--effects", "none", "--minutes", str(m),
                            "--out", str(out)])
             add_row(results, "scratch", {"minutes": m, "seconds": round(seconds, 1),
-                                                    **evaluate(out, a.scan, a.round_views)})
+                                         **evaluate(out, a.scan, a.round_views)})
     results = write_results(a, results, ("scan", "scan_frames"), ("minutes",))
     chart(results, a.out.with_suffix(".png"))
     print(f"wrote {a.out} and {a.out.with_suffix('.png')}")

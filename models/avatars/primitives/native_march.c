@@ -1,13 +1,16 @@
-/* The display march of models/avatars/primitives/march.py, one ray at a time: for display only (no gradients).
+/* The primitives' hot loops for native.py: display's march (march_rays, no gradients) and training's trilinear
+   lookups with their gradients (lookup_forward, lookup_backward).
+
+   The march is models/avatars/primitives/march.py's display march, one ray at a time.
 
    Each ray takes its candidate primitives in their list's order (front to back), meets each box by the slab test
    in the box's unit frame, takes one sample a voxel spacing it crosses and one more (2 at least, `most` at most)
    at the midpoints of equal steps, looks the density up trilinearly (voxel centres at -1 + 2k/(M-1), clamped to
    the grid, as grid_sample's align_corners and border padding do), composites front to back (w = T (1 - exp(-tau)),
-   tau = sigma delta clamped to [0, 30], the light left multiplied down sample by sample), looks the colour channels up only
-   where w reaches min_weight, and stops once no more than stop_below of its light gets through (checked before
-   each candidate, where the torch march checks between waves of them). The torch march (march.py) is the
-   reference: tests hold the two to each other's images.
+   tau = sigma delta clamped to [0, 30], the light left multiplied down sample by sample), looks the colour
+   channels up only where w reaches min_weight, and stops once no more than stop_below of its light gets through
+   (checked before each candidate, where the torch march checks between waves of them). The torch march
+   (march.py) is the reference: tests hold the two to each other's images.
 
    Built by native.py with the system's C compiler; called through ctypes, which lets go of Python's lock, so
    that two threads each march their own rays at once. */
@@ -17,7 +20,8 @@
 
 static inline float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
-/* The trilinear weights and the first corner's offset of local (3) in an M^3 grid [z][y][x]. */
+/* The offset of the first corner of the cell holding local (3) in an M^3 grid [z][y][x], and the fractions f of
+   the way across the cell along x, y and z. */
 static inline void corner(const float local[3], int M, int64_t *base, float f[3]) {
     int64_t idx[3];
     for (int a = 0; a < 3; a++) {
@@ -44,8 +48,9 @@ static inline void cell(int M, int64_t base, const float f[3], int64_t offset[8]
 }
 
 /* values: each primitive's grid [z][y][x] of its density then its C colour channels, side by side (a sample's
-   density and colour share cache lines). Marches rays[0..n) (indices into the R rays) and writes their rows of out (R x C: the colour channels over the
-   background, rgb first), opacity and depth (R). stats: lookups and segments made, added to. */
+   density and colour share cache lines). Marches rays[0..n) (indices into the R rays) and writes their rows of
+   out (R x C: the colour channels over the background, rgb first), opacity and depth (R). stats: lookups and
+   segments made, added to. */
 void march_rays(int64_t n, const int64_t *rays, const float *origins, const float *directions,
                 const float *background, int background_per_ray,
                 int64_t P, int M, int C, const float *centres, const float *to_box, const float *values,
