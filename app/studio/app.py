@@ -91,9 +91,12 @@ class Studio:
         self.last_submit_time = 0.0
         self.latency_ms: float | None = None
         self.pass_latency_ms: dict[str, float] = {}
+        """Since the last request: ms from its submission to each of its passes' pixels on screen (draft, preview,
+        final): stamped when the frame that draws them has been presented (`presented`)."""
         self.pass_render_ms: dict[str, float] = {}
         """Each pass's own render time (of those latencies, what the renderer took)."""
-        """Since the last request: ms from its submission to each of its passes' pixels (draft, preview, final)."""
+        self.drawn: list[str] = []
+        """Passes of the last request drawn in this frame, not yet presented."""
         self.clock = FrameClock()
         self.frame_count = 0
         self.gl: GLContext | None = None
@@ -273,11 +276,10 @@ class Studio:
         if self.script is not None:
             self.script.step(self)
         result = self.worker.result
-        if result is not None and result.request_id == self.last_submit_id:
-            ms = 1e3 * (time.perf_counter() - self.last_submit_time)
-            self.latency_ms = ms if self.latency_ms is None else self.latency_ms
-            self.pass_latency_ms.setdefault(result.pass_name, ms)
-            self.pass_render_ms.setdefault(result.pass_name, result.ms)
+        if result is not None and result.request_id == self.last_submit_id and \
+                result.pass_name not in self.pass_render_ms:
+            self.pass_render_ms[result.pass_name] = result.ms
+            self.drawn.append(result.pass_name)
 
         w, h = imgui.get_io().display_size
         left, right = 330, 420
@@ -293,6 +295,7 @@ class Studio:
             self.latency_ms = None
             self.pass_latency_ms = {}
             self.pass_render_ms = {}
+            self.drawn = []
             self.submit_render()
         self.frame_count += 1
         if self.cfg.screenshot and self.script is None and self.frame_count >= self.cfg.frames:
@@ -347,6 +350,14 @@ class Studio:
             data = fb.read(components=3, alignment=1)
         return np.frombuffer(data, np.uint8).reshape(h, w, 3)[::-1].copy()
 
+    def presented(self) -> None:
+        """After the swap: the passes this frame drew are on screen now (their latencies)."""
+        ms = 1e3 * (time.perf_counter() - self.last_submit_time)
+        for name in self.drawn:
+            self.latency_ms = ms if self.latency_ms is None else self.latency_ms
+            self.pass_latency_ms.setdefault(name, ms)
+        self.drawn = []
+
     def figures(self) -> dict:
         """Measured figures for reports: interface fps per state, latency, the last pass's time."""
         r = self.worker.result
@@ -392,6 +403,33 @@ class FrameCpu:
         return self.seconds
 
 
+MAX_HOLD_S = 0.2
+"""The longest frame_wait holds the window for pixels that are due (the window's input waits as long)."""
+
+
+def frame_wait(now: float, last_end: float, cap_fps: float, due: float | None) -> float:
+    """Seconds to wait before the next frame: what is left of 1/cap_fps since the last wait ended (`last_end`; the
+    frame since then took now - last_end). Where a pass's pixels are `due` before a frame started after that would
+    be presented, the window waits for them instead (their arrival ends the wait), until one frame's time after
+    they are due and at most MAX_HOLD_S: a frame drawn just before they came would hold them back by most of a
+    frame (at 1920x1080 on a software GL, 21-27 ms of a 34 ms frame).
+
+    >>> round(frame_wait(1.010, 1.0, 60.0, None), 4)  # a 10 ms frame at 60 fps
+    0.0067
+    >>> round(frame_wait(1.034, 1.0, 20.0, 1.054), 4)  # pixels due in 20 ms: wait for them, up to 1.088
+    0.054
+    >>> round(frame_wait(1.034, 1.0, 20.0, 1.300), 4)  # due long after the next frame: the cap alone
+    0.016
+    >>> round(frame_wait(1.034, 1.0, 20.0, 1.0), 4)  # late: past their time and a frame's, the cap alone
+    0.016
+    """
+    frame_s = now - last_end
+    spare = 1.0 / cap_fps - frame_s
+    if due is not None and now + max(spare, 0.0) + frame_s > due:
+        spare = max(spare, min(due + frame_s, now + MAX_HOLD_S) - now)
+    return spare
+
+
 def run_studio(cfg: StudioConfig) -> int:
     studio = Studio(cfg)
     params = hello_imgui.RunnerParams()
@@ -415,19 +453,27 @@ def run_studio(cfg: StudioConfig) -> int:
         studio.take_viewport_shot()
         if studio.script is not None:
             studio.script.after_frame(studio)
+
+    def after_swap() -> None:
         # The cap: no display sync here, so without it the interface would take a whole core. Counted from the
-        # previous frame's swap, so that only what is left of a whole frame's time is slept.
+        # end of the previous frame's wait, so that only what is left of a whole frame's time is slept. Slept
+        # after the swap, not before it: new pixels that end the wait go into the very next frame, where before
+        # the swap they waited for the frame already drawn to be presented first (on a software GL the swap
+        # rasterizes: at 1920x1080 that is most of a 34 ms frame).
+        studio.presented()
         cpu_s = frame_cpu.tick()
         cap = cfg.fps_cap
-        if studio.worker.busy:
+        worker = studio.worker
+        if worker.busy:
             cap = min(cap, cfg.rendering_fps_cap, max(8.0, cfg.rendering_window_share / max(cpu_s, 1e-4)))
-        spare = 1.0 / cap - (time.perf_counter() - last_swap[0])
+        spare = frame_wait(time.perf_counter(), last_swap[0], cap, worker.due if worker.busy else None)
         if spare > 0:  # a pass's new pixels end the wait: the next frame shows them
-            studio.worker.arrived.wait(spare)
+            worker.arrived.wait(spare)
         studio.worker.arrived.clear()
         last_swap[0] = time.perf_counter()
 
     params.callbacks.before_swap = before_swap
+    params.callbacks.after_swap = after_swap
 
     def post_init() -> None:
         # A panel's mistake (an exception between a push and its pop) is recovered and logged, not fatal.

@@ -109,7 +109,10 @@ class NeuralWorker:
         ctx = mp.get_context("spawn")  # a fresh interpreter: no copy of the window's GL or threads
         self._latest = ctx.Value("q", 0, lock=False)
         """The newest request's id, in shared memory: the renderer's passes stop between batches once it moves."""
-        self._requests = ctx.Queue()
+        inbox, self._requests = ctx.Pipe(duplex=False)
+        """Requests go down a pipe, written by the window's thread as it submits them: through a Queue, its feeder
+        thread waited for the interpreter lock while the window's thread drew (at 1920x1080 a request reached the
+        renderer 10-30 ms after the move)."""
         self._results = ctx.Queue()
         self._id = 0
         self._avatar_id = 0
@@ -117,9 +120,11 @@ class NeuralWorker:
         self.arrived = threading.Event()
         """Set when a pass's pixels are stored: the window's frame pacing wakes on it, so they show at once."""
         self.busy = False
+        self.due: float | None = None
+        """When (time.perf_counter) the pass in flight should end, by its recent render times; None: not known."""
         self.error = ""
         self.figures = PresetFigures()
-        self._proc = ctx.Process(target=serve, args=(self._requests, self._results, self._latest),
+        self._proc = ctx.Process(target=serve, args=(inbox, self._results, self._latest),
                                  name="neural-render", daemon=True)
         self._proc.start()
         self._reader = threading.Thread(target=self._read, name="neural-results", daemon=True)
@@ -137,18 +142,22 @@ class NeuralWorker:
         self._avatar_id = self._next_id()
         self.result = None
         self.figures = PresetFigures()
-        self._requests.put(("avatar", self._avatar_id, None if folder is None else str(folder), measure))
+        self._send(("avatar", self._avatar_id, None if folder is None else str(folder), measure))
 
     def submit(self, request: Request) -> int:
         rid = self._next_id()
         self.busy = True
-        self._requests.put(("render", rid, request))
+        self.due = None
+        self._send(("render", rid, request))
         return rid
+
+    def _send(self, msg: tuple) -> None:
+        with contextlib.suppress(OSError, ValueError):  # the renderer is gone: its error is shown
+            self._requests.send(msg)
 
     def close(self) -> None:
         self._next_id()
-        with contextlib.suppress(OSError, ValueError):
-            self._requests.put(("quit",))
+        self._send(("quit",))
         self._proc.join(timeout=10)
         if self._proc.is_alive():
             self._proc.terminate()
@@ -161,30 +170,36 @@ class NeuralWorker:
             except (EOFError, OSError, ValueError):
                 return
             kind = msg[0]
-            if kind == "result":
+            if kind == "started":
+                _, rid, ms = msg
+                if rid == self._id:
+                    self.due = None if ms is None else time.perf_counter() + ms / 1e3
+            elif kind == "result":
                 _, rid, name, buffers, ms = msg
                 if rid == self._id:  # a pass of the newest request
+                    self.due = None
                     self.result = Result(rid, name, buffers, ms)
                     self.error = ""
                     self.arrived.set()
             elif kind == "idle":
                 if msg[1] == self._id:
-                    self.busy = False
+                    self.busy, self.due = False, None
             elif kind == "figures":
                 if msg[1] == self._avatar_id:
                     self.figures = msg[2]
             elif kind == "error":
                 self.error = msg[1]
-                self.busy = False
+                self.busy, self.due = False, None
                 self.arrived.set()
             elif kind == "closed":
                 return
 
 
 # ---- the renderer process ----------------------------------------------------------------------------------
-def serve(requests, results, latest) -> None:
+def serve(pipe, results, latest) -> None:
     """The renderer's loop: the newest render request first, then (controls at rest) the presets' measurement;
-    anything newer stops either between batches of rays."""
+    anything newer stops either between batches of rays. A thread empties the pipe of requests as they come, so
+    that the window never waits on a full pipe while a pass renders."""
     import torch
 
     from models.avatars.base import RenderCancelled
@@ -192,19 +207,35 @@ def serve(requests, results, latest) -> None:
     from render.gl.context import GLContext
     from render.gl.raster import Rasterizer
 
-    # Below the window: the interface keeps its frame rate; rendering takes what is left, on one core (the window
-    # keeps the other: measured, draft 196 -> 173 ms in the window with two threads against one).
-    with contextlib.suppress(OSError, AttributeError):
-        os.setpriority(os.PRIO_PROCESS, 0, 10)
+    # At the window's own priority: the window's frames are held to a share of a core while it renders
+    # (StudioConfig.rendering_window_share). Niced to 10, it lost the cores to the window's frame after each move
+    # (the guide drawn anew): at 1920x1080 a pass began 30-40 ms after the request came.
     torch.set_num_threads(1)
     gl = GLContext.headless()
     raster = Rasterizer(gl)
     avatar, avatar_id, measure = None, 0, False
     timed: dict[tuple[str, int], list[float]] = {}  # the loaded avatar's passes' last render times (recent_ms)
     stale = lambda rid: latest.value != rid
+    taken = 0
+    """The newest request id this loop has taken: a request the window has sent (`latest` moved) but the loop has
+    not yet taken stops the presets' measurement too (timed from `latest` as it began, a measurement that began
+    between the two ran to its end, 0.4 s, while the request waited)."""
+    requests: queue.Queue = queue.Queue()
+
+    def take() -> None:
+        while True:
+            try:
+                msg = pipe.recv()
+            except (EOFError, OSError):  # the window is gone
+                msg = ("quit",)
+            requests.put(msg)
+            if msg[0] == "quit":
+                return
+
+    threading.Thread(target=take, name="requests", daemon=True).start()
     try:
         while True:
-            msgs = [requests.get()] if not measure else []
+            msgs = [requests.get()] if not measure or stale(taken) else []
             with contextlib.suppress(queue.Empty):
                 while True:
                     msgs.append(requests.get_nowait())
@@ -214,16 +245,18 @@ def serve(requests, results, latest) -> None:
                     return
                 if msg[0] == "avatar":
                     _, avatar_id, folder, measure = msg
+                    taken = avatar_id
                     render, timed = None, {}
                     try:
                         avatar = None if folder is None else load_avatar(folder)[0]
                         if avatar is not None:
                             avatar.display_cores = os.cpu_count() or 1
+                            warm_up(avatar, raster)
                     except Exception as e:  # the window read the same folder: this is rare
                         avatar, measure = None, False
                         results.put(("error", f"render failed: {type(e).__name__}: {e}"))
                 elif msg[0] == "render":
-                    render = msg
+                    render, taken = msg, msg[1]
             if avatar is None:
                 measure = False
                 if render is not None:
@@ -235,8 +268,9 @@ def serve(requests, results, latest) -> None:
                     render_passes(avatar, raster, request, rid, stale, results, timed)
                     results.put(("idle", rid))
                 elif measure:
-                    figures = measure_presets(avatar, raster, lambda since=latest.value: stale(since))
+                    figures = measure_presets(avatar, raster, lambda since=taken: stale(since))
                     results.put(("figures", avatar_id, figures))
+                    seed_times(timed, figures)
                     measure = False
             except RenderCancelled:
                 if render is not None:
@@ -257,13 +291,15 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
     """Each pass of the request worth rendering (passes_to_render), coarse to fine, its pixels sent as soon as they
     are made; each pass's time goes into `timed` (its last TIMES_KEPT kept)."""
     size = request.camera.width_px
-    passes = passes_to_render(request.passes, recent_ms(timed), size)
+    recent = recent_ms(timed)
+    passes = passes_to_render(request.passes, recent, size)
     qualities = [avatar.presets[name].quality for name in passes]
     for i, name in enumerate(passes):
         if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:
             continue  # the bench may choose one setting for two presets: render it once, as the finer
         avatar.apply_preset(name, size)
         cam = scaled(request.camera, avatar.presets[name].quality.scale)
+        results.put(("started", rid, recent.get((name, size))))  # the window paces its frames by it
         t0 = time.perf_counter()
         buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
                                       should_stop=lambda: stale(rid), inspect=request.inspect,
@@ -273,6 +309,29 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
             return
         timed[name, size] = [*timed.get((name, size), [])[1 - TIMES_KEPT:], ms]
         results.put(("result", rid, name, buffers, ms))
+
+
+def warm_up(avatar, raster) -> None:
+    """One 32 px render of a newly loaded avatar, so that its first pass is timed as the later ones are: on the
+    demo at 256 px the first final took 95 ms and the next ones 75-81 (one thread, alone), and with no other time
+    yet the window's first slider move went by that one (the preview first, the final on screen 178 ms after
+    the move); after this 56 ms render the first final takes 73."""
+    cam = framing_camera(avatar.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=32, height_px=32)
+    avatar.apply_preset("draft", 32)
+    avatar.render_image(avatar.at_rest(Controls()), cam, raster, buffers=None)
+
+
+def seed_times(timed: dict[tuple[str, int], list[float]], figures: PresetFigures) -> None:
+    """The presets' times measured at rest (`measure_presets`, the median of 3 renders each) for the passes of
+    that size not yet timed by a request: a move after the avatar opened chooses its passes by them.
+
+    >>> timed = {("final", 256): [80.0]}
+    >>> seed_times(timed, PresetFigures(ms={"final": 70.0, "draft": 20.0}, size_px=256))
+    >>> timed
+    {('final', 256): [80.0], ('draft', 256): [20.0]}
+    """
+    for name, ms in figures.ms.items():
+        timed.setdefault((name, figures.size_px), [ms])
 
 
 def display_march_name(avatar) -> str:

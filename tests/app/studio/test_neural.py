@@ -23,13 +23,18 @@ def test_a_fast_final_pass_leaves_the_coarse_passes_out(gl):
     cam = framing_camera(avatar.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=48, height_px=48)
     request = Request(avatar.at_rest(Controls()), cam, ("draft", "preview", "final"))
     results, timed = queue.Queue(), {}
-    shown = lambda: [results.get_nowait()[2] for _ in range(results.qsize())]
+    sent = lambda: [results.get_nowait() for _ in range(results.qsize())]
+    shown = lambda: [m[2] for m in sent() if m[0] == "result"]
     render_passes(avatar, raster, request, 1, lambda rid: False, results, timed)
-    assert shown() == ["draft", "preview", "final"]  # nothing timed yet: coarse to fine
+    messages = sent()  # each pass says when it starts and how long it should take (nothing timed yet: not known)
+    assert [m[0] for m in messages] == ["started", "result"] * 3 and all(m[2] is None for m in messages[::2])
+    assert [m[2] for m in messages[1::2]] == ["draft", "preview", "final"]  # nothing timed yet: coarse to fine
     assert set(timed) == {("draft", 48), ("preview", 48), ("final", 48)}
     assert timed["final", 48][-1] <= PASS_BUDGET_MS  # a 48 px frame of the demo
+    first = timed["final", 48][-1]
     render_passes(avatar, raster, request, 2, lambda rid: False, results, timed)
-    assert shown() == ["final"]
+    messages = sent()
+    assert [m[:3] for m in messages] == [("started", 2, first), ("result", 2, "final")]  # due by its last time
     assert len(timed["final", 48]) == 2  # each pass's times kept
     timed["final", 48] = [PASS_BUDGET_MS + 50, 10.0, 20.0]  # one slow final does not decide
     render_passes(avatar, raster, request, 3, lambda rid: False, results, timed)
