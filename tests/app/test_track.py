@@ -165,6 +165,24 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     assert 10 < metrics["psnr"] < 40 and 0 < metrics["face_mse"] < 0.1, metrics
 
 
+def test_on_a_tracked_video_all_and_none_train_the_same_primitives(d3_dataset, gl, tmp_path):
+    """A tracked video records no key light, so `all` has nothing to read that `none` does not: the same steps train
+    the same weights bit for bit (their 30-minute results differ only by the steps each run made and where the
+    schedule stood at each), and `all` adds the normals buffer (the opacity grids' gradients) at display."""
+    from safetensors.torch import load_file
+
+    weights = {}
+    for effects in ("none", "all"):
+        out = tmp_path / effects
+        prepare_training(TrainConfig(dataset=d3_dataset, out=out, model="primitives", effects=effects, steps=6),
+                         gl).run(gl)
+        weights[effects] = load_file(next(out.glob("weights-*.safetensors")))
+    assert weights["none"].keys() == weights["all"].keys()
+    assert all(torch.equal(weights["none"][k], weights["all"][k]) for k in weights["none"])
+    assert "normals" in load_avatar(tmp_path / "all")[0].default_buffers()
+    assert "normals" not in load_avatar(tmp_path / "none")[0].default_buffers()
+
+
 def test_synthetic_capture_recovers_pose_and_expression(synth_ict_video, landmarker, ict_npz, tmp_path):
     """An ICT synthetic capture (true controls known) played as a video: tracking with the true field of view
     recovers the head's rotation relative to the camera within 5 degrees and the expression weights within a
