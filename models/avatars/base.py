@@ -346,6 +346,12 @@ class Avatar(nn.Module, ABC):
         raise ValueError(f"a {self.name} avatar has no field to export as a mesh yet (primitives, prior and "
                          "CoDyNeRF avatars have)")
 
+    @contextlib.contextmanager
+    def training_step(self):
+        """Around the trainer's loss terms of one step's frames (their backward comes after it): a model may work
+        out once what those frames share."""
+        yield
+
     def before_save(self, geometry: Any) -> None:
         """Called before each checkpoint with the first training frame's geometry (display caches follow the
         weights)."""

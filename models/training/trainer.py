@@ -206,18 +206,20 @@ class Trainer:
         terms: dict[str, torch.Tensor] = {}
         total = torch.zeros((), device=self.device)
         per_frame = self.rays_per_step // cfg.frames_per_step
-        for fid in frame_ids.tolist():
-            if len(fs.active_index[fid]) == 0:
-                continue
-            pick = self.avatar.draw_training_pixels(fs.active_index[fid], fs.images[fid][..., 0].numel(), per_frame, g)
-            rays = Rays(fs.origins[fid].expand(len(pick), 3), fs.directions[fid].reshape(-1, 3)[pick],
-                        fs.surface_t[fid].reshape(-1)[pick], None if fs.plate is None else fs.plate[pick]
-                        ).to(self.device)
-            target = fs.images[fid].reshape(-1, 3)[pick].to(self.device)
-            parts = self.avatar.loss_terms(TrainingBatch(fid, rays, target, fs.geometry[fid], progress, g))
-            for k, v in parts.items():
-                terms[k] = terms.get(k, 0.0) + v.detach() / len(frame_ids)
-                total = total + v / len(frame_ids)
+        with self.avatar.training_step():
+            for fid in frame_ids.tolist():
+                if len(fs.active_index[fid]) == 0:
+                    continue
+                pick = self.avatar.draw_training_pixels(fs.active_index[fid], fs.images[fid][..., 0].numel(),
+                                                        per_frame, g)
+                rays = Rays(fs.origins[fid].expand(len(pick), 3), fs.directions[fid].reshape(-1, 3)[pick],
+                            fs.surface_t[fid].reshape(-1)[pick], None if fs.plate is None else fs.plate[pick]
+                            ).to(self.device)
+                target = fs.images[fid].reshape(-1, 3)[pick].to(self.device)
+                parts = self.avatar.loss_terms(TrainingBatch(fid, rays, target, fs.geometry[fid], progress, g))
+                for k, v in parts.items():
+                    terms[k] = terms.get(k, 0.0) + v.detach() / len(frame_ids)
+                    total = total + v / len(frame_ids)
         self.step += 1
         return optimiser_step(self.opt, self.avatar, total, terms, self.cfg.grad_clip)
 

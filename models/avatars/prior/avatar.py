@@ -12,6 +12,7 @@ chart's eye cells (the seed's masked gaze)."""
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from typing import Annotated, ClassVar
 
@@ -95,6 +96,9 @@ class PriorAvatar(PrimitivesAvatar):
         self._kl: torch.Tensor | None = None
         self._noise: torch.Generator | None = None
         self._own_biases: list[torch.Tensor] | None = None
+        self._step_biases: list[torch.Tensor] | None = None
+        """Within a training step (`training_step`): this avatar's bias maps, made once for all the step's frames."""
+        self._in_step = False
 
     def fit_to_tracked_video(self, corrections: bool | None = None) -> None:
         """No per-frame corrections: the prior keeps no per-frame anything (a frame is its maps and its mesh)."""
@@ -136,10 +140,24 @@ class PriorAvatar(PrimitivesAvatar):
         if geo.identity is not None:
             return self.identity_encoder(*geo.identity)
         if self.training or torch.is_grad_enabled():
-            return self.identity_encoder(self.neutral_texture, self.neutral_geometry)
+            if not self._in_step:
+                return self.identity_encoder(self.neutral_texture, self.neutral_geometry)
+            if self._step_biases is None:  # the step's frames are all this person: one pass of E_id, one backward
+                self._step_biases = self.identity_encoder(self.neutral_texture, self.neutral_geometry)
+            return self._step_biases
         if self._own_biases is None:
             self._own_biases = self.identity_encoder(self.neutral_texture, self.neutral_geometry)
         return self._own_biases
+
+    @contextlib.contextmanager
+    def training_step(self):
+        """A personalisation step's frames share their identity's bias maps: made once a step (E_id ran for each of
+        the step's 4 frames, a quarter of a step's time on one thread)."""
+        self._in_step, self._step_biases = True, None
+        try:
+            yield
+        finally:
+            self._in_step, self._step_biases = False, None
 
     def train(self, mode: bool = True):
         self._own_biases = None

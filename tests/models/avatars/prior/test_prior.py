@@ -3,6 +3,7 @@ gaze, and training in two gloo processes against one."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
 from pathlib import Path
@@ -91,6 +92,43 @@ def test_an_untrained_prior_decodes_as_its_shared_decoder_and_learns_identity(bu
     prims.colour.square().mean().backward()
     assert all(h.weight.grad is not None and h.weight.grad.abs().sum() > 0 for h in avatar.identity_encoder.heads)
     assert avatar.expression_encoder.mean.weight.grad.abs().sum() > 0
+
+
+def test_a_steps_frames_share_one_pass_of_the_identity_encoder(builtin):
+    """Within a training step the person's bias maps are made once for all its frames: the same loss and the same
+    gradients as with E_id run for each frame, and E_id called once (twice without the step)."""
+    torch.manual_seed(0)
+    avatar = PriorAvatar(builtin, SMALL, 1, np.full(3, 0.5, np.float32))
+    S = SMALL.grid * SMALL.voxels
+    avatar.personalize(torch.randn(1, 3, S, S), torch.randn(1, 3, S, S))
+    with torch.no_grad():  # the identity heads start at zero: give them weights, so that E_id reaches the loss
+        for h in avatar.identity_encoder.heads:
+            h.weight.normal_(0, 0.1)
+    avatar.train()
+    geos = [avatar.geometry(Controls()), avatar.geometry(Controls(jaw=np.array([0.3, 0.0, 0.0], np.float32)))]
+    calls = []
+    hook = avatar.identity_encoder.register_forward_hook(lambda *_: calls.append(1))
+
+    def loss_and_grads(step: bool) -> tuple[torch.Tensor, list[torch.Tensor]]:
+        avatar.zero_grad()
+        calls.clear()
+        with avatar.training_step() if step else contextlib.nullcontext():
+            total = sum(avatar.decode(g, avatar.codes(None), torch.tensor([0.0, 0.0, 1.0]), training=True)[0]
+                        .colour.square().mean() for g in geos)
+        total.backward()
+        return total.detach(), [p.grad.clone() for p in avatar.identity_encoder.parameters() if p.grad is not None]
+
+    torch.manual_seed(1)
+    each, grads_each = loss_and_grads(step=False)
+    assert len(calls) == 2
+    torch.manual_seed(1)
+    shared, grads_shared = loss_and_grads(step=True)
+    assert len(calls) == 1
+    hook.remove()
+    torch.testing.assert_close(shared, each)
+    assert len(grads_shared) == len(grads_each) > 0 and any(g.abs().sum() > 0 for g in grads_each)
+    for a, b in zip(grads_shared, grads_each, strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7)
 
 
 def test_expression_maps_see_the_jaw_not_the_head_turn(builtin):
