@@ -7,6 +7,7 @@ from models.capture.dataset import DatasetError
 from models.device import DeviceError
 from models.head.controls import ControlsError
 from models.head.model import HeadModelError
+from models.ranges import OptionError
 from models.tracking.canonical import BundleError
 from models.tracking.video import VideoError
 
@@ -17,4 +18,4 @@ class UserInputError(ValueError):
 
 #: Exceptions that are the user's input being wrong, not the program failing.
 INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError, CheckpointError, DeviceError,
-                BundleError, VideoError)
+                BundleError, VideoError, OptionError)

@@ -84,3 +84,62 @@ def check_config(cfg: object) -> None:
     problems = config_problems(cfg)
     if problems:
         raise ValueError(problems[0])
+
+
+class OptionError(ValueError):
+    """A setting given on the command line that the config does not have, or cannot take."""
+
+
+def config_with(cls: type, settings: tuple[str, ...], option: str = "--model-options"):
+    """The config `cls` with its defaults but for `settings`, each "field=value" (bools: true/false, 1/0, yes/no),
+    checked against the field's type and range.
+
+    >>> @dataclass(frozen=True)
+    ... class C:
+    ...     grid: typing.Annotated[int, Range(8, 256)] = 16
+    ...     swap: float = 0.0
+    ...     maps: bool = False
+    >>> config_with(C, ("grid=32", "maps=yes"))
+    C(grid=32, swap=0.0, maps=True)
+    >>> for bad in ("grid=4", "grid=x", "swap=nan", "maps=2", "size=3"):
+    ...     try:
+    ...         config_with(C, (bad,))
+    ...     except OptionError as e:
+    ...         print(e)
+    --model-options grid=4: must be at least 8 and at most 256
+    --model-options grid=x: grid must be int
+    --model-options swap=nan: must be a finite number
+    --model-options maps=2: maps must be true or false
+    --model-options size=3: not a setting of this model (its settings: grid, swap, maps)
+    """
+    hints = typing.get_type_hints(cls)
+    values = {}
+    for item in settings:
+        name, sep, text = item.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or name not in hints:
+            known = ", ".join(f.name for f in dataclasses.fields(cls))
+            raise OptionError(f"{option} {item}: not a setting of this model (its settings: {known})")
+        kind = hints[name]
+        try:
+            if kind is bool:
+                flag = text.strip().lower()
+                if flag not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError(flag)
+                values[name] = flag in ("true", "1", "yes")
+            elif kind in (int, float):
+                values[name] = kind(text)
+            else:
+                raise OptionError(f"{option} {item}: {name} cannot be set on the command line")
+        except ValueError as e:
+            if isinstance(e, OptionError):
+                raise
+            raise OptionError(f"{option} {item}: {name} must be {'true or false' if kind is bool else kind.__name__}"
+                              ) from None
+    extras = typing.get_type_hints(cls, include_extras=True)
+    for name, v in values.items():
+        ranges = ranges_of(extras[name]) or ([Range()] if isinstance(v, float) else [])
+        why = next((r.problem(v) for r in ranges if r.problem(v)), None)
+        if why:
+            raise OptionError(f"{option} {name}={v:g}: {why}")
+    return cls(**values)

@@ -23,7 +23,7 @@ from models.capture.frames import background_plate, view_range
 from models.device import device_of
 from models.files import atomic_write_bytes
 from models.head.sources import load_head
-from models.ranges import Range
+from models.ranges import Range, config_with
 from models.training.data import FrameSet, ValidationFrame, build_frames, validation_frame
 from models.training.metrics import psnr
 from render.gl.context import GLContext
@@ -58,6 +58,9 @@ class TrainConfig:
     """Rays a step; default: the model's (1024 codynerf; 256 nerface, each of whose rays costs 128 samples of an
     8x256 MLP)."""
     frames_per_step: Annotated[int, Range(1, 1024)] = 4
+    model_options: tuple[str, ...] = ()
+    """The model's own settings, KEY=VALUE each, the fields of its config (the primitives': grid, voxels,
+    code_dim, code_swap, expression_maps, ...: README); the rest keep their defaults."""
     corrections: bool | None = None
     """On a tracked video, learn each training frame's head pose correction (and the primitives' expression
     correction) with the avatar; default: the model's (codynerf on, primitives off: README, Real people)."""
@@ -103,12 +106,17 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
     resumed = load_checkpoint(cfg.out, with_train_state=True) if cfg.resume else None
     if resumed is not None:  # the checkpoint's own model and sizes (an older one: no shadow factor)
         cls = avatar_class(resumed.meta.get("model", DEFAULT_MODEL))
+        if cfg.model_options:
+            raise CheckpointError(f"{cfg.out}: --model-options with --resume; the avatar keeps the settings it was "
+                                  "trained with (avatar.json)")
         avatar = cls.from_meta(head, resumed.meta)
         if cfg.effects is not None and set(parse_effects(cfg.effects)) != set(avatar.effects):
             raise CheckpointError(f"{cfg.out}: --effects {cfg.effects} with --resume, but the avatar was trained with "
                                   f"{avatar.describe_effects()}; leave --effects out to continue it")
     else:
         model = cfg.model or default_model(split.tracked)
+        if cfg.model_options and model_config is None:
+            model_config = config_with(avatar_class(model).config_class, cfg.model_options)
         avatar = avatar_class(model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects or "all"),
                                                      split.lighting, model_config)
         if plate is not None:

@@ -15,7 +15,7 @@ offsets' L2 (primitives stay near their places on the mesh), and the per-frame c
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -32,6 +32,7 @@ from models.avatars.components.poses import PoseCorrected
 from models.avatars.components.rigid import kabsch
 from models.avatars.mesh import MeshField
 from models.avatars.primitives import march, native
+from models.avatars.primitives.chart import GEOMETRY_SCALE_M, ChartSampler, chart_sampler, geometry_map
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
 from models.avatars.quality import Quality
@@ -46,6 +47,8 @@ from render.rays import Raster, Rays
 from render.shadow_map import LightDepthMap
 
 GAZE_JOINTS = ("eye_l", "eye_r")
+EXPRESSION_MAP_UNIT_M = 0.01
+"""Expression maps are in centimetres: an expression moves the face by millimetres to a few centimetres."""
 DISPLAY_PARALLEL_RAYS = 4096
 """Display marches a batch of at least this many rays in as many groups as torch has threads (march_in_parts)."""
 
@@ -80,6 +83,11 @@ class PrimitivesConfig:
     """Share of training steps (on a capture with code keys: a tracked video) whose frame decodes with the code a
     held-out frame of its controls would get (components/codes.py left_out_weights), so that the decoder learns to
     do with the codes new controls get."""
+    expression_maps: bool = False
+    """The decoder also reads the frame's expression as the guide mesh shows it, in its own layout: each texel's
+    surface point (chart.py) with the head's rigid pose taken out, less the neutral face's, in centimetres (the
+    seed's Delta G, paper 002 Eq. 1), joined at every level from K x K up. A mouth's change then reaches the mouth's
+    slabs where it is, where the global condition spreads every expression weight over the whole head."""
     chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1 << 18
     """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
@@ -111,13 +119,16 @@ class PrimitivesGeometry:
     code_weights: torch.Tensor | None = None
     light: LightDepthMap | None = None  # the posed mesh seen from the key light, where the avatar casts shadows
     controls: Controls | None = None  # what posed the mesh (expression corrections pose it again)
+    local: torch.Tensor | None = None  # (V,3) posed without the root's turn and the translation (expression maps)
+    neutral: torch.Tensor | None = None  # (V,3) the head's neutral face, unposed (expression maps)
     decoded: dict = field(default_factory=dict)
 
     def to(self, device: torch.device | str) -> PrimitivesGeometry:
         w = None if self.code_weights is None else self.code_weights.to(device)
         return PrimitivesGeometry(self.posed.to(device), self.rotation.to(device), self.translation.to(device),
                                   self.condition.to(device), self.gaze.to(device), w,
-                                  None if self.light is None else self.light.to(device), self.controls)
+                                  None if self.light is None else self.light.to(device), self.controls,
+                                  *(None if m is None else m.to(device) for m in (self.local, self.neutral)))
 
 
 class PrimitivesAvatar(PoseCorrected, Avatar):
@@ -152,13 +163,16 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """(N,6) per training frame, on a tracked video (components/poses.py); None: the poses as given."""
         self.expression_corrections: nn.Parameter | None = None
         """(N,E) per training frame, on a tracked video; None: the expressions as given."""
+        self.chart: ChartSampler | None = None
+        """The chart at the slabs' texels, where the decoder reads expression maps (made on first use)."""
 
     def make_decoder(self) -> SlabDecoder:
         """The decoder of the frame's condition (expression and jaw/neck, code, view, the light's direction where
         the capture records one) and gaze; with cast shadows, the shadow map's channel."""
         extra = 3 if self.light_dir is not None else 0
         return SlabDecoder(self.condition_dim + self.cfg.code_dim + 3 + extra, 6, self.cfg.grid, self.cfg.voxels, 3,
-                           self.cfg.width, map_channels=1 if self.casts_shadows else 0)
+                           self.cfg.width, map_channels=1 if self.casts_shadows else 0,
+                           geometry_channels=3 if self.cfg.expression_maps else 0)
 
     # ---- making and describing -------------------------------------------------------------------------
     @classmethod
@@ -275,7 +289,9 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     @torch.no_grad()
     def geometry(self, controls: Controls) -> PrimitivesGeometry:
         unposed = Controls(shape=controls.shape, expression=controls.expression)
-        v, _, _ = self.head.pose([unposed, controls])
+        maps = self.decoder.geometry_channels > 0  # Delta G: the face as posed but for the root, less the neutral
+        local = [replace(controls, root=np.zeros(3), translation=np.zeros(3)), Controls(shape=controls.shape)]
+        v, _, _ = self.head.pose([unposed, controls, *(local if maps else [])])
         rotation, translation = kabsch(v[0], v[1])
         E = self.head_model.num_expression
         cond = np.zeros(self.condition_dim, np.float32)
@@ -285,7 +301,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
         return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_weights(controls),
-                                  controls=controls)
+                                  controls=controls, local=v[2] if maps else None, neutral=v[3] if maps else None)
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> PrimitivesGeometry:
         """The frame's geometry; where the avatar casts shadows, with the posed mesh's depth map from the key light
@@ -342,11 +358,25 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return frame_code(self.latent, frame, weights)
 
     # ---- the decode --------------------------------------------------------------------------------------
+    def expression_map(self, geo: PrimitivesGeometry, posed: torch.Tensor) -> torch.Tensor:
+        """(1,3,S,S) Delta G (`expression_maps`): the chart's texels on the mesh posed but for the root's turn and
+        the translation (the controls' own rigid pose, exactly: a fit of one, as `rotation` is, takes in part of an
+        opened jaw), less the neutral face's, in centimetres. posed (V,3): the frame's mesh where an expression
+        correction posed it again (its change turned back into the head's frame)."""
+        if self.chart is None:
+            self.chart = chart_sampler(self.head_model, self.cfg.grid * self.cfg.voxels)
+        local = geo.local.to(posed) + (posed - geo.posed) @ geo.rotation
+        delta = geometry_map(self.chart, self.triangles, local) - geometry_map(self.chart, self.triangles,
+                                                                                geo.neutral.to(posed))
+        return delta[None] * (GEOMETRY_SCALE_M / EXPRESSION_MAP_UNIT_M)
+
     def decode_slabs(self, geo: PrimitivesGeometry, condition: torch.Tensor, light: torch.Tensor | None,
-                     training: bool) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """The decoder's raw opacity, colour and offsets for every cell of the grid (SlabDecoder.forward)."""
+                     training: bool, posed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The decoder's raw opacity, colour and offsets for every cell of the grid (SlabDecoder.forward); posed
+        (V,3): the mesh the frame decodes on (its expression maps')."""
         del training  # the decoder is deterministic
-        return self.decoder(condition, geo.gaze, light)
+        geometry = self.expression_map(geo, posed) if self.decoder.geometry_channels else None
+        return self.decoder(condition, geo.gaze, light, geometry=geometry)
 
     @staticmethod
     def view_of(geo: PrimitivesGeometry, eye: torch.Tensor) -> torch.Tensor:
@@ -387,7 +417,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         light = None if not self.casts_shadows else torch.ones(1, 1, self.cfg.grid * self.cfg.voxels,
                                                                  self.cfg.grid * self.cfg.voxels, device=code.device) \
             if lit else self.slab_visibility(geo, centres, rotations)
-        density_raw, colour_raw, offsets = self.decode_slabs(geo, torch.cat(inputs, -1), light, training)
+        density_raw, colour_raw, offsets = self.decode_slabs(geo, torch.cat(inputs, -1), light, training, posed)
         cells = self.layout_cells
         density_raw, colour_raw, offsets = density_raw[cells], colour_raw[cells], offsets[cells]
         half = self.layout_half[:, None] * torch.exp(offsets[:, 6:9].clamp(-3.0, 3.0))

@@ -9,7 +9,10 @@ move, a turn and a log-scale, zero at the start so that the primitives begin whe
 
 Maps in the slab's own layout (one channel per input, K M x K M: the key light's visibility of each primitive's
 texels where the capture casts shadows) join the last upsampling (averaged to its size) and the slab's
-convolution, so what a texel decodes follows what the light sees there."""
+convolution, so what a texel decodes follows what the light sees there. Geometry maps in the same layout (the
+frame's expression as the guide mesh shows it, avatar.py `expression_maps`) join earlier, every upsampling from
+the K x K level on (averaged to each one's size) and the slab's convolution: what a primitive decodes then follows
+how the mesh moved where it sits, not only the global condition."""
 
 from __future__ import annotations
 
@@ -22,7 +25,8 @@ from torch import nn
 
 class SlabDecoder(nn.Module):
     def __init__(self, condition_dim: int, gaze_dim: int, grid: int, voxels: int, colour_channels: int = 3,
-                 width: int = 64, min_width: int = 16, map_channels: int = 0, latent_channels: int = 0):
+                 width: int = 64, min_width: int = 16, map_channels: int = 0, latent_channels: int = 0,
+                 geometry_channels: int = 0):
         """latent_channels > 0: the frame's expression is a spatial 4x4 code of that many channels (the prior's,
         paper 002 Section 3.1.1), joined by the condition vector (view, light) at every cell through a 1x1
         convolution, instead of the condition vector alone through a linear layer."""
@@ -30,6 +34,7 @@ class SlabDecoder(nn.Module):
         assert grid >= 8 and grid & (grid - 1) == 0 and voxels & (voxels - 1) == 0, (grid, voxels)
         self.grid, self.voxels, self.colour_channels, self.gaze_dim = grid, voxels, colour_channels, gaze_dim
         self.map_channels, self.latent_channels = map_channels, latent_channels
+        self.geometry_channels = geometry_channels
         self.fc = nn.Linear(condition_dim, 16 * width) if not latent_channels else \
             nn.Conv2d(latent_channels + condition_dim, width, 1)
         self.width = width
@@ -43,11 +48,12 @@ class SlabDecoder(nn.Module):
         for k in range(levels):
             c_in = chans[k] + (gaze_dim if k == 1 else 0)  # gaze joins at 8x8 (after the first upsampling)
             c_in += map_channels if k == levels - 1 else 0  # the maps, halved, join the last upsampling
+            c_in += geometry_channels if k > self.offset_level else 0  # geometry from the K x K level on
             self.ups.append(nn.ConvTranspose2d(c_in, chans[k + 1], 4, stride=2, padding=1))
             size = 4 * 2 ** (k + 1)
             self.biases.append(nn.Parameter(torch.zeros(chans[k + 1], size, size)))
         self.out_channels = voxels * (1 + colour_channels)
-        self.slab = nn.Conv2d(chans[-1] + map_channels, self.out_channels, 3, padding=1)
+        self.slab = nn.Conv2d(chans[-1] + map_channels + geometry_channels, self.out_channels, 3, padding=1)
         self.slab_bias = nn.Parameter(torch.zeros(self.out_channels, grid * voxels, grid * voxels))
         self.offsets = nn.Conv2d(chans[self.offset_level + 1], 9, 1)
         nn.init.zeros_(self.offsets.weight)
@@ -60,13 +66,16 @@ class SlabDecoder(nn.Module):
 
     def forward(self, condition: torch.Tensor, gaze: torch.Tensor, maps: torch.Tensor | None = None,
                 latent: torch.Tensor | None = None, bias_maps: list[torch.Tensor] | None = None,
-                gaze_mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+                gaze_mask: torch.Tensor | None = None, geometry: torch.Tensor | None = None
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """condition (1,Dc), gaze (1,Dg), maps (1, map_channels, K M, K M) -> raw opacity (K*K, M,M,M), raw colour
         (K*K, M,M,M, C) and offsets (K*K, 9), primitives in row-major grid order, voxels [z, y, x].
         latent (1, latent_channels, 4, 4): the spatial expression code, where the decoder takes one; bias_maps
         (bias_shapes, each with a leading 1): added to the decoder's own biases (an identity's, from the prior);
-        gaze_mask (1,1,8,8): where on the 8x8 features gaze may act (1 everywhere if not given)."""
+        gaze_mask (1,1,8,8): where on the 8x8 features gaze may act (1 everywhere if not given); geometry
+        (1, geometry_channels, K M, K M): the geometry maps, where the decoder takes them."""
         assert (maps is None) == (self.map_channels == 0), "maps go with map_channels"
+        assert (geometry is None) == (self.geometry_channels == 0), "geometry maps go with geometry_channels"
         assert (latent is None) == (self.latent_channels == 0), "a latent goes with latent_channels"
         K, M, C = self.grid, self.voxels, self.colour_channels
         if latent is None:
@@ -81,10 +90,13 @@ class SlabDecoder(nn.Module):
                 h = torch.cat([h, g if gaze_mask is None else g * gaze_mask], 1)
             if maps is not None and k == len(self.ups) - 1:
                 h = torch.cat([h, F.avg_pool2d(maps, 2)], 1)
+            if geometry is not None and k > self.offset_level:
+                h = torch.cat([h, F.adaptive_avg_pool2d(geometry, h.shape[2:])], 1)
             h = F.leaky_relu(up(h) + bias[None] + extra[k], 0.2)
             if k == self.offset_level:
                 offsets = self.offsets(h)
-        slab = self.slab(h if maps is None else torch.cat([h, maps], 1)) + self.slab_bias[None] + extra[-1]
+        joined = [h] + [m for m in (maps, geometry) if m is not None]
+        slab = self.slab(torch.cat(joined, 1) if len(joined) > 1 else h) + self.slab_bias[None] + extra[-1]
         slab = slab.reshape(1 + C, M, K, M, K, M)  # channel (c, z), rows (i, y), columns (j, x)
         slab = slab.permute(2, 4, 0, 1, 3, 5).reshape(K * K, 1 + C, M, M, M)  # (prim, c, z, y, x)
         offsets = offsets[0].permute(1, 2, 0).reshape(K * K, 9)

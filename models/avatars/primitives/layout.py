@@ -40,10 +40,17 @@ class PrimitiveLayout:
         return len(self.triangles)
 
 
-def outermost_hits(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray, chunk: int = 16
+def outermost_hits(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray, chunk: int = 16, cull: bool = True
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For rays from `origin` along dirs (N,3) (unit) against triangles tri (F,3,3): the farthest hit's triangle
-    (N,) (-1 where none), barycentrics (N,3) and distance (N,) (Moller-Trumbore with the inside test).
+    (N,) (-1 where none), barycentrics (N,3) and distance (N,) (0 where none; Moller-Trumbore with the inside
+    test).
+
+    cull: rays go in tiles of nearby directions, each tested only against the triangles that may meet one of them:
+    a triangle's directions from the origin lie in the cap about their mean that holds its corners (caps under a
+    right angle are convex), so one whose cap is farther from a tile's cap than their two radii is met by none of
+    the tile's rays. The same hits as testing every triangle (a test holds them equal), at a fraction of the work:
+    the chart of ICT's 34k triangles at 128 x 128 texels took 27 s untiled.
 
     >>> tri = np.array([[[-1, -1, 2], [1, -1, 2], [0, 1, 2]], [[-1, -1, 3], [1, -1, 3], [0, 1, 3]]], float)
     >>> f, b, t = outermost_hits(np.zeros(3), np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]), tri)
@@ -53,27 +60,61 @@ def outermost_hits(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray, chunk:
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     s = origin - tri[:, 0]
     q = np.cross(s, e1)  # (F,3), the same for every ray (one origin)
+    qe2 = np.einsum("fk,fk->f", e2, q)
     best_f = np.full(len(dirs), -1)
     best_b = np.zeros((len(dirs), 3))
     best_t = np.zeros(len(dirs))
-    for a in range(0, len(dirs), chunk):
-        d = dirs[a:a + chunk]  # (C,3)
-        p = np.cross(d[:, None], e2[None])  # (C,F,3)
-        det = np.einsum("fk,cfk->cf", e1, p)
+    tiles = direction_tiles(dirs) if cull else [np.arange(a, min(a + chunk, len(dirs)))
+                                                 for a in range(0, len(dirs), chunk)]
+    centre, radius = direction_caps(tri - origin) if cull else (None, None)
+    for rows_of in tiles:
+        d = dirs[rows_of]  # (C,3)
+        cand = np.arange(len(tri))
+        if cull:
+            mid, spread = direction_caps(d[None])
+            apart = np.arccos(np.clip(centre @ mid[0], -1.0, 1.0))
+            cand = np.nonzero(apart <= radius + spread[0] + 1e-6)[0]
+            if len(cand) == 0:
+                continue
+        p = np.cross(d[:, None], e2[cand][None])  # (C,F',3)
+        det = np.einsum("fk,cfk->cf", e1[cand], p)
         ok = np.abs(det) > 1e-18
         det = np.where(ok, det, 1.0)
-        u = np.einsum("fk,cfk->cf", s, p) / det
-        v = np.einsum("ck,fk->cf", d, q) / det
-        t = np.einsum("fk,fk->f", e2, q)[None] / det
+        u = np.einsum("fk,cfk->cf", s[cand], p) / det
+        v = np.einsum("ck,fk->cf", d, q[cand]) / det
+        t = qe2[cand][None] / det
         hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
         t_hit = np.where(hit, t, -np.inf)
         f = t_hit.argmax(1)
         any_hit = hit.any(1)
         rows = np.arange(len(d))
-        best_f[a:a + chunk] = np.where(any_hit, f, -1)
-        best_t[a:a + chunk] = np.where(any_hit, t_hit[rows, f], 0.0)
-        best_b[a:a + chunk] = np.stack([1 - u[rows, f] - v[rows, f], u[rows, f], v[rows, f]], 1)
+        best_f[rows_of] = np.where(any_hit, cand[f], -1)
+        best_t[rows_of] = np.where(any_hit, t_hit[rows, f], 0.0)
+        best_b[rows_of] = np.where(any_hit[:, None], np.stack([1 - u[rows, f] - v[rows, f], u[rows, f], v[rows, f]], 1),
+                                   0.0)
     return best_f, best_b, best_t
+
+
+def direction_caps(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For sets of points (F,n,3) seen from the origin: the unit mean direction (F,3) of each set and the angle
+    (F,) (radians) from it to the farthest of its points; pi (every direction) where a point lies at the origin or
+    the cap reaches a right angle (larger caps are not convex: the set's hull may leave them)."""
+    length = np.linalg.norm(points, axis=-1, keepdims=True)
+    unit = points / np.maximum(length, 1e-300)
+    mean = unit.sum(1)
+    mean /= np.maximum(np.linalg.norm(mean, axis=-1, keepdims=True), 1e-300)
+    cos = np.einsum("fnk,fk->fn", unit, mean).min(1)
+    radius = np.arccos(np.clip(cos, -1.0, 1.0))
+    return mean, np.where((length[..., 0].min(1) > 0) & (cos > 1e-6), radius, np.pi)
+
+
+def direction_tiles(dirs: np.ndarray, tile_deg: float = 6.0) -> list[np.ndarray]:
+    """The rows of dirs (N,3) (unit, +y up) grouped by tile_deg x tile_deg cells of elevation and azimuth."""
+    el = np.degrees(np.arcsin(np.clip(dirs[:, 1], -1.0, 1.0)))
+    az = np.degrees(np.arctan2(dirs[:, 0], dirs[:, 2]))
+    key = np.floor((el + 90.0) / tile_deg) * 1000 + np.floor((az + 180.0) / tile_deg)
+    order = np.argsort(key, kind="stable")
+    return np.split(order, np.nonzero(np.diff(key[order]))[0] + 1)
 
 
 def chart_directions(grid: int) -> np.ndarray:

@@ -23,9 +23,9 @@ import torch.nn.functional as F
 from models.avatars.base import TrainingBatch
 from models.avatars.components import losses
 from models.avatars.primitives.avatar import GAZE_JOINTS, PrimitivesAvatar, PrimitivesConfig, PrimitivesGeometry
+from models.avatars.primitives.chart import chart_sampler, geometry_map
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.prior.encoders import ExpressionEncoder, IdentityEncoder, kl_divergence
-from models.avatars.prior.maps import chart_sampler, geometry_map
 from models.head.controls import Controls
 from models.head.model import HeadModel
 from models.ranges import Range
@@ -43,6 +43,8 @@ class PriorConfig(PrimitivesConfig):
     expression from the primitives' places alone)."""
     code_dim: Annotated[int, Range(0, 1024)] = 0
     """No per-frame code: a frame is its identity's maps and its guide mesh."""
+    expression_maps: bool = False
+    """Unused: the prior reads Delta G through its expression encoder (Eq. 1), not beside its condition."""
 
 
 @dataclass
@@ -164,7 +166,7 @@ class PriorAvatar(PrimitivesAvatar):
         return super().train(mode)
 
     def decode_slabs(self, geo: PriorGeometry, condition: torch.Tensor, light: torch.Tensor | None,
-                     training: bool) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+                     training: bool, posed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Eq. 1 and 3: the expression code from Delta G (sampled while training: the variational encoder's
         reparameterisation, with its KL kept for the loss), the decoder with the identity's bias maps."""
         condition = condition[:, self.condition_dim:]  # the controls' expression reaches the prior as Delta G only

@@ -9,69 +9,16 @@ encoder's maps line up pixel for pixel with the decoder's slabs (S = K M). Every
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-from models.avatars.primitives.layout import chart_directions, outermost_hits
-from models.head.model import HeadModel
+from models.avatars.primitives.chart import ChartSampler, texel_points
 from render.camera import Camera
 from render.rays import Raster
 
-GEOMETRY_SCALE_M = 0.1
-"""Geometry maps are in units of this many metres about the head's centre."""
 VISIBLE_WITHIN_M = 0.004
 """A texel is seen by a pixel whose raster depth is at most this much in front of it."""
-
-
-@dataclass(frozen=True)
-class ChartSampler:
-    """Where each of the chart's S x S texels lies on the template: its triangle (-1: the ray misses the head) and
-    barycentric point, rows top (crown) first."""
-
-    size: int
-    triangles: np.ndarray  # (S*S,)
-    bary: np.ndarray  # (S*S,3)
-    centre: np.ndarray  # (3,) the template's centre, the maps' origin
-
-    @property
-    def valid(self) -> np.ndarray:
-        return self.triangles >= 0
-
-
-_SAMPLERS: dict[tuple, ChartSampler] = {}
-
-
-def chart_sampler(model: HeadModel, size: int) -> ChartSampler:
-    """The chart at S = size for a head model (computed once per model and size: a ray per texel)."""
-    key = (model.name, model.num_vertices, len(model.triangles), size)
-    if key not in _SAMPLERS:
-        verts = np.asarray(model.template, np.float64)
-        tris = np.asarray(model.triangles, np.int64)
-        centre = 0.5 * (verts.min(0) + verts.max(0))
-        f, b, _ = outermost_hits(centre, chart_directions(size), verts[tris], chunk=64)
-        _SAMPLERS[key] = ChartSampler(size, f, b.astype(np.float32), centre.astype(np.float32))
-    return _SAMPLERS[key]
-
-
-def texel_points(sampler: ChartSampler, triangles: torch.Tensor, vertices: torch.Tensor) -> torch.Tensor:
-    """(S*S,3) each texel's point on a mesh (V,3) with the template's triangles (F,3); the centre where invalid."""
-    f = torch.as_tensor(np.maximum(sampler.triangles, 0), device=vertices.device)
-    b = torch.as_tensor(sampler.bary, device=vertices.device, dtype=vertices.dtype)
-    points = (vertices[triangles[f]] * b[:, :, None]).sum(1)
-    centre = torch.as_tensor(sampler.centre, device=vertices.device, dtype=vertices.dtype)
-    return torch.where(torch.as_tensor(sampler.valid, device=vertices.device)[:, None], points, centre)
-
-
-def geometry_map(sampler: ChartSampler, triangles: torch.Tensor, head_vertices: torch.Tensor) -> torch.Tensor:
-    """(3,S,S) the texels' points of a mesh given in the head's frame (unposed by the head's rigid pose), about the
-    template's centre in GEOMETRY_SCALE_M units; 0 off the head."""
-    S = sampler.size
-    p = texel_points(sampler, triangles, head_vertices)
-    p = (p - torch.as_tensor(sampler.centre, device=p.device, dtype=p.dtype)) / GEOMETRY_SCALE_M
-    return p.T.reshape(3, S, S)
 
 
 def texture_map(sampler: ChartSampler, triangles: torch.Tensor, vertices: torch.Tensor, camera: Camera,

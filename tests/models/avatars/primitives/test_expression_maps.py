@@ -1,0 +1,90 @@
+"""The primitives' expression maps (`expression_maps`: Delta G in the decoder's own layout) and the trainer's
+`--model-options` that switch them on: the map is zero at rest whatever the head's rigid pose, follows the jaw where
+the mouth is, reaches only the slabs near it, and an avatar trained with it saves, reloads and renders the same."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from models.avatars.checkpoint import CheckpointError
+from models.avatars.primitives.avatar import EXPRESSION_MAP_UNIT_M, PrimitivesAvatar, PrimitivesConfig
+from models.avatars.primitives.decoder import SlabDecoder
+from models.avatars.primitives.layout import ELEVATION_DEG
+from models.capture.frames import camera_of
+from models.head.controls import Controls
+from models.ranges import OptionError
+from models.training.trainer import TrainConfig, prepare_training
+from render.gl.raster import Rasterizer
+from tests.models.avatars.runs import photometric_before_and_after, saved_and_reloaded
+
+MAPS = PrimitivesConfig(grid=16, voxels=4, width=16, expression_maps=True)
+
+
+def expression_map(avatar: PrimitivesAvatar, controls: Controls) -> torch.Tensor:
+    geo = avatar.geometry(controls)
+    return avatar.expression_map(geo, geo.posed)[0]  # (3,S,S) centimetres
+
+
+def test_the_map_is_zero_at_rest_and_follows_the_jaw(builtin_model):
+    avatar = PrimitivesAvatar(builtin_model, MAPS, 1, np.zeros(3, np.float32))
+    S = MAPS.grid * MAPS.voxels
+    # the neutral face turned, tilted and moved: the rigid pose is taken out, nothing moved on the face
+    root, move = np.array([0.3, -0.7, 0.2]), np.array([0.05, -0.02, 0.3])
+    turned = Controls(root=root, translation=move)
+    assert expression_map(avatar, turned).abs().max() < 1e-3  # centimetres: float32 rounding of a posed head
+    # the jaw opened by 0.3 rad (17 degrees) on the same turned head
+    opened = Controls(root=root, jaw=np.array([0.3, 0.0, 0.0]), translation=move)
+    m = expression_map(avatar, opened).norm(dim=0)  # (S,S) how far each texel moved, cm
+    # no texel moves farther than the farthest vertex (the texels are points of the mesh's triangles)
+    v_rest, v_open = avatar.head.pose([Controls(), Controls(jaw=np.array([0.3, 0.0, 0.0]))])[0]
+    most = float((v_open - v_rest).norm(dim=1).max()) / EXPRESSION_MAP_UNIT_M
+    assert 0.5 * most < float(m.max()) <= most + 1e-3, (float(m.max()), most)
+    # where: the texel that moved most is below the head's centre and in front (the chin), the crown did not move
+    row, col = divmod(int(m.argmax()), S)
+    elevation = ELEVATION_DEG[1] - (row + 0.5) / S * (ELEVATION_DEG[1] - ELEVATION_DEG[0])
+    azimuth = -180.0 + (col + 0.5) / S * 360.0
+    assert elevation < 0 and abs(azimuth) < 45, (elevation, azimuth)
+    assert float(m[: S // 5].max()) < 0.01 * float(m.max())  # the top fifth of the chart's rows: the crown
+
+
+def test_geometry_maps_reach_only_the_slabs_near_them():
+    dec = SlabDecoder(10, 6, grid=8, voxels=4, width=16, geometry_channels=3)
+    with torch.no_grad():
+        for p in dec.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    cond, gaze = torch.randn(1, 10), torch.zeros(1, 6)
+    rest, moved = torch.zeros(1, 3, 32, 32), torch.zeros(1, 3, 32, 32)
+    moved[..., :4, :4] = 1.0  # the first primitive's texels moved by a centimetre
+    a, b = dec(cond, gaze, geometry=rest), dec(cond, gaze, geometry=moved)
+    d = (a[0] - b[0]).abs().amax((1, 2, 3)) + (a[1] - b[1]).abs().amax((1, 2, 3, 4))  # (64,) per primitive
+    assert d[0] > 1e-4  # the map changes the primitive it covers...
+    assert d[63] == 0 and d[7] == 0 and d[56] == 0  # ...and none three cells or more away
+    with pytest.raises(AssertionError, match="geometry maps go with geometry_channels"):
+        dec(cond, gaze)
+
+
+@pytest.mark.gl
+def test_trained_with_expression_maps_saves_and_renders(synth_capture, gl, tmp_path):
+    capture = synth_capture("studio", 12, 32)
+    options = ("grid=8", "voxels=4", "width=16", "expression_maps=true")
+    cfg = TrainConfig(dataset=capture, out=tmp_path / "maps", model="primitives", steps=60, checkpoint_seconds=1e9,
+                      model_options=options)
+    t = prepare_training(cfg, gl)
+    assert t.avatar.cfg == PrimitivesConfig(grid=8, voxels=4, width=16, expression_maps=True)
+    assert t.avatar.decoder.geometry_channels == 3
+    first, last = photometric_before_and_after(t, 60)
+    assert last < first / 2, (first, last)
+    avatar, meta = saved_and_reloaded(t)
+    assert meta["primitives"]["expression_maps"] is True and avatar.decoder.geometry_channels == 3
+    f = t.split.frames[0]
+    cam, r = camera_of(t.split, f.camera_to_world), Rasterizer(gl)
+    np.testing.assert_array_equal(avatar.render_image(f.controls, cam, r)["rgb"],
+                                  t.avatar.render_image(f.controls, cam, r)["rgb"])
+    # the options are the new avatar's: a resumed one keeps its own, a bad one names itself
+    with pytest.raises(CheckpointError, match="--model-options with --resume"):
+        prepare_training(TrainConfig(dataset=capture, out=cfg.out, resume=True, model_options=options), gl)
+    with pytest.raises(OptionError, match="--model-options grid=3: must be at least 8"):
+        prepare_training(TrainConfig(dataset=capture, out=tmp_path / "bad", model="primitives",
+                                     model_options=("grid=3",)), gl)
