@@ -119,8 +119,7 @@ class PrimitivesGeometry:
     code_weights: torch.Tensor | None = None
     light: LightDepthMap | None = None  # the posed mesh seen from the key light, where the avatar casts shadows
     controls: Controls | None = None  # what posed the mesh (expression corrections pose it again)
-    local: torch.Tensor | None = None  # (V,3) posed without the root's turn and the translation (expression maps)
-    neutral: torch.Tensor | None = None  # (V,3) the head's neutral face, unposed (expression maps)
+    expression: torch.Tensor | None = None  # (1,3,S,S) the expression map (Delta G), where the decoder reads one
     decoded: dict = field(default_factory=dict)
 
     def to(self, device: torch.device | str) -> PrimitivesGeometry:
@@ -128,7 +127,7 @@ class PrimitivesGeometry:
         return PrimitivesGeometry(self.posed.to(device), self.rotation.to(device), self.translation.to(device),
                                   self.condition.to(device), self.gaze.to(device), w,
                                   None if self.light is None else self.light.to(device), self.controls,
-                                  *(None if m is None else m.to(device) for m in (self.local, self.neutral)))
+                                  None if self.expression is None else self.expression.to(device))
 
 
 class PrimitivesAvatar(PoseCorrected, Avatar):
@@ -292,6 +291,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         maps = self.decoder.geometry_channels > 0  # Delta G: the face as posed but for the root, less the neutral
         local = [replace(controls, root=np.zeros(3), translation=np.zeros(3)), Controls(shape=controls.shape)]
         v, _, _ = self.head.pose([unposed, controls, *(local if maps else [])])
+        expression = self.expression_map(v[2], v[3]) if maps else None
         rotation, translation = kabsch(v[0], v[1])
         E = self.head_model.num_expression
         cond = np.zeros(self.condition_dim, np.float32)
@@ -301,7 +301,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
         return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_weights(controls),
-                                  controls=controls, local=v[2] if maps else None, neutral=v[3] if maps else None)
+                                  controls=controls, expression=expression)
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> PrimitivesGeometry:
         """The frame's geometry; where the avatar casts shadows, with the posed mesh's depth map from the key light
@@ -358,24 +358,30 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return frame_code(self.latent, frame, weights)
 
     # ---- the decode --------------------------------------------------------------------------------------
-    def expression_map(self, geo: PrimitivesGeometry, posed: torch.Tensor) -> torch.Tensor:
-        """(1,3,S,S) Delta G (`expression_maps`): the chart's texels on the mesh posed but for the root's turn and
-        the translation (the controls' own rigid pose, exactly: a fit of one, as `rotation` is, takes in part of an
-        opened jaw), less the neutral face's, in centimetres. posed (V,3): the frame's mesh where an expression
-        correction posed it again (its change turned back into the head's frame)."""
+    def expression_map(self, local: torch.Tensor, neutral: torch.Tensor) -> torch.Tensor:
+        """(1,3,S,S) Delta G (`expression_maps`): the chart's texels (chart.py) on the mesh (V,3) posed but for the
+        root's turn and the translation (the controls' own rigid pose, exactly: a fit of one, as `rotation` is,
+        takes in part of an opened jaw), less those on the neutral face (V,3), in centimetres."""
         if self.chart is None:
             self.chart = chart_sampler(self.head_model, self.cfg.grid * self.cfg.voxels)
-        local = geo.local.to(posed) + (posed - geo.posed) @ geo.rotation
-        delta = geometry_map(self.chart, self.triangles, local) - geometry_map(self.chart, self.triangles,
-                                                                                geo.neutral.to(posed))
+        delta = geometry_map(self.chart, self.triangles, local) - geometry_map(self.chart, self.triangles, neutral)
         return delta[None] * (GEOMETRY_SCALE_M / EXPRESSION_MAP_UNIT_M)
+
+    def frame_expression_map(self, geo: PrimitivesGeometry, posed: torch.Tensor) -> torch.Tensor:
+        """The frame's expression map, where an expression correction posed its mesh (V,3) again: the change
+        turned back into the head's frame, R^T (posed - geo.posed), added (the map is linear in the mesh)."""
+        if posed is geo.posed:
+            return geo.expression
+        change = (posed - geo.posed) @ geo.rotation
+        centre = torch.as_tensor(self.chart.centre, dtype=change.dtype, device=change.device)
+        return geo.expression + self.expression_map(change + centre, torch.zeros_like(change) + centre)
 
     def decode_slabs(self, geo: PrimitivesGeometry, condition: torch.Tensor, light: torch.Tensor | None,
                      training: bool, posed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The decoder's raw opacity, colour and offsets for every cell of the grid (SlabDecoder.forward); posed
         (V,3): the mesh the frame decodes on (its expression maps')."""
         del training  # the decoder is deterministic
-        geometry = self.expression_map(geo, posed) if self.decoder.geometry_channels else None
+        geometry = self.frame_expression_map(geo, posed) if self.decoder.geometry_channels else None
         return self.decoder(condition, geo.gaze, light, geometry=geometry)
 
     @staticmethod
