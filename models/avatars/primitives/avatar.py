@@ -15,7 +15,7 @@ offsets' L2 (primitives stay near their places on the mesh), and the per-frame c
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -130,6 +130,11 @@ class PrimitivesGeometry:
                                   None if self.expression is None else self.expression.to(device))
 
 
+def root_rotation(controls: Controls) -> torch.Tensor:
+    """(3,3) the rotation of the controls' root joint."""
+    return rotation_matrix_from_axis_angle(torch.as_tensor(np.asarray(controls.root, np.float32))[None])[0]
+
+
 class PrimitivesAvatar(PoseCorrected, Avatar):
     name: ClassVar[str] = "primitives"
     rays_per_step: ClassVar[int] = 2048
@@ -164,6 +169,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """(N,E) per training frame, on a tracked video; None: the expressions as given."""
         self.chart: ChartSampler | None = None
         """The chart at the slabs' texels, where the decoder reads expression maps (made on first use)."""
+        self._neutral_maps: dict[bytes, torch.Tensor] = {}
 
     def make_decoder(self) -> SlabDecoder:
         """The decoder of the frame's condition (expression and jaw/neck, code, view, the light's direction where
@@ -288,10 +294,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     @torch.no_grad()
     def geometry(self, controls: Controls) -> PrimitivesGeometry:
         unposed = Controls(shape=controls.shape, expression=controls.expression)
-        maps = self.decoder.geometry_channels > 0  # Delta G: the face as posed but for the root, less the neutral
-        local = [replace(controls, root=np.zeros(3), translation=np.zeros(3)), Controls(shape=controls.shape)]
-        v, _, _ = self.head.pose([unposed, controls, *(local if maps else [])])
-        expression = self.expression_map(v[2], v[3]) if maps else None
+        v, joints, _ = self.head.pose([unposed, controls])
         rotation, translation = kabsch(v[0], v[1])
         E = self.head_model.num_expression
         cond = np.zeros(self.condition_dim, np.float32)
@@ -301,7 +304,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
         return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_weights(controls),
-                                  controls=controls, expression=expression)
+                                  controls=controls,
+                                  expression=self.controls_expression_map(controls, v[1], joints[1, 0]))
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> PrimitivesGeometry:
         """The frame's geometry; where the avatar casts shadows, with the posed mesh's depth map from the key light
@@ -358,23 +362,39 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return frame_code(self.latent, frame, weights)
 
     # ---- the decode --------------------------------------------------------------------------------------
-    def expression_map(self, local: torch.Tensor, neutral: torch.Tensor) -> torch.Tensor:
-        """(1,3,S,S) Delta G (`expression_maps`): the chart's texels (chart.py) on the mesh (V,3) posed but for the
-        root's turn and the translation (the controls' own rigid pose, exactly: a fit of one, as `rotation` is,
-        takes in part of an opened jaw), less those on the neutral face (V,3), in centimetres."""
+    def texel_map(self, vertices: torch.Tensor) -> torch.Tensor:
+        """(1,3,S,S) the chart's texels (chart.py, made on first use) on a mesh (V,3) given in the head's frame, in
+        centimetres about the template's centre; 0 off the head."""
         if self.chart is None:
             self.chart = chart_sampler(self.head_model, self.cfg.grid * self.cfg.voxels)
-        delta = geometry_map(self.chart, self.triangles, local) - geometry_map(self.chart, self.triangles, neutral)
-        return delta[None] * (GEOMETRY_SCALE_M / EXPRESSION_MAP_UNIT_M)
+        return geometry_map(self.chart, self.triangles, vertices)[None] * (GEOMETRY_SCALE_M / EXPRESSION_MAP_UNIT_M)
+
+    @torch.no_grad()
+    def controls_expression_map(self, controls: Controls, posed: torch.Tensor, root: torch.Tensor
+                                ) -> torch.Tensor | None:
+        """Delta G, the frame's expression map (`expression_maps`; None where the decoder reads none): the texels on
+        its posed mesh (V,3) with the controls' own rigid pose taken out, less those on the person's neutral face.
+        Taken out exactly: every joint hangs from the root, so the root's rotation R about its posed place r (the
+        root joint, which carries the translation t) moves every vertex alike, v = R (u - r + t) + r, and
+        u = R^T (v - r) + r - t; a fit of one, as `rotation` is, would take in part of an opened jaw."""
+        if not self.decoder.geometry_channels:
+            return None
+        R = root_rotation(controls).to(posed)
+        shift = torch.as_tensor(np.asarray(controls.translation), dtype=posed.dtype, device=posed.device)
+        local = (posed - root) @ R + (root - shift)
+        key = np.asarray(controls.shape, np.float32).tobytes()
+        if key not in self._neutral_maps:  # the face expressions are measured from: one a person
+            neutral, _, _ = self.head.pose([Controls(shape=controls.shape)])
+            self._neutral_maps = {key: self.texel_map(neutral[0])}
+        return self.texel_map(local) - self._neutral_maps[key]
 
     def frame_expression_map(self, geo: PrimitivesGeometry, posed: torch.Tensor) -> torch.Tensor:
         """The frame's expression map, where an expression correction posed its mesh (V,3) again: the change
-        turned back into the head's frame, R^T (posed - geo.posed), added (the map is linear in the mesh)."""
+        turned into the head's frame, R^T (posed - geo.posed), added (a texel is a fixed blend of vertices)."""
         if posed is geo.posed:
             return geo.expression
-        change = (posed - geo.posed) @ geo.rotation
-        centre = torch.as_tensor(self.chart.centre, dtype=change.dtype, device=change.device)
-        return geo.expression + self.expression_map(change + centre, torch.zeros_like(change) + centre)
+        centre = torch.as_tensor(self.chart.centre, dtype=posed.dtype, device=posed.device)
+        return geo.expression + self.texel_map((posed - geo.posed) @ root_rotation(geo.controls).to(posed) + centre)
 
     def decode_slabs(self, geo: PrimitivesGeometry, condition: torch.Tensor, light: torch.Tensor | None,
                      training: bool, posed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
