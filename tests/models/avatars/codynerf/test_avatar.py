@@ -18,6 +18,7 @@ from models.training.trainer import TrainConfig, prepare_training
 from render.camera import Camera, look_at
 from render.gl.raster import Rasterizer
 from render.rays import Rays
+from tests.models.avatars.runs import gpu_run_matches_cpu
 
 pytestmark = pytest.mark.gl
 
@@ -220,20 +221,5 @@ def test_inspection_buffers(capture, gl, tmp_path):
 def test_cuda_matches_cpu(capture, gl, tmp_path):
     """The same steps on the GPU and the CPU (same seed, same rays: the generator stays on the CPU) give the
     same losses and weights to float tolerance, with second derivatives on (progress past Eq. 13's ramp)."""
-    cfg = TrainConfig(dataset=capture, out=tmp_path / "cpu", effects="all", steps=4, rays_per_step=128,
-                      checkpoint_seconds=1e9)
-    cpu, gpu = prepare_training(cfg, gl), prepare_training(replace(cfg, out=tmp_path / "gpu", device="cuda"), gl)
-    for _ in range(4):
-        a, b = cpu.train_step(0.9), gpu.train_step(0.9)
-        assert b["loss"] == pytest.approx(a["loss"], rel=1e-3)
-    for k, v in cpu.avatar.state_dict().items():
-        torch.testing.assert_close(gpu.avatar.state_dict()[k].cpu().float(), v.float(), atol=1e-3, rtol=1e-3)
-    gpu.save()
-    avatar, _ = load_avatar(gpu.cfg.out, "cuda")
-    f = cpu.split.frames[0]
-    from models.capture.frames import camera_of
-
-    cam = camera_of(cpu.split, f.camera_to_world)
-    on_gpu = avatar.render_image(f.controls, cam, Rasterizer(gl))["rgb"]
-    on_cpu = cpu.avatar.render_image(f.controls, cam, Rasterizer(gl))["rgb"]
-    assert np.isfinite(on_gpu).all() and np.abs(on_gpu - on_cpu).max() < 0.01
+    gpu_run_matches_cpu(TrainConfig(dataset=capture, out=tmp_path / "cpu", effects="all", steps=4, rays_per_step=128,
+                                    checkpoint_seconds=1e9), gl, 0.9)

@@ -3,8 +3,6 @@ tiny training run through the common trainer, its checkpoint and renders, and th
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 import torch
@@ -28,7 +26,7 @@ from models.training.trainer import TrainConfig, prepare_training
 from render.camera import framing_camera
 from render.gl.raster import Rasterizer
 from tests.conftest import DEMO
-from tests.models.avatars.runs import photometric_before_and_after, saved_and_reloaded
+from tests.models.avatars.runs import gpu_run_matches_cpu, photometric_before_and_after, saved_and_reloaded
 from tests.models.head.flame_files import write_flame_from_head
 
 
@@ -228,19 +226,7 @@ def test_cuda_trains_and_renders_as_the_cpu_does(synth_capture, gl, tmp_path):
     """`train --device cuda`: the same steps (same seed and rays) give the same losses and weights to float
     tolerance, with every effect and expression maps on; a render on the GPU (the torch march) matches the CPU's
     (the C march where a compiler is found: within 2e-3 of the torch march, tests of test_native.py)."""
-    capture = synth_capture("sun", 12, 32)
-    cfg = TrainConfig(dataset=capture, out=tmp_path / "cpu", model="primitives", steps=4, checkpoint_seconds=1e9,
-                      model_options=("grid=8", "voxels=4", "width=16", "expression_maps=true"))
-    cpu, gpu = prepare_training(cfg, gl), prepare_training(replace(cfg, out=tmp_path / "gpu", device="cuda"), gl)
-    for _ in range(4):
-        a, b = cpu.train_step(0.5), gpu.train_step(0.5)
-        assert b["loss"] == pytest.approx(a["loss"], rel=1e-3)
-    for k, v in cpu.avatar.state_dict().items():
-        torch.testing.assert_close(gpu.avatar.state_dict()[k].cpu().float(), v.float(), atol=1e-3, rtol=1e-3)
-    gpu.save()
-    avatar, _ = load_avatar(gpu.cfg.out, "cuda")
-    f = cpu.split.frames[0]
-    cam, r = camera_of(cpu.split, f.camera_to_world), Rasterizer(gl)
-    on_gpu, on_cpu = avatar.render_image(f.controls, cam, r), cpu.avatar.render_image(f.controls, cam, r)
-    for name in ("rgb", "normals", "opacity"):
-        assert np.isfinite(on_gpu[name]).all() and np.abs(on_gpu[name] - on_cpu[name]).max() < 0.01, name
+    options = ("grid=8", "voxels=4", "width=16", "expression_maps=true")
+    gpu_run_matches_cpu(TrainConfig(dataset=synth_capture("sun", 12, 32), out=tmp_path / "cpu", model="primitives",
+                                    steps=4, checkpoint_seconds=1e9, model_options=options), gl, 0.5,
+                        ("rgb", "normals", "opacity"))
