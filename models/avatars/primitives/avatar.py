@@ -59,6 +59,10 @@ class PrimitivesConfig:
 
     grid: Annotated[int, Range(8, 256)] = 16
     """K: primitives on a K x K chart of the head (a power of two; cells the head does not fill have none)."""
+    front: Annotated[float, Range(0, 4)] = 0.0
+    """How much the chart's columns crowd to the face (layout.chart_azimuths): 0 even (22.5 degrees a column at
+    K = 16); 2 gives the face 12.4-degree columns, and so primitives half as wide, the sides about the same and the
+    back of the head 2x, where a monocular video never looks."""
     voxels: Annotated[int, Range(2, 64)] = 8
     """M: each primitive's grid is M^3 voxels (a power of two)."""
     width: Annotated[int, Range(8, 1024)] = 64
@@ -151,7 +155,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         self.light_dir = light_dir if effects else None
         """The capture's key light (world, towards it) where it records one and the effects call for light: the
         decoder reads its direction in the head's frame (colour under that light as the head turns)."""
-        layout = primitive_layout(head_model, cfg.grid)
+        layout = primitive_layout(head_model, cfg.grid, front=cfg.front)
         self.register_buffer("layout_triangles", torch.as_tensor(layout.triangles, dtype=torch.long))
         self.register_buffer("layout_bary", torch.as_tensor(layout.bary, dtype=torch.float32))
         self.register_buffer("layout_cells", torch.as_tensor(layout.cells[:, 0] * cfg.grid + layout.cells[:, 1]))
@@ -366,7 +370,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """(1,3,S,S) the chart's texels (chart.py, made on first use) on a mesh (V,3) given in the head's frame, in
         centimetres about the template's centre; 0 off the head."""
         if self.chart is None:
-            self.chart = chart_sampler(self.head_model, self.cfg.grid * self.cfg.voxels)
+            self.chart = chart_sampler(self.head_model, self.cfg.grid * self.cfg.voxels, self.cfg.front)
         return geometry_map(self.chart, self.triangles, vertices)[None] * (GEOMETRY_SCALE_M / EXPRESSION_MAP_UNIT_M)
 
     @torch.no_grad()

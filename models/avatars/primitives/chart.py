@@ -35,14 +35,15 @@ class ChartSampler:
 _SAMPLERS: dict[tuple, ChartSampler] = {}
 
 
-def chart_sampler(model: HeadModel, size: int) -> ChartSampler:
-    """The chart at S = size for a head model (computed once per model and size: a ray per texel)."""
-    key = (model.name, model.num_vertices, len(model.triangles), size)
+def chart_sampler(model: HeadModel, size: int, front: float = 0.0) -> ChartSampler:
+    """The chart at S = size for a head model, its columns crowded to the face by `front` (layout.chart_azimuths;
+    computed once per model, size and front: a ray per texel)."""
+    key = (model.name, model.num_vertices, len(model.triangles), size, front)
     if key not in _SAMPLERS:
         verts = np.asarray(model.template, np.float64)
         tris = np.asarray(model.triangles, np.int64)
         centre = 0.5 * (verts.min(0) + verts.max(0))
-        f, b, _ = outermost_hits(centre, chart_directions(size), verts[tris], chunk=64)
+        f, b, _ = outermost_hits(centre, chart_directions(size, front), verts[tris], chunk=64)
         _SAMPLERS[key] = ChartSampler(size, f, b.astype(np.float32), centre.astype(np.float32))
     return _SAMPLERS[key]
 

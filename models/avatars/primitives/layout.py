@@ -18,8 +18,6 @@ import torch
 
 from models.head.model import HeadModel
 
-AZIMUTH_DEG = (-180.0, 180.0)
-"""The chart's columns: the angle about the vertical axis from the face's front (+z)."""
 ELEVATION_DEG = (-60.0, 80.0)
 """The chart's rows, from below the chin (the neck) to the crown."""
 
@@ -117,11 +115,30 @@ def direction_tiles(dirs: np.ndarray, tile_deg: float = 6.0) -> list[np.ndarray]
     return np.split(order, np.nonzero(np.diff(key[order]))[0] + 1)
 
 
-def chart_directions(grid: int) -> np.ndarray:
+def chart_azimuths(grid: int, front: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The chart's columns: each one's azimuth at its centre and its width (K,) (radians). front = a > 0 crowds
+    them to the face: azimuth = pi w(s), w(s) = sinh(a s) / sinh(a), over s = 2u - 1 of the place u in [0, 1]
+    along the columns (a column's width: between its edges' azimuths); 0: even columns (w(s) = s).
+
+    >>> az, width = chart_azimuths(8, 2.0)  # face: pi sinh(0.5) / sinh(2); back: pi (1 - sinh(1.5) / sinh(2))
+    >>> np.degrees(width[3:5]).round(2).tolist(), np.degrees(width[[0, 7]]).round(2).tolist()
+    ([25.86, 25.86], [74.32, 74.32])
+    >>> round(float(np.degrees(width).sum()), 9), np.degrees(chart_azimuths(8)[1]).tolist()  # a turn; even
+    (360.0, [45.0, 45.0, 45.0, 45.0, 45.0, 45.0, 45.0, 45.0])
+    """
+    if front <= 0:  # as the avatars before `front` had them, to the last bit
+        u = (np.arange(grid) + 0.5) / grid
+        return np.radians(np.interp(u, [0, 1], (-180.0, 180.0))), np.full(grid, np.radians(360.0) / grid)
+    w = lambda s: np.sinh(front * s) / np.sinh(front)
+    edges = np.pi * w(np.linspace(-1.0, 1.0, grid + 1))
+    return np.pi * w(2.0 * (np.arange(grid) + 0.5) / grid - 1.0), np.diff(edges)
+
+
+def chart_directions(grid: int, front: float = 0.0) -> np.ndarray:
     """(K*K,3) unit directions through the cell centres of the chart, row-major (row = elevation, column =
-    azimuth), +y up, +z the face's front."""
+    azimuth: chart_azimuths), +y up, +z the face's front."""
     el = np.radians(np.interp((np.arange(grid) + 0.5) / grid, [0, 1], ELEVATION_DEG))[::-1]  # row 0: the crown
-    az = np.radians(np.interp((np.arange(grid) + 0.5) / grid, [0, 1], AZIMUTH_DEG))
+    az = chart_azimuths(grid, front)[0]
     e, a = np.meshgrid(el, az, indexing="ij")
     return np.stack([np.cos(e) * np.sin(a), np.sin(e), np.cos(e) * np.cos(a)], -1).reshape(-1, 3)
 
@@ -131,25 +148,26 @@ MIN_INCIDENCE = 0.4
 at a grazing angle (the neck, below the chin) covers a patch 1/cos as long as the cell is wide, up to 2.5x."""
 
 
-def primitive_layout(model: HeadModel, grid: int, overlap: float = 1.3) -> PrimitiveLayout:
+def primitive_layout(model: HeadModel, grid: int, overlap: float = 1.3, front: float = 0.0) -> PrimitiveLayout:
     """A primitive at each cell of the chart whose ray leaves the template somewhere; its half-size is half the
     surface patch the cell covers (the distance times the cell's angle, the larger of its two sides, over the
     cosine at which the ray leaves the surface, at least MIN_INCIDENCE), times `overlap` so that neighbours leave
-    no gaps."""
+    no gaps. front: the columns crowded to the face (chart_azimuths)."""
     verts = np.asarray(model.template, np.float64)
     tris = np.asarray(model.triangles, np.int64)
     centre = 0.5 * (verts.min(0) + verts.max(0))
-    f, b, t = outermost_hits(centre, chart_directions(grid), verts[tris])
+    directions = chart_directions(grid, front)
+    f, b, t = outermost_hits(centre, directions, verts[tris])
     keep = np.nonzero(f >= 0)[0]
     if len(keep) == 0:
         raise ValueError(f"head model '{model.name}': no ray from its centre leaves its surface")
     el = np.radians(np.interp((keep // grid + 0.5) / grid, [0, 1], ELEVATION_DEG))
-    d_az = np.radians(np.ptp(AZIMUTH_DEG)) / grid * np.cos(el)
+    d_az = chart_azimuths(grid, front)[1][keep % grid] * np.cos(el)
     d_el = np.radians(np.ptp(ELEVATION_DEG)) / grid
     tri = verts[tris[f[keep]]]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-18)
-    incidence = np.abs((normal * chart_directions(grid)[keep]).sum(1)).clip(MIN_INCIDENCE, 1.0)
+    incidence = np.abs((normal * directions[keep]).sum(1)).clip(MIN_INCIDENCE, 1.0)
     half = 0.5 * overlap * t[keep] * np.maximum(d_az, d_el) / incidence
     return PrimitiveLayout(grid, f[keep], b[keep], np.stack([keep // grid, keep % grid], 1),
                            half.astype(np.float32))
