@@ -90,9 +90,9 @@ class OptionError(ValueError):
     """A setting given on the command line that the config does not have, or cannot take."""
 
 
-def config_with(cls: type, settings: tuple[str, ...], option: str = "--model-options"):
-    """The config `cls` with its defaults but for `settings`, each "field=value" (bools: true/false, 1/0, yes/no),
-    checked against the field's type and range.
+def config_with(cls: type, settings: tuple[str, ...], base: object = None, option: str = "--model-options"):
+    """The config `cls` (base's values, else its defaults) but for `settings`, each "field=value" (bools:
+    true/false, 1/0, yes/no), checked against the field's type and range.
 
     >>> @dataclass(frozen=True)
     ... class C:
@@ -142,4 +142,4 @@ def config_with(cls: type, settings: tuple[str, ...], option: str = "--model-opt
         why = next((r.problem(v) for r in ranges if r.problem(v)), None)
         if why:
             raise OptionError(f"{option} {name}={v:g}: {why}")
-    return cls(**values)
+    return dataclasses.replace(base if base is not None else cls(), **values)

@@ -78,6 +78,15 @@ class Avatar(nn.Module, ABC):
     quality_knobs: ClassVar[tuple[str, ...]] = ()
     """Which fields of a Quality setting change this model's rendering besides the image size (none: the
     model always renders the same way, as the dense NerFACE baseline does)."""
+    config_class: ClassVar[type | None] = None
+    """The frozen dataclass for_capture's `config` is (`train --model-options` sets its fields); None: none."""
+
+    @classmethod
+    def default_config(cls, tracked: bool) -> Any:
+        """The config a new avatar of a capture gets (None: for_capture's own defaults); tracked: a tracked video,
+        one camera that stays in front of the face."""
+        del tracked
+        return None
 
     def __init__(self, head_model: HeadModel, n_frames: int, background: np.ndarray):
         super().__init__()

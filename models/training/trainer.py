@@ -23,7 +23,7 @@ from models.capture.frames import background_plate, view_range
 from models.device import device_of
 from models.files import atomic_write_bytes
 from models.head.sources import load_head
-from models.ranges import Range, config_with
+from models.ranges import OptionError, Range, config_with
 from models.training.data import FrameSet, ValidationFrame, build_frames, validation_frame
 from models.training.metrics import psnr
 from render.gl.context import GLContext
@@ -115,8 +115,9 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
                                   f"{avatar.describe_effects()}; leave --effects out to continue it")
     else:
         model = cfg.model or default_model(split.tracked)
-        if cfg.model_options and model_config is None:
-            model_config = config_with(avatar_class(model).config_class, cfg.model_options)
+        model_config = model_config or avatar_class(model).default_config(split.tracked)
+        if cfg.model_options:
+            model_config = model_options(avatar_class(model), cfg.model_options, model_config)
         avatar = avatar_class(model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects or "all"),
                                                      split.lighting, model_config)
         if plate is not None:
@@ -130,6 +131,13 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
     avatar.note_views(frames)
     validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
     return Trainer(cfg, avatar, frames, validation, resumed)
+
+
+def model_options(cls: type[Avatar], settings: tuple[str, ...], base: Any) -> Any:
+    """`--model-options` over the config a new avatar would get (base; None: the model's defaults)."""
+    if cls.config_class is None:
+        raise OptionError(f"--model-options: {cls.name} avatars have no settings")
+    return config_with(cls.config_class, settings, base)
 
 
 def trim_progress(log: Path, step: int) -> None:

@@ -57,6 +57,21 @@ def test_bad_input(capture, tmp_path, capsys):
     assert main(["train", str(capture), "--out", str(tmp_path / "c"), "--steps", "1"]) == 2
     assert "already holds an avatar" in capsys.readouterr().err
     assert (tmp_path / "c" / "avatar.json").read_text() == "{}"
+    for options, why in ((["grid=1000"], "--model-options grid=1000: must be at least 8 and at most 256"),
+                         (["glow=1"], "--model-options glow=1: not a setting of this model (its settings: grid,"),
+                         (["expression_maps=maybe"], "expression_maps must be true or false")):
+        assert main(["train", str(capture), "--out", str(tmp_path / "d"), "--model", "primitives", "--steps", "1",
+                     "--model-options", *options]) == 2
+        assert why in capsys.readouterr().err
+        assert not (tmp_path / "d" / "avatar.json").exists()
+    # every model takes its own config's fields (CoDyNeRF's loss weights), and the avatar records what it was given
+    assert main(["train", str(capture), "--out", str(tmp_path / "e"), "--steps", "1", "--rays-per-step", "64",
+                 "--model-options", "cauchy=0.5"]) == 0
+    meta = json.loads((tmp_path / "e" / "avatar.json").read_text())
+    assert meta["provenance"]["config"]["model_options"] == "('cauchy=0.5',)"
+    assert main(["train", str(capture), "--out", str(tmp_path / "f"), "--steps", "1", "--model", "nerface",
+                 "--model-options", "cauchy=0.5"]) == 2
+    assert "--model-options cauchy=0.5: not a setting of this model" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(__import__("torch").cuda.is_available(), reason="this machine has a CUDA GPU")

@@ -104,6 +104,7 @@ def active_pixels(cfg: RenderConfig, camera: Camera, raster: Raster) -> np.ndarr
 class CoDyNeRFAvatar(PoseCorrected, Avatar):
     name: ClassVar[str] = "codynerf"
     quality_knobs: ClassVar[tuple[str, ...]] = ("samples", "fine", "bf16")
+    config_class: ClassVar[type] = LossWeights
 
     def __init__(self, head_model: HeadModel, field_cfg: FieldConfig, n_frames: int, background: np.ndarray,
                  render_cfg: RenderConfig = RenderConfig(), loss_weights: LossWeights | None = None):

@@ -133,6 +133,7 @@ class NerfaceAvatar(Avatar):
 
     name: ClassVar[str] = "nerface"
     rays_per_step: ClassVar[int] = 256
+    config_class: ClassVar[type] = NerfaceConfig
     """Each of its rays costs 128 samples of an 8x256 MLP."""
 
     def __init__(self, head_model: HeadModel, cfg: NerfaceConfig, n_frames: int, background: np.ndarray,

@@ -15,7 +15,7 @@ offsets' L2 (primitives stay near their places on the mesh), and the per-frame c
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -96,6 +96,10 @@ class PrimitivesConfig:
     """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
     """Rendered pixels reach this many of the largest primitive half-sizes beyond the mesh's silhouette."""
+
+
+VIDEO_SETTINGS = {"front": 2.0, "expression_maps": True}
+"""PrimitivesConfig's fields for a tracked video (default_config)."""
 
 
 def grid_normals(density: torch.Tensor, rotations: torch.Tensor, half: torch.Tensor) -> torch.Tensor:
@@ -190,6 +194,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """`none` decodes colour alone; with effects the decoder reads the key light's direction (where the capture
         records one) and, with shading or specular, the normals buffer comes from the opacity grids' gradients."""
         return cls(head_model, config or cls.config_class(), n_frames, background, effects, key_light_dir(lighting))
+
+    @classmethod
+    def default_config(cls, tracked: bool) -> PrimitivesConfig | None:
+        """A tracked video's avatar: the chart crowded to the face (front 2), where its one camera looks, and the
+        decoder reading the expression maps (README, Real people: d3 25.65 -> 25.94 dB with the maps alone)."""
+        return replace(cls.config_class(), **VIDEO_SETTINGS) if tracked else None
 
     @classmethod
     def from_meta(cls, head_model: HeadModel, meta: dict) -> PrimitivesAvatar:

@@ -102,6 +102,12 @@ class PriorAvatar(PrimitivesAvatar):
         """Within a training step (`training_step`): this avatar's bias maps, made once for all the step's frames."""
         self._in_step = False
 
+    @classmethod
+    def default_config(cls, tracked: bool) -> None:
+        """The prior's own sizes, a video's scan or not (its decoder is the prior's)."""
+        del tracked
+        return None
+
     def fit_to_tracked_video(self, corrections: bool | None = None) -> None:
         """No per-frame corrections: the prior keeps no per-frame anything (a frame is its maps and its mesh)."""
 
