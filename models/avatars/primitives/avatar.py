@@ -61,7 +61,7 @@ class PrimitivesConfig:
     """K: primitives on a K x K chart of the head (a power of two; cells the head does not fill have none)."""
     front: Annotated[float, Range(0, 4)] = 0.0
     """How much the chart's columns crowd to the face (layout.chart_azimuths): 0 even (22.5 degrees a column at
-    K = 16); 2 gives the face 12.4-degree columns, and so primitives half as wide, the sides about the same and the
+    K = 16); 2 gives the face 12.4-degree columns, and so primitives 0.6x as wide, the sides about the same and the
     back of the head 2x, where a monocular video never looks."""
     voxels: Annotated[int, Range(2, 64)] = 8
     """M: each primitive's grid is M^3 voxels (a power of two)."""
