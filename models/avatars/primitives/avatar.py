@@ -177,7 +177,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """(N,E) per training frame, on a tracked video; None: the expressions as given."""
         self.chart: ChartSampler | None = None
         """The chart at the slabs' texels, where the decoder reads expression maps (made on first use)."""
-        self._neutral_maps: dict[bytes, torch.Tensor] = {}
+        self._neutral: tuple[bytes, torch.Tensor] | None = None
+        """The neutral face's texel map and the shape it is of (an avatar is one person: one is kept)."""
 
     def make_decoder(self) -> SlabDecoder:
         """The decoder of the frame's condition (expression and jaw/neck, code, view, the light's direction where
@@ -399,10 +400,10 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         shift = torch.as_tensor(np.asarray(controls.translation), dtype=posed.dtype, device=posed.device)
         local = (posed - root) @ R + (root - shift)
         key = np.asarray(controls.shape, np.float32).tobytes()
-        if key not in self._neutral_maps:  # the face expressions are measured from: one a person
+        if self._neutral is None or self._neutral[0] != key:  # the face expressions are measured from
             neutral, _, _ = self.head.pose([Controls(shape=controls.shape)])
-            self._neutral_maps = {key: self.texel_map(neutral[0])}
-        return self.texel_map(local) - self._neutral_maps[key]
+            self._neutral = key, self.texel_map(neutral[0])
+        return self.texel_map(local) - self._neutral[1]
 
     def frame_expression_map(self, geo: PrimitivesGeometry, posed: torch.Tensor) -> torch.Tensor:
         """The frame's expression map, where an expression correction posed its mesh (V,3) again: the change

@@ -62,7 +62,7 @@ class PriorGeometry(PrimitivesGeometry):
                              delta_geometry=self.delta_geometry.to(device), identity=ident)
 
 
-def eye_cells(model: HeadModel, size: int, cells: int = 8) -> torch.Tensor:
+def eye_cells(model: HeadModel, size: int, cells: int = 8, front: float = 0.0) -> torch.Tensor:
     """(1,1,cells,cells): 1 on the chart's cells whose texels lie on an eyeball (and their neighbours), where the
     seed lets gaze act; ones everywhere for a head without eye joints."""
     names = [j for j in GAZE_JOINTS if j in model.joint_names]
@@ -71,7 +71,7 @@ def eye_cells(model: HeadModel, size: int, cells: int = 8) -> torch.Tensor:
     on_eye = np.zeros(model.num_vertices, bool)
     for name in names:
         on_eye |= model.weights[:, model.joint_names.index(name)] > 0.5
-    s = chart_sampler(model, size)
+    s = chart_sampler(model, size, front)
     texel = np.zeros(size * size, np.float32)
     ok = s.valid
     texel[ok] = on_eye[np.asarray(model.triangles)[s.triangles[ok]]].any(1)
@@ -93,8 +93,8 @@ class PriorAvatar(PrimitivesAvatar):
         self.expression_encoder = ExpressionEncoder(S, cfg.latent)
         self.register_buffer("neutral_texture", torch.zeros(1, 3, S, S))
         self.register_buffer("neutral_geometry", torch.zeros(1, 3, S, S))
-        self.register_buffer("gaze_mask", eye_cells(head_model, S), persistent=False)
-        self.sampler = chart_sampler(head_model, S)
+        self.register_buffer("gaze_mask", eye_cells(head_model, S, front=cfg.front), persistent=False)
+        self.sampler = chart_sampler(head_model, S, cfg.front)  # the chart the layout has (PrimitivesAvatar)
         self._kl: torch.Tensor | None = None
         self._noise: torch.Generator | None = None
         self._own_biases: list[torch.Tensor] | None = None
