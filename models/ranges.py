@@ -142,4 +142,7 @@ def config_with(cls: type, settings: tuple[str, ...], base: object = None, optio
         why = next((r.problem(v) for r in ranges if r.problem(v)), None)
         if why:
             raise OptionError(f"{option} {name}={v:g}: {why}")
-    return dataclasses.replace(base if base is not None else cls(), **values)
+    try:  # a config's own checks of its fields together (__post_init__)
+        return dataclasses.replace(base if base is not None else cls(), **values)
+    except ValueError as e:
+        raise OptionError(f"{option} {' '.join(settings)}: {e}") from None

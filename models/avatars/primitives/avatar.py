@@ -92,10 +92,20 @@ class PrimitivesConfig:
     surface point (chart.py) with the head's rigid pose taken out, less the neutral face's, in centimetres (the
     seed's Delta G, paper 002 Eq. 1), joined at every level from K x K up. A mouth's change then reaches the mouth's
     slabs where it is, where the global condition spreads every expression weight over the whole head."""
+    global_expression: bool = True
+    """The decoder reads the controls (expression weights, jaw and neck rotations) as one vector that reaches every
+    slab. False (with expression_maps): they reach it only as the maps do, where the mesh moves, as the prior's
+    decoder has them; a new mix of expressions (eyes of one frame, mouth of another) is then decoded from the
+    parts that each training frame showed."""
     chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1 << 18
     """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
     """Rendered pixels reach this many of the largest primitive half-sizes beyond the mesh's silhouette."""
+
+    def __post_init__(self):
+        if not self.global_expression and not self.expression_maps:
+            raise ValueError("global_expression false needs expression_maps true: the decoder would read no "
+                             "expression at all")
 
 
 VIDEO_SETTINGS = {"front": 2.0, "expression_maps": True}
@@ -184,7 +194,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """The decoder of the frame's condition (expression and jaw/neck, code, view, the light's direction where
         the capture records one) and gaze; with cast shadows, the shadow map's channel."""
         extra = 3 if self.light_dir is not None else 0
-        return SlabDecoder(self.condition_dim + self.cfg.code_dim + 3 + extra, 6, self.cfg.grid, self.cfg.voxels, 3,
+        controls = self.condition_dim if self.cfg.global_expression else 0
+        return SlabDecoder(controls + self.cfg.code_dim + 3 + extra, 6, self.cfg.grid, self.cfg.voxels, 3,
                            self.cfg.width, map_channels=1 if self.casts_shadows else 0,
                            geometry_channels=3 if self.cfg.expression_maps else 0)
 
@@ -419,6 +430,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         (V,3): the mesh the frame decodes on (its expression maps')."""
         del training  # the decoder is deterministic
         geometry = self.frame_expression_map(geo, posed) if self.decoder.geometry_channels else None
+        if not self.cfg.global_expression:
+            condition = condition[:, self.condition_dim:]  # the controls reach the slabs as the maps show them
         return self.decoder(condition, geo.gaze, light, geometry=geometry)
 
     @staticmethod

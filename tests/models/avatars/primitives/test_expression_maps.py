@@ -73,6 +73,33 @@ def test_geometry_maps_reach_only_the_slabs_near_them():
         dec(cond, gaze)
 
 
+def test_without_the_global_condition_the_controls_reach_the_slabs_only_through_the_map(builtin_model):
+    smile = np.zeros(builtin_model.num_expression, np.float32)
+    smile[:4] = [0.8, 0.8, 0.5, -0.3]
+    a, b = Controls(expression=smile), Controls(jaw=np.array([0.3, 0.0, 0.0]))
+    for global_expression in (True, False):
+        torch.manual_seed(0)
+        avatar = PrimitivesAvatar(builtin_model, replace(MAPS, global_expression=global_expression), 1,
+                                  np.zeros(3, np.float32))
+        with torch.no_grad():
+            for p in avatar.decoder.parameters():
+                p.add_(0.05 * torch.randn_like(p))
+        width = avatar.decoder.fc.in_features
+        geo_a, geo_b = avatar.geometry(a), avatar.geometry(b)
+        rest = torch.zeros(1, MAPS.code_dim + 3)  # the code and the view
+        own, other = (torch.cat([g.condition, rest], -1) for g in (geo_a, geo_b))
+        slabs = [avatar.decode_slabs(geo_a, c, None, False, geo_a.posed) for c in (own, other)]
+        same = all(torch.equal(x, y) for x, y in zip(*slabs, strict=True))
+        if global_expression:  # the smile's frame decoded with the open jaw's weights: other slabs
+            assert width == avatar.condition_dim + MAPS.code_dim + 3 and not same
+        else:  # the weights are not read: the smile's map alone makes its slabs
+            assert width == MAPS.code_dim + 3 and same
+            other_map = avatar.decode_slabs(geo_b, own, None, False, geo_b.posed)
+            assert not torch.equal(other_map[0], slabs[0][0])
+    with pytest.raises(ValueError, match="global_expression false needs expression_maps true"):
+        PrimitivesConfig(global_expression=False)
+
+
 @pytest.mark.gl
 def test_trained_with_expression_maps_saves_and_renders(synth_capture, gl, tmp_path):
     capture = synth_capture("studio", 12, 32)
@@ -96,3 +123,6 @@ def test_trained_with_expression_maps_saves_and_renders(synth_capture, gl, tmp_p
     with pytest.raises(OptionError, match="--model-options grid=3: must be at least 8"):
         prepare_training(TrainConfig(dataset=capture, out=tmp_path / "bad", model="primitives",
                                      model_options=("grid=3",)), gl)
+    with pytest.raises(OptionError, match="global_expression=false: global_expression false needs expression_maps"):
+        prepare_training(TrainConfig(dataset=capture, out=tmp_path / "bad", model="primitives",
+                                     model_options=("global_expression=false",)), gl)
