@@ -32,7 +32,14 @@ from models.avatars.components.poses import PoseCorrected
 from models.avatars.components.rigid import kabsch
 from models.avatars.mesh import MeshField
 from models.avatars.primitives import march, native
-from models.avatars.primitives.chart import GEOMETRY_SCALE_M, ChartSampler, chart_sampler, geometry_map
+from models.avatars.primitives.chart import (
+    GAZE_JOINTS,
+    GEOMETRY_SCALE_M,
+    ChartSampler,
+    chart_sampler,
+    eye_cells,
+    geometry_map,
+)
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
 from models.avatars.quality import Quality
@@ -46,7 +53,6 @@ from render.gl.shadow import draw_light_depth
 from render.rays import Raster, Rays
 from render.shadow_map import LightDepthMap
 
-GAZE_JOINTS = ("eye_l", "eye_r")
 EXPRESSION_MAP_UNIT_M = 0.01
 """Expression maps are in centimetres: an expression moves the face by millimetres to a few centimetres."""
 DISPLAY_PARALLEL_RAYS = 4096
@@ -97,6 +103,9 @@ class PrimitivesConfig:
     slab. False (with expression_maps): they reach it only as the maps do, where the mesh moves, as the prior's
     decoder has them; a new mix of expressions (eyes of one frame, mouth of another) is then decoded from the
     parts that each training frame showed."""
+    gaze_at_eyes: bool = False
+    """Gaze (the eyes' rotations) joins the decoder's 8x8 features only over the chart's cells on and beside the
+    eyeballs (chart.eye_cells, the prior's masked gaze), not over the whole head."""
     chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1 << 18
     """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
@@ -177,6 +186,9 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         self.register_buffer("triangles", torch.as_tensor(np.asarray(head_model.triangles), dtype=torch.long),
                              persistent=False)
         self.condition_dim = head_model.num_expression + 6
+        S = cfg.grid * cfg.voxels
+        self.register_buffer("gaze_mask", eye_cells(head_model, S, front=cfg.front) if cfg.gaze_at_eyes else None,
+                             persistent=False)
         self.decoder = self.make_decoder()
         self.latent = nn.Embedding(n_frames, cfg.code_dim)
         nn.init.zeros_(self.latent.weight)
@@ -432,7 +444,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         geometry = self.frame_expression_map(geo, posed) if self.decoder.geometry_channels else None
         if not self.cfg.global_expression:
             condition = condition[:, self.condition_dim:]  # the controls reach the slabs as the maps show them
-        return self.decoder(condition, geo.gaze, light, geometry=geometry)
+        return self.decoder(condition, geo.gaze, light, geometry=geometry, gaze_mask=self.gaze_mask)
 
     @staticmethod
     def view_of(geo: PrimitivesGeometry, eye: torch.Tensor) -> torch.Tensor:

@@ -9,10 +9,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from models.avatars.primitives.layout import chart_directions, outermost_hits
 from models.head.model import HeadModel
 
+GAZE_JOINTS = ("eye_l", "eye_r")
 GEOMETRY_SCALE_M = 0.1
 """Geometry maps are in units of this many metres about the head's centre."""
 
@@ -64,3 +66,20 @@ def geometry_map(sampler: ChartSampler, triangles: torch.Tensor, head_vertices: 
     p = texel_points(sampler, triangles, head_vertices)
     p = (p - torch.as_tensor(sampler.centre, device=p.device, dtype=p.dtype)) / GEOMETRY_SCALE_M
     return p.T.reshape(3, S, S)
+
+
+def eye_cells(model: HeadModel, size: int, cells: int = 8, front: float = 0.0) -> torch.Tensor:
+    """(1,1,cells,cells): 1 on the chart's cells whose texels lie on an eyeball (and their neighbours), where the
+    seed lets gaze act; ones everywhere for a head without eye joints."""
+    names = [j for j in GAZE_JOINTS if j in model.joint_names]
+    if not names:
+        return torch.ones(1, 1, cells, cells)
+    on_eye = np.zeros(model.num_vertices, bool)
+    for name in names:
+        on_eye |= model.weights[:, model.joint_names.index(name)] > 0.5
+    s = chart_sampler(model, size, front)
+    texel = np.zeros(size * size, np.float32)
+    ok = s.valid
+    texel[ok] = on_eye[np.asarray(model.triangles)[s.triangles[ok]]].any(1)
+    grid = F.adaptive_max_pool2d(torch.as_tensor(texel).reshape(1, 1, size, size), cells)
+    return F.max_pool2d(grid, 3, stride=1, padding=1)

@@ -18,11 +18,10 @@ from typing import Annotated, ClassVar
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from models.avatars.base import TrainingBatch
 from models.avatars.components import losses
-from models.avatars.primitives.avatar import GAZE_JOINTS, PrimitivesAvatar, PrimitivesConfig, PrimitivesGeometry
+from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, PrimitivesGeometry
 from models.avatars.primitives.chart import chart_sampler, geometry_map
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.prior.encoders import ExpressionEncoder, IdentityEncoder, kl_divergence
@@ -45,6 +44,8 @@ class PriorConfig(PrimitivesConfig):
     """No per-frame code: a frame is its identity's maps and its guide mesh."""
     expression_maps: bool = False
     """Unused: the prior reads Delta G through its expression encoder (Eq. 1), not beside its condition."""
+    gaze_at_eyes: bool = True
+    """Gaze joins the decoder only over the chart's eye cells (the seed's masked gaze)."""
 
 
 @dataclass
@@ -62,23 +63,6 @@ class PriorGeometry(PrimitivesGeometry):
                              delta_geometry=self.delta_geometry.to(device), identity=ident)
 
 
-def eye_cells(model: HeadModel, size: int, cells: int = 8, front: float = 0.0) -> torch.Tensor:
-    """(1,1,cells,cells): 1 on the chart's cells whose texels lie on an eyeball (and their neighbours), where the
-    seed lets gaze act; ones everywhere for a head without eye joints."""
-    names = [j for j in GAZE_JOINTS if j in model.joint_names]
-    if not names:
-        return torch.ones(1, 1, cells, cells)
-    on_eye = np.zeros(model.num_vertices, bool)
-    for name in names:
-        on_eye |= model.weights[:, model.joint_names.index(name)] > 0.5
-    s = chart_sampler(model, size, front)
-    texel = np.zeros(size * size, np.float32)
-    ok = s.valid
-    texel[ok] = on_eye[np.asarray(model.triangles)[s.triangles[ok]]].any(1)
-    grid = F.adaptive_max_pool2d(torch.as_tensor(texel).reshape(1, 1, size, size), cells)
-    return F.max_pool2d(grid, 3, stride=1, padding=1)
-
-
 class PriorAvatar(PrimitivesAvatar):
     name: ClassVar[str] = "prior"
     config_class: ClassVar[type] = PriorConfig
@@ -93,7 +77,6 @@ class PriorAvatar(PrimitivesAvatar):
         self.expression_encoder = ExpressionEncoder(S, cfg.latent)
         self.register_buffer("neutral_texture", torch.zeros(1, 3, S, S))
         self.register_buffer("neutral_geometry", torch.zeros(1, 3, S, S))
-        self.register_buffer("gaze_mask", eye_cells(head_model, S, front=cfg.front), persistent=False)
         self.sampler = chart_sampler(head_model, S, cfg.front)  # the chart the layout has (PrimitivesAvatar)
         self._kl: torch.Tensor | None = None
         self._noise: torch.Generator | None = None

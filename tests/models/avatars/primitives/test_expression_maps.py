@@ -100,6 +100,27 @@ def test_without_the_global_condition_the_controls_reach_the_slabs_only_through_
         PrimitivesConfig(global_expression=False)
 
 
+def test_gaze_at_the_eyes_leaves_the_back_of_the_head_as_it_was(builtin_model):
+    looks = [Controls(gaze_left=np.array([0.0, y, 0.0]), gaze_right=np.array([0.0, y, 0.0])) for y in (0.0, 0.4)]
+    for at_eyes in (False, True):
+        torch.manual_seed(0)
+        avatar = PrimitivesAvatar(builtin_model, replace(MAPS, gaze_at_eyes=at_eyes), 1, np.zeros(3, np.float32))
+        with torch.no_grad():
+            for p in avatar.decoder.parameters():
+                p.add_(0.05 * torch.randn_like(p))
+        ahead, turned = (avatar.geometry(c) for c in looks)
+        assert not torch.equal(ahead.gaze, turned.gaze)
+        geos = [ahead, replace(ahead, gaze=turned.gaze)]  # one mesh and map, the gaze alone turned
+        condition = torch.cat([ahead.condition, torch.zeros(1, MAPS.code_dim + 3)], -1)
+        with torch.no_grad():
+            density = [avatar.decode_slabs(g, condition, None, False, g.posed)[0] for g in geos]
+        change = (density[0] - density[1]).abs().amax((1, 2, 3)).reshape(MAPS.grid, MAPS.grid)
+        back = torch.cat([change[:, :2], change[:, -2:]], 1)  # the chart's first and last columns: behind the head
+        assert float(change.max()) > 1e-4  # the eyes' slabs follow the gaze either way
+        assert (float(back.max()) == 0.0) == at_eyes, float(back.max())
+    assert avatar.gaze_mask.sum() < 0.4 * avatar.gaze_mask.numel()  # the eyes and their neighbours, not the head
+
+
 @pytest.mark.gl
 def test_trained_with_expression_maps_saves_and_renders(synth_capture, gl, tmp_path):
     capture = synth_capture("studio", 12, 32)

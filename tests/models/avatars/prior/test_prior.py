@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import torch
 
-from models.avatars.primitives.chart import GEOMETRY_SCALE_M, chart_sampler, geometry_map, texel_points
-from models.avatars.prior.avatar import PriorAvatar, PriorConfig, eye_cells
+from models.avatars.primitives.chart import GEOMETRY_SCALE_M, chart_sampler, eye_cells, geometry_map, texel_points
+from models.avatars.prior.avatar import PriorAvatar, PriorConfig
 from models.avatars.prior.maps import texture_map
 from models.capture.synthetic import SynthConfig, synthesize
 from models.head.controls import Controls
