@@ -179,7 +179,10 @@ def test_on_a_tracked_video_all_and_none_train_the_same_primitives(d3_dataset, g
         weights[effects] = load_file(next(out.glob("weights-*.safetensors")))
     assert weights["none"].keys() == weights["all"].keys()
     assert all(torch.equal(weights["none"][k], weights["all"][k]) for k in weights["none"])
-    assert "normals" in load_avatar(tmp_path / "all")[0].default_buffers()
+    avatar = load_avatar(tmp_path / "all")[0]
+    assert "normals" in avatar.default_buffers()
+    # a video's defaults: the chart crowded to the face, the controls read only through the expression maps
+    assert avatar.cfg.front == 2.0 and avatar.cfg.expression_maps and not avatar.cfg.global_expression
     assert "normals" not in load_avatar(tmp_path / "none")[0].default_buffers()
 
 
