@@ -24,6 +24,13 @@ from tests.models.avatars.runs import photometric_before_and_after, saved_and_re
 MAPS = PrimitivesConfig(grid=16, voxels=4, width=16, expression_maps=True)
 
 
+def jostle(decoder: torch.nn.Module) -> None:
+    """Move every weight off its start (zero last layers, bias maps) so that every input reaches the output."""
+    with torch.no_grad():
+        for p in decoder.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+
+
 def expression_map(avatar: PrimitivesAvatar, controls: Controls) -> torch.Tensor:
     return avatar.geometry(controls).expression[0]  # (3,S,S) centimetres
 
@@ -59,9 +66,7 @@ def test_the_map_is_zero_at_rest_and_follows_the_jaw(builtin_model):
 
 def test_geometry_maps_reach_only_the_slabs_near_them():
     dec = SlabDecoder(10, 6, grid=8, voxels=4, width=16, geometry_channels=3)
-    with torch.no_grad():
-        for p in dec.parameters():
-            p.add_(0.05 * torch.randn_like(p))
+    jostle(dec)
     cond, gaze = torch.randn(1, 10), torch.zeros(1, 6)
     rest, moved = torch.zeros(1, 3, 32, 32), torch.zeros(1, 3, 32, 32)
     moved[..., :4, :4] = 1.0  # the first primitive's texels moved by a centimetre
@@ -81,9 +86,7 @@ def test_without_the_global_condition_the_controls_reach_the_slabs_only_through_
         torch.manual_seed(0)
         avatar = PrimitivesAvatar(builtin_model, replace(MAPS, global_expression=global_expression), 1,
                                   np.zeros(3, np.float32))
-        with torch.no_grad():
-            for p in avatar.decoder.parameters():
-                p.add_(0.05 * torch.randn_like(p))
+        jostle(avatar.decoder)
         width = avatar.decoder.fc.in_features
         geo_a, geo_b = avatar.geometry(a), avatar.geometry(b)
         rest = torch.zeros(1, MAPS.code_dim + 3)  # the code and the view
@@ -105,9 +108,7 @@ def test_gaze_at_the_eyes_leaves_the_back_of_the_head_as_it_was(builtin_model):
     for at_eyes in (False, True):
         torch.manual_seed(0)
         avatar = PrimitivesAvatar(builtin_model, replace(MAPS, gaze_at_eyes=at_eyes), 1, np.zeros(3, np.float32))
-        with torch.no_grad():
-            for p in avatar.decoder.parameters():
-                p.add_(0.05 * torch.randn_like(p))
+        jostle(avatar.decoder)
         ahead, turned = (avatar.geometry(c) for c in looks)
         assert not torch.equal(ahead.gaze, turned.gaze)
         geos = [ahead, replace(ahead, gaze=turned.gaze)]  # one mesh and map, the gaze alone turned
