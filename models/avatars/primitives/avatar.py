@@ -203,8 +203,9 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """The neutral face's texel map and the shape it is of (an avatar is one person: one is kept)."""
 
     def make_decoder(self) -> SlabDecoder:
-        """The decoder of the frame's condition (expression and jaw/neck, code, view, the light's direction where
-        the capture records one) and gaze; with cast shadows, the shadow map's channel."""
+        """The decoder of the frame's condition (expression and jaw/neck unless only the expression maps carry
+        them, code, view, the light's direction where the capture records one) and gaze; with cast shadows, the
+        shadow map's channel; with expression maps, their three."""
         extra = 3 if self.light_dir is not None else 0
         controls = self.condition_dim if self.cfg.global_expression else 0
         return SlabDecoder(controls + self.cfg.code_dim + 3 + extra, 6, self.cfg.grid, self.cfg.voxels, 3,
