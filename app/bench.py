@@ -26,7 +26,6 @@ import torch
 from tqdm import tqdm
 
 from app.avatar_commands import face_mask_of
-from app.bench_charts import draw_charts
 from app.errors import UserInputError
 from models.avatars.base import Avatar
 from models.avatars.effects import effects_name
@@ -295,6 +294,8 @@ def run_bench(cfg: BenchConfig) -> int:
                "training_curves": curves, "train_seconds": seconds,
                "bench_seconds": round(time.perf_counter() - t_start, 1)}
     atomic_write_bytes(out / "results.json", (json.dumps(results, indent=1) + "\n").encode())
+    from app.bench_charts import draw_charts  # matplotlib (0.3 s) loads when charts are drawn, not for --help
+
     for p in draw_charts(results, out):
         print(f"wrote {p}")
     print(f"wrote {out / 'results.json'} in {results['bench_seconds']:.0f} s")

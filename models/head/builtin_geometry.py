@@ -8,7 +8,6 @@ front), with slits at the mouth and the eyes, and two eyeballs.
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 ROWS, COLUMNS = 110, 128
 MOUTH_Y, MOUTH_HALF_WIDTH = -0.035, 0.023
@@ -52,6 +51,8 @@ def gauss(x: np.ndarray, y: np.ndarray, cx: float, cy: float, sx: float, sy: flo
 
 def row_profile() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """y, a, cf, cb for each skin row (row 0 is the crown's pole), spaced evenly along the profile."""
+    from scipy.interpolate import PchipInterpolator  # (0.3 s to import: only when a head is built)
+
     dense_y = np.linspace(_PROFILE[0, 0], _PROFILE[-1, 0], 4000)
     # Monotone cubic through the profile's knots: smooth rows, no overshoot between knots.
     cols = [PchipInterpolator(_PROFILE[::-1, 0], _PROFILE[::-1, k])(dense_y) for k in range(1, 4)]
