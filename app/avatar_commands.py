@@ -268,7 +268,8 @@ def run_prior_train(cfg: PriorTrainConfig) -> int:
         raise UserInputError(f"{cfg.out}: already holds a prior; pass --resume to continue it or choose a new folder")
     rank, world = distributed_from_env(cfg.device)
     gl = GLContext.headless()
-    trainer = prepare_prior(cfg, gl, rank, world)
+    bar = Progress("reading the corpus", len(corpus_folders(cfg.corpus)), "identities") if rank == 0 else None
+    trainer = prepare_prior(cfg, gl, rank, world, None if bar is None else lambda k, _: bar.update(k))
 
     def show(r: dict) -> None:
         sys.stderr.write(f"step {r['step']}  loss {r['loss']:.5f}  {r['elapsed_s']:.0f} s\n")

@@ -251,15 +251,21 @@ def distributed_from_env(device: str = "cpu") -> tuple[int, int]:
     return dist.get_rank(), dist.get_world_size()
 
 
-def prepare_prior(cfg: PriorTrainConfig, gl: GLContext, rank: int = 0, world: int = 1) -> PriorTrainer:
-    """The prior and its corpus read from disk (every process reads it all)."""
+def prepare_prior(cfg: PriorTrainConfig, gl: GLContext, rank: int = 0, world: int = 1,
+                  on_identity: Callable[[int, int], None] | None = None) -> PriorTrainer:
+    """The prior and its corpus read from disk (every process reads it all); on_identity(done, total) after each
+    identity's frames and maps are ready (a corpus of 24 takes minutes)."""
     folders = corpus_folders(cfg.corpus)
     first = load_split(folders[0], "train")
     head = load_head(first.head_model)
     torch.manual_seed(cfg.seed)
     pcfg = PriorConfig(grid=cfg.grid, voxels=cfg.voxels, width=cfg.width, kl=cfg.kl)
     avatar = PriorAvatar.for_capture(head, 1, first.background, parse_effects(cfg.effects), first.lighting, pcfg)
-    identities = [load_identity(f, avatar, gl) for f in folders]
+    identities = []
+    for f in folders:
+        identities.append(load_identity(f, avatar, gl))
+        if on_identity is not None:
+            on_identity(len(identities), len(folders))
     trainer = PriorTrainer(cfg, avatar, identities, rank, world)
     if cfg.resume:
         trainer.resume()

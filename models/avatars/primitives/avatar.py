@@ -162,6 +162,16 @@ def root_rotation(controls: Controls) -> torch.Tensor:
     return rotation_matrix_from_axis_angle(torch.as_tensor(np.asarray(controls.root, np.float32))[None])[0]
 
 
+def head_frame(controls: Controls, posed: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
+    """(V,3) a posed mesh with the controls' own rigid pose taken out exactly, in the head's frame: every joint hangs
+    from the root, so the root's rotation R about its posed place r (the root joint, which carries the translation
+    t) moves every vertex alike, v = R (u - r + t) + r, and u = R^T (v - r) + r - t. A fit of one rigid motion to
+    the whole mesh, as the geometry's `rotation` is, would take in part of an opened jaw."""
+    R = root_rotation(controls).to(posed)
+    shift = torch.as_tensor(np.asarray(controls.translation), dtype=posed.dtype, device=posed.device)
+    return (posed - root) @ R + (root - shift)
+
+
 class PrimitivesAvatar(PoseCorrected, Avatar):
     name: ClassVar[str] = "primitives"
     rays_per_step: ClassVar[int] = 2048
@@ -415,15 +425,11 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     def controls_expression_map(self, controls: Controls, posed: torch.Tensor, root: torch.Tensor
                                 ) -> torch.Tensor | None:
         """Delta G, the frame's expression map (`expression_maps`; None where the decoder reads none): the texels on
-        its posed mesh (V,3) with the controls' own rigid pose taken out, less those on the person's neutral face.
-        Taken out exactly: every joint hangs from the root, so the root's rotation R about its posed place r (the
-        root joint, which carries the translation t) moves every vertex alike, v = R (u - r + t) + r, and
-        u = R^T (v - r) + r - t; a fit of one, as `rotation` is, would take in part of an opened jaw."""
+        its posed mesh (V,3) with the controls' own rigid pose taken out exactly (head_frame; root: the posed root
+        joint), less those on the person's neutral face."""
         if not self.decoder.geometry_channels:
             return None
-        R = root_rotation(controls).to(posed)
-        shift = torch.as_tensor(np.asarray(controls.translation), dtype=posed.dtype, device=posed.device)
-        local = (posed - root) @ R + (root - shift)
+        local = head_frame(controls, posed, root)
         key = np.asarray(controls.shape, np.float32).tobytes()
         if self._neutral is None or self._neutral[0] != key:  # the face expressions are measured from
             neutral, _, _ = self.head.pose([Controls(shape=controls.shape)])

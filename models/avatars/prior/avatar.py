@@ -21,7 +21,7 @@ import torch
 
 from models.avatars.base import TrainingBatch
 from models.avatars.components import losses
-from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, PrimitivesGeometry
+from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, PrimitivesGeometry, head_frame
 from models.avatars.primitives.chart import chart_sampler, geometry_map
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.prior.encoders import ExpressionEncoder, IdentityEncoder, kl_divergence
@@ -50,17 +50,15 @@ class PriorConfig(PrimitivesConfig):
 
 @dataclass
 class PriorGeometry(PrimitivesGeometry):
-    """A primitives frame, with its expression maps (1,3,S,S: Delta G) and, for a corpus frame, its identity's
-    neutral texture and geometry maps (else the avatar's own)."""
+    """A primitives frame (its `expression`: Delta G, 1,3,S,S, what the expression encoder reads) and, for a corpus
+    frame, its identity's neutral texture and geometry maps (else the avatar's own)."""
 
-    delta_geometry: torch.Tensor | None = None
     identity: tuple[torch.Tensor, torch.Tensor] | None = None
 
     def to(self, device: torch.device | str) -> PriorGeometry:
         base = super().to(device)
         ident = None if self.identity is None else tuple(m.to(device) for m in self.identity)
-        return PriorGeometry(**{k: getattr(base, k) for k in PrimitivesGeometry.__dataclass_fields__},
-                             delta_geometry=self.delta_geometry.to(device), identity=ident)
+        return PriorGeometry(**{k: getattr(base, k) for k in PrimitivesGeometry.__dataclass_fields__}, identity=ident)
 
 
 class PriorAvatar(PrimitivesAvatar):
@@ -118,12 +116,15 @@ class PriorAvatar(PrimitivesAvatar):
 
     # ---- per frame -------------------------------------------------------------------------------------
     @torch.no_grad()
+    def controls_expression_map(self, controls: Controls, posed: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
+        """Delta G, what the expression encoder reads: the geometry map of the posed mesh (V,3) with the controls'
+        rigid pose taken out exactly (head_frame: root, the posed root joint), less the person's neutral face's."""
+        local = head_frame(controls, posed, root)
+        return geometry_map(self.sampler, self.triangles, local)[None] - self.neutral_geometry_of(controls.shape)
+
     def geometry(self, controls: Controls) -> PriorGeometry:
         base = super().geometry(controls)
-        head_frame = (base.posed - base.translation) @ base.rotation  # R^T (v - t): the rigid pose taken out
-        delta = geometry_map(self.sampler, self.triangles, head_frame)[None] - self.neutral_geometry_of(controls.shape)
-        return PriorGeometry(**{k: getattr(base, k) for k in PrimitivesGeometry.__dataclass_fields__},
-                             delta_geometry=delta)
+        return PriorGeometry(**{k: getattr(base, k) for k in PrimitivesGeometry.__dataclass_fields__})
 
     def identity_biases(self, geo: PriorGeometry) -> list[torch.Tensor]:
         """E_id's bias maps (Eq. 2) for the frame's identity: a corpus frame's own maps, else this avatar's (made
@@ -159,8 +160,8 @@ class PriorAvatar(PrimitivesAvatar):
         """Eq. 1 and 3: the expression code from Delta G (sampled while training: the variational encoder's
         reparameterisation, with its KL kept for the loss), the decoder with the identity's bias maps."""
         condition = condition[:, self.condition_dim:]  # the controls' expression reaches the prior as Delta G only
-        delta_t = torch.zeros_like(geo.delta_geometry)
-        mean, log_var = self.expression_encoder(delta_t, geo.delta_geometry)
+        delta_t = torch.zeros_like(geo.expression)
+        mean, log_var = self.expression_encoder(delta_t, geo.expression)
         if training:
             noise = torch.randn(mean.shape, generator=self._noise).to(mean) if self._noise is not None else \
                 torch.randn_like(mean)
