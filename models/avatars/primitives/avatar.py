@@ -37,6 +37,7 @@ from models.avatars.primitives.chart import (
     GEOMETRY_SCALE_M,
     ChartSampler,
     chart_sampler,
+    expression_share,
     eye_cells,
     geometry_map,
 )
@@ -106,6 +107,11 @@ class PrimitivesConfig:
     gaze_at_eyes: bool = False
     """Gaze (the eyes' rotations) joins the decoder's 8x8 features only over the chart's cells on and beside the
     eyeballs (chart.eye_cells, the prior's masked gaze), not over the whole head."""
+    code_off_face: bool = False
+    """The per-frame code joins the decoder at the K x K level, weighted on each cell by the share of it that the
+    controls do not move (1 - chart.expression_share), instead of reaching every slab: a frame's face is decoded
+    from its controls and maps alone, the code keeps what the guide mesh cannot say (hair, shoulders, collar).
+    A held-out frame's blended code then cannot bring other frames' eyes and mouths."""
     chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1 << 18
     """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
@@ -115,6 +121,8 @@ class PrimitivesConfig:
         if not self.global_expression and not self.expression_maps:
             raise ValueError("global_expression false needs expression_maps true: the decoder would read no "
                              "expression at all")
+        if self.code_off_face and self.code_dim == 0:
+            raise ValueError("code_off_face needs a per-frame code (code_dim > 0)")
 
 
 VIDEO_SETTINGS = {"front": 2.0, "expression_maps": True, "global_expression": False}
@@ -199,6 +207,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         S = cfg.grid * cfg.voxels
         self.register_buffer("gaze_mask", eye_cells(head_model, S, front=cfg.front) if cfg.gaze_at_eyes else None,
                              persistent=False)
+        self.register_buffer("code_mask", 1.0 - expression_share(head_model, S, cfg.grid, cfg.front)
+                             if cfg.code_off_face else None, persistent=False)
         self.decoder = self.make_decoder()
         self.latent = nn.Embedding(n_frames, cfg.code_dim)
         nn.init.zeros_(self.latent.weight)
@@ -218,9 +228,10 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         shadow map's channel; with expression maps, their three."""
         extra = 3 if self.light_dir is not None else 0
         controls = self.condition_dim if self.cfg.global_expression else 0
-        return SlabDecoder(controls + self.cfg.code_dim + 3 + extra, 6, self.cfg.grid, self.cfg.voxels, 3,
+        code, apart = (0, self.cfg.code_dim) if self.cfg.code_off_face else (self.cfg.code_dim, 0)
+        return SlabDecoder(controls + code + 3 + extra, 6, self.cfg.grid, self.cfg.voxels, 3,
                            self.cfg.width, map_channels=1 if self.casts_shadows else 0,
-                           geometry_channels=3 if self.cfg.expression_maps else 0)
+                           geometry_channels=3 if self.cfg.expression_maps else 0, code_channels=apart)
 
     # ---- making and describing -------------------------------------------------------------------------
     @classmethod
@@ -450,9 +461,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         (V,3): the mesh the frame decodes on (its expression maps')."""
         del training  # the decoder is deterministic
         geometry = self.frame_expression_map(geo, posed) if self.decoder.geometry_channels else None
-        if not self.cfg.global_expression:
-            condition = condition[:, self.condition_dim:]  # the controls reach the slabs as the maps show them
-        return self.decoder(condition, geo.gaze, light, geometry=geometry, gaze_mask=self.gaze_mask)
+        D, C = self.condition_dim, self.cfg.code_dim
+        controls, code, rest = condition[:, :D], condition[:, D:D + C], condition[:, D + C:]
+        kept = [controls] if self.cfg.global_expression else []  # else the controls reach it as the maps show them
+        kept += [rest] if self.cfg.code_off_face else [code, rest]
+        return self.decoder(torch.cat(kept, -1), geo.gaze, light, geometry=geometry, gaze_mask=self.gaze_mask,
+                            code=code if self.cfg.code_off_face else None, code_mask=self.code_mask)
 
     @staticmethod
     def view_of(geo: PrimitivesGeometry, eye: torch.Tensor) -> torch.Tensor:

@@ -26,15 +26,16 @@ from torch import nn
 class SlabDecoder(nn.Module):
     def __init__(self, condition_dim: int, gaze_dim: int, grid: int, voxels: int, colour_channels: int = 3,
                  width: int = 64, min_width: int = 16, map_channels: int = 0, latent_channels: int = 0,
-                 geometry_channels: int = 0):
+                 geometry_channels: int = 0, code_channels: int = 0):
         """latent_channels > 0: the frame's expression is a spatial 4x4 code of that many channels (the prior's,
         paper 002 Section 3.1.1), joined by the condition vector (view, light) at every cell through a 1x1
-        convolution, instead of the condition vector alone through a linear layer."""
+        convolution, instead of the condition vector alone through a linear layer. code_channels > 0: the per-frame
+        code joins apart from the condition, at the K x K level, weighted by a mask (forward's code_mask)."""
         super().__init__()
         assert grid >= 8 and grid & (grid - 1) == 0 and voxels & (voxels - 1) == 0, (grid, voxels)
         self.grid, self.voxels, self.colour_channels, self.gaze_dim = grid, voxels, colour_channels, gaze_dim
         self.map_channels, self.latent_channels = map_channels, latent_channels
-        self.geometry_channels = geometry_channels
+        self.geometry_channels, self.code_channels = geometry_channels, code_channels
         self.fc = nn.Linear(condition_dim, 16 * width) if not latent_channels else \
             nn.Conv2d(latent_channels + condition_dim, width, 1)
         self.width = width
@@ -49,6 +50,7 @@ class SlabDecoder(nn.Module):
             c_in = chans[k] + (gaze_dim if k == 1 else 0)  # gaze joins at 8x8 (after the first upsampling)
             c_in += map_channels if k == levels - 1 else 0  # the maps, halved, join the last upsampling
             c_in += geometry_channels if k > self.offset_level else 0  # geometry from the K x K level on
+            c_in += code_channels if k == self.offset_level + 1 else 0  # the masked code at K x K
             self.ups.append(nn.ConvTranspose2d(c_in, chans[k + 1], 4, stride=2, padding=1))
             size = 4 * 2 ** (k + 1)
             self.biases.append(nn.Parameter(torch.zeros(chans[k + 1], size, size)))
@@ -66,17 +68,20 @@ class SlabDecoder(nn.Module):
 
     def forward(self, condition: torch.Tensor, gaze: torch.Tensor, maps: torch.Tensor | None = None,
                 latent: torch.Tensor | None = None, bias_maps: list[torch.Tensor] | None = None,
-                gaze_mask: torch.Tensor | None = None, geometry: torch.Tensor | None = None
+                gaze_mask: torch.Tensor | None = None, geometry: torch.Tensor | None = None,
+                code: torch.Tensor | None = None, code_mask: torch.Tensor | None = None
                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """condition (1,Dc), gaze (1,Dg), maps (1, map_channels, K M, K M) -> raw opacity (K*K, M,M,M), raw colour
         (K*K, M,M,M, C) and offsets (K*K, 9), primitives in row-major grid order, voxels [z, y, x].
         latent (1, latent_channels, 4, 4): the spatial expression code, where the decoder takes one; bias_maps
         (bias_shapes, each with a leading 1): added to the decoder's own biases (an identity's, from the prior);
         gaze_mask (1,1,8,8): where on the 8x8 features gaze may act (1 everywhere if not given); geometry
-        (1, geometry_channels, K M, K M): the geometry maps, where the decoder takes them."""
+        (1, geometry_channels, K M, K M): the geometry maps, where the decoder takes them; code (1, code_channels)
+        and code_mask (1,1,K,K): the per-frame code and where on the K x K features it may act."""
         assert (maps is None) == (self.map_channels == 0), "maps go with map_channels"
         assert (geometry is None) == (self.geometry_channels == 0), "geometry maps go with geometry_channels"
         assert (latent is None) == (self.latent_channels == 0), "a latent goes with latent_channels"
+        assert (code is None) == (self.code_channels == 0), "a code apart goes with code_channels"
         K, M, C = self.grid, self.voxels, self.colour_channels
         if latent is None:
             h = F.leaky_relu(self.fc(condition).reshape(1, self.width, 4, 4), 0.2)
@@ -92,6 +97,9 @@ class SlabDecoder(nn.Module):
                 h = torch.cat([h, F.avg_pool2d(maps, 2)], 1)
             if geometry is not None and k > self.offset_level:
                 h = torch.cat([h, F.adaptive_avg_pool2d(geometry, h.shape[2:])], 1)
+            if code is not None and k == self.offset_level + 1:
+                c = code[:, :, None, None].expand(-1, -1, h.shape[2], h.shape[3])
+                h = torch.cat([h, c if code_mask is None else c * code_mask], 1)
             h = F.leaky_relu(up(h) + bias[None] + extra[k], 0.2)
             if k == self.offset_level:
                 offsets = self.offsets(h)

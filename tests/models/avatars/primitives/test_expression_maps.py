@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from models.avatars.checkpoint import CheckpointError
 from models.avatars.primitives.avatar import EXPRESSION_MAP_UNIT_M, PrimitivesAvatar, PrimitivesConfig
@@ -148,3 +149,34 @@ def test_trained_with_expression_maps_saves_and_renders(synth_capture, gl, tmp_p
     with pytest.raises(OptionError, match="global_expression=false: global_expression false needs expression_maps"):
         prepare_training(TrainConfig(dataset=capture, out=tmp_path / "bad", model="primitives",
                                      model_options=("global_expression=false",)), gl)
+
+
+def test_a_code_off_the_face_leaves_the_face_to_the_controls(builtin_model):
+    """code_off_face: a per-frame code joins the decoder at K x K weighted by 1 - the share of each cell that the
+    controls move; the slabs of cells whose neighbours up to two cells away all lie on the moving face (the furthest
+    the upsamplings carry a K x K input: 1 + 1/2 + 1/4 + 1/8 cells) come out the same whatever the code, the crown's
+    and the back's change. With the code in the global condition, every slab changes."""
+    from models.avatars.primitives.chart import expression_share
+
+    share = expression_share(builtin_model, 64, 16)[0, 0]
+    assert float(share.max()) == 1.0 and float(share.min()) == 0.0  # a moving face and a still crown on the chart
+    inner = F.max_pool2d((share < 1).float()[None, None], 5, stride=1, padding=2)[0, 0].flatten() == 0
+    outer = (share == 0).flatten()
+    assert int(inner.sum()) >= 4 and int(outer.sum()) >= 4
+    for off_face in (True, False):
+        torch.manual_seed(0)
+        avatar = PrimitivesAvatar(builtin_model, replace(MAPS, code_off_face=off_face), 1, np.zeros(3, np.float32))
+        jostle(avatar.decoder)
+        geo = avatar.geometry(Controls())
+        codes = torch.zeros(1, MAPS.code_dim), torch.randn(1, MAPS.code_dim)
+        with torch.no_grad():
+            slabs = [avatar.decode_slabs(geo, torch.cat([geo.condition, c, torch.zeros(1, 3)], -1), None, False,
+                                         geo.posed)[0] for c in codes]
+        change = (slabs[0] - slabs[1]).abs().flatten(1).amax(1)  # per cell of the K x K grid
+        assert float(change[outer].min()) > 0  # the code still reaches the crown and the back
+        if off_face:
+            assert float(change[inner].max()) == 0.0
+        else:
+            assert float(change[inner].min()) > 0
+    with pytest.raises(ValueError, match="code_off_face needs a per-frame code"):
+        PrimitivesConfig(code_off_face=True, code_dim=0)
