@@ -38,7 +38,6 @@ from models.training.data import FrameSet, build_frames
 from models.training.trainer import _adam_state_tensors, _load_adam_state, log_progress, optimiser_step, trim_progress
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
-from render.rays import Rays
 
 NEUTRAL_FRAMES = 8
 """The frames of least expression whose colours make an identity's neutral texture."""
@@ -170,8 +169,7 @@ class PriorTrainer:
             pick = idx[torch.randint(len(idx), (self.cfg.rays_per_frame,), generator=g)] if len(idx) else idx
             if k % self.world != self.rank or len(pick) == 0:
                 continue
-            rays = Rays(fs.origins[fid].expand(len(pick), 3), fs.directions[fid].reshape(-1, 3)[pick],
-                        fs.surface_t[fid].reshape(-1)[pick]).to(self.device)
+            rays = fs.rays(fid, pick).to(self.device)
             own = torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + self.step * 4096 + k)
             out.append(TrainingBatch(fid, rays, fs.images[fid].reshape(-1, 3)[pick].to(self.device),
                                      fs.geometry[fid], 0.0, own))

@@ -28,7 +28,6 @@ from models.training.data import FrameSet, ValidationFrame, build_frames, valida
 from models.training.metrics import psnr
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
-from render.rays import Rays
 
 
 @dataclass(frozen=True)
@@ -228,9 +227,7 @@ class Trainer:
                     continue
                 pick = self.avatar.draw_training_pixels(fs.active_index[fid], fs.images[fid][..., 0].numel(),
                                                         per_frame, g)
-                rays = Rays(fs.origins[fid].expand(len(pick), 3), fs.directions[fid].reshape(-1, 3)[pick],
-                            fs.surface_t[fid].reshape(-1)[pick], None if fs.plate is None else fs.plate[pick]
-                            ).to(self.device)
+                rays = fs.rays(fid, pick).to(self.device)
                 target = fs.images[fid].reshape(-1, 3)[pick].to(self.device)
                 parts = self.avatar.loss_terms(TrainingBatch(fid, rays, target, fs.geometry[fid], progress, g))
                 for k, v in parts.items():

@@ -1,0 +1,43 @@
+"""The training frames in memory (models/training/data.py): what a step's rays are made of."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig
+from models.capture.dataset import load_split
+from models.capture.frames import camera_of
+from models.capture.synthetic import SynthConfig, synthesize
+from models.head.sources import load_builtin
+from models.training.data import build_frames
+from render.gl.raster import Rasterizer
+from render.rays import pixel_rays
+
+
+@pytest.mark.gl
+def test_a_frames_rays_are_its_cameras_and_its_raster_made_afresh(tmp_path, gl):
+    """build_frames keeps no per-frame directions or rasters: each frame's rays, made from the camera's directions
+    and the frame's rotation, are the pixel rays of that frame's camera (render.rays, through the inverse view
+    matrix: to 1e-6), and its surface distances and training pixels are what rasterizing the frame again gives,
+    bit for bit."""
+    synthesize(SynthConfig(scene="ambient", frames=4, size=32, views=2, out=tmp_path / "c"), load_builtin(), gl)
+    split = load_split(tmp_path / "c", "train")  # each frame from two cameras, in front and behind
+    avatar = PrimitivesAvatar(load_builtin(), PrimitivesConfig(grid=8, voxels=2, width=16), len(split.frames),
+                              np.zeros(3, np.float32))
+    fs = build_frames(split, avatar, gl)
+    raster = Rasterizer(gl)
+    yaws = set()
+    for k, f in enumerate(split.frames):
+        cam = camera_of(split, f.camera_to_world)
+        origin, dirs = pixel_rays(cam)
+        rays = fs.rays(k, torch.arange(32 * 32))
+        np.testing.assert_allclose(rays.origins.numpy(), np.broadcast_to(origin, (32 * 32, 3)), atol=1e-6)
+        np.testing.assert_allclose(rays.directions.numpy(), dirs.reshape(-1, 3), atol=1e-6)
+        r = raster.rasterize(fs.geometry[k].posed.numpy(), avatar.head_model.triangles, cam)
+        assert torch.equal(rays.surface_t, torch.from_numpy(r.distance.astype(np.float32)).reshape(-1))
+        assert np.array_equal(fs.active[k].numpy(), avatar.training_pixels(cam, r))
+        yaws.add(round(float(np.degrees(np.arctan2(f.camera_to_world[0, 2], f.camera_to_world[2, 2]))), 3))
+    raster.release()
+    assert len(yaws) > 1  # the frames' cameras differ: each frame's own rotation is used
