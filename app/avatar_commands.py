@@ -58,7 +58,14 @@ def train_locked(cfg: TrainConfig) -> int:
     if not cfg.resume and (cfg.out / "avatar.json").exists():
         raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
     gl = GLContext.headless()
-    trainer = prepare_training(cfg, gl)
+    bars: list[Progress] = []
+
+    def reading(done: int, total: int) -> None:
+        if not bars:
+            bars.append(Progress("reading the frames", total))
+        bars[0].update(done)
+
+    trainer = prepare_training(cfg, gl, on_frame=reading)
     tty = sys.stderr.isatty()
     last_line = [0.0]
 

@@ -4,6 +4,7 @@ what it returns."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -55,12 +56,13 @@ class ValidationFrame:
     image: np.ndarray  # (H,W,3)
 
 
-def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet:
+def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
+                 on_frame: Callable[[int, int], None] | None = None) -> FrameSet:
     """Read the split's images (and masks), make each frame's geometry, rasterize the posed mesh for the surface
     distance along each pixel's ray, and let the avatar fit its settings to the capture and choose where
     training draws rays. One frame at a time into tensors made once: what a frame's raster holds (3 MB at 256 px)
     is not kept for every frame of a long video, the mesh is rasterized again once the avatar's settings are
-    fitted."""
+    fitted. on_frame(done, total) after each frame is read (a long video takes minutes)."""
     bg = avatar.background.numpy()
     n = len(split.frames)
     d = camera_directions(camera_of(split, np.eye(4)))  # every frame of a split has the same intrinsics
@@ -84,6 +86,8 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext) -> FrameSet
         surf[k] = torch.from_numpy(r.distance.astype(np.float32))
         geos.append(geo)
         cameras.append(cam)
+        if on_frame is not None:
+            on_frame(k + 1, n)
     avatar.fit_to_capture(np.concatenate(reach) if has_masks else None)
     active = torch.empty(n, H, W, dtype=torch.bool)
     for k, (geo, cam) in enumerate(zip(geos, cameras, strict=True)):  # the pixels as the fitted settings see them

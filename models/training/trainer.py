@@ -88,10 +88,11 @@ def _load_adam_state(opt: torch.optim.Adam, tensors: dict[str, torch.Tensor]) ->
             opt.state[p] = {k: v.clone() if k == "step" else v.to(p.device) for k, v in st.items()}
 
 
-def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) -> Trainer:
+def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None,
+                     on_frame: Callable[[int, int], None] | None = None) -> Trainer:
     """A training run from its config: read the capture and the head model (and the checkpoint to resume), build
     the avatar the registry names, read and rasterize the frames. model_config: the model's own sizes or loss
-    weights (its for_capture's `config`; None: its defaults)."""
+    weights (its for_capture's `config`; None: its defaults). on_frame(done, total): as the frames are read."""
     split, val_split = load_split(cfg.dataset, "train"), load_split(cfg.dataset, "val")
     for s in (split, val_split):  # a truncated or wrong-size image: a clear error before any work
         check_images(s)
@@ -126,7 +127,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None) 
         # Its codes carry what the controls miss (hair, shoulders) and follow the controls: held-out frames and
         # sliders take the nearest training frames' (components/codes.py). Synthetic captures keep the mean code.
         avatar.key_codes([f.controls for f in split.frames])
-    frames = build_frames(split, avatar, gl)
+    frames = build_frames(split, avatar, gl, on_frame)
     avatar.note_views(frames)
     validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
     return Trainer(cfg, avatar, frames, validation, resumed)

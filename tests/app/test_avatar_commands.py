@@ -24,6 +24,8 @@ def test_train_eval_render(capture, tmp_path, capsys):
     avatar = tmp_path / "av"
     assert main(["train", str(capture), "--out", str(avatar), "--effects", "shading", "--steps", "6",
                  "--rays-per-step", "128"]) == 0
+    n = len(json.loads((capture / "transforms_train.json").read_text())["frames"])
+    assert f"reading the frames: {n}/{n} frames" in capsys.readouterr().err  # a long video's reading is shown
     lines = (avatar / "progress.jsonl").read_text().splitlines()
     assert json.loads(lines[0])["step"] == 1 and "eta_s" in json.loads(lines[-1])
     assert all(json.loads(line)["eta_s"] >= 0 for line in lines)  # the last step: 0 s left, not -1
