@@ -2,7 +2,7 @@
 # Rebuild the universal prior shipped in resources/prior/: a corpus of PEOPLE (default 24) synthetic people of the
 # built-in head (40 frames of the range-of-motion script, each from 4 cameras at once round the head, 128 px;
 # seeds 1-PEOPLE; about 8 s a person), then MINUTES (default 60) of prior-train in one process on one thread (the
-# corpus takes about 3 minutes to read first). WORKERS=2 trains under torchrun on two processes instead.
+# corpus takes about 2 minutes to read first). WORKERS=2 trains under torchrun on two processes instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MINUTES=${MINUTES:-60}

@@ -119,8 +119,11 @@ class PriorAvatar(PrimitivesAvatar):
     def controls_expression_map(self, controls: Controls, posed: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
         """Delta G, what the expression encoder reads: the geometry map of the posed mesh (V,3) with the controls'
         rigid pose taken out exactly (head_frame: root, the posed root joint), less the person's neutral face's."""
+        key = np.asarray(controls.shape, np.float32).tobytes()
+        if self._neutral is None or self._neutral[0] != key:  # one person's frames follow each other: kept
+            self._neutral = key, self.neutral_geometry_of(controls.shape)
         local = head_frame(controls, posed, root)
-        return geometry_map(self.sampler, self.triangles, local)[None] - self.neutral_geometry_of(controls.shape)
+        return geometry_map(self.sampler, self.triangles, local)[None] - self._neutral[1]
 
     def geometry(self, controls: Controls) -> PriorGeometry:
         base = super().geometry(controls)
