@@ -216,9 +216,12 @@ class JobQueue:
 
     @staticmethod
     def status(job: Job) -> str:
-        """What a job is doing, in a few words: its stage, and while tracking the tracker's last line."""
+        """What a job is doing, in a few words: its stage, and while tracking the tracker's last line, and while a
+        training reads its frames (a long video's take minutes, before the first step) its last line."""
         if job.stage in ("track", "reenact") and job.state == "running":
             return ("tracking: " if job.stage == "track" else "") + JobQueue.last_line(job)
+        if job.stage == "train" and job.state == "running" and not job.progress:
+            return JobQueue.last_line(job) or job.state
         return job.state
 
     def stop_all(self, wait_s: float = 30.0) -> None:

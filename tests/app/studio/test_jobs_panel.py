@@ -43,3 +43,15 @@ def test_a_reenactment_is_refused_with_its_reason_and_runs_the_reenact_command(t
     assert job.stage == "reenact" and job.fraction == 0.0
     job.log_path.write_text("reenact: 9/30 frames\nreenact: 12/30 frames\n")
     assert job.fraction == 0.4
+
+
+def test_a_training_reading_its_frames_says_so(tmp_path):
+    """Before its first step a training shows the last line of its log (train's "reading the frames: k/N"), then its
+    state once steps are recorded."""
+    from app.jobs import JobQueue
+
+    job = Job(1, tmp_path / "d", tmp_path / "o", state="running")
+    job.log_path.write_text("reading the frames: 30/302 frames\nreading the frames: 61/302 frames\n")
+    assert JobQueue.status(job) == "reading the frames: 61/302 frames"
+    job.progress.append({"step": 1, "eta_s": 1800.0})
+    assert JobQueue.status(job) == "running"
