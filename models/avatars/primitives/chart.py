@@ -103,4 +103,3 @@ def expression_share(model: HeadModel, size: int, cells: int, front: float = 0.0
     texel = np.zeros(size * size, np.float32)
     texel[s.valid] = moved[np.asarray(model.triangles)[s.triangles[s.valid]]].all(1)
     return F.adaptive_avg_pool2d(torch.as_tensor(texel).reshape(1, 1, size, size), cells)
-
