@@ -15,7 +15,7 @@ import torch
 
 from app.errors import UserInputError
 from app.head_commands import save_png
-from app.progress import Progress
+from app.progress import Progress, progress_callback
 from app.turntable import INSPECT, TurntableConfig, buffer_image, render_needs, turntable_frames
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
@@ -58,14 +58,7 @@ def train_locked(cfg: TrainConfig) -> int:
     if not cfg.resume and (cfg.out / "avatar.json").exists():
         raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
     gl = GLContext.headless()
-    bars: list[Progress] = []
-
-    def reading(done: int, total: int) -> None:
-        if not bars:
-            bars.append(Progress("reading the frames", total))
-        bars[0].update(done)
-
-    trainer = prepare_training(cfg, gl, on_frame=reading)
+    trainer = prepare_training(cfg, gl, on_frame=progress_callback("reading the frames"))
     tty = sys.stderr.isatty()
     last_line = [0.0]
 
@@ -275,8 +268,8 @@ def run_prior_train(cfg: PriorTrainConfig) -> int:
         raise UserInputError(f"{cfg.out}: already holds a prior; pass --resume to continue it or choose a new folder")
     rank, world = distributed_from_env(cfg.device)
     gl = GLContext.headless()
-    bar = Progress("reading the corpus", len(corpus_folders(cfg.corpus)), "identities") if rank == 0 else None
-    trainer = prepare_prior(cfg, gl, rank, world, None if bar is None else lambda k, _: bar.update(k))
+    reading = progress_callback("reading the corpus", "identities") if rank == 0 else None
+    trainer = prepare_prior(cfg, gl, rank, world, reading)
 
     def show(r: dict) -> None:
         sys.stderr.write(f"step {r['step']}  loss {r['loss']:.5f}  {r['elapsed_s']:.0f} s\n")

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Annotated
 
 from app.errors import UserInputError
-from app.progress import Progress
+from app.progress import Progress, progress_callback
 from models.capture.dataset import SPLITS, check_images, load_split
 from models.capture.scenes import SCENE_EFFECTS
 from models.capture.synthetic import SynthConfig, synthesize
@@ -27,14 +27,7 @@ def run_synth(cfg: SynthConfig) -> int:
     if cfg.out.exists() and (not cfg.out.is_dir() or any(cfg.out.iterdir())):
         raise UserInputError(f"{cfg.out}: already exists and is not empty; choose a new folder")
     head = load_head(cfg.head)
-    bar: list[Progress] = []
-
-    def progress(done: int, total: int) -> None:
-        if not bar:
-            bar.append(Progress("synth", total))
-        bar[0].update(done)
-
-    summary = synthesize(cfg, head, GLContext.headless(), progress)
+    summary = synthesize(cfg, head, GLContext.headless(), progress_callback("synth"))
     n = summary["frames"]
     print(f"wrote {cfg.out}: {n['train']} train, {n['val']} val, {n['test']} test frames "
           f"({cfg.scene} scene, {cfg.size}x{cfg.size}) in {summary['seconds']:.1f} s")

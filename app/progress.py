@@ -5,6 +5,7 @@ says how far it got."""
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from typing import TextIO
 
 
@@ -27,3 +28,15 @@ class Progress:
             while done * 10 >= self._next_tenth * self.total:
                 self._next_tenth += 1
         self.stream.flush()
+
+
+def progress_callback(what: str, unit: str = "frames") -> Callable[[int, int], None]:
+    """A (done, total) callback for work that learns its total as it goes: a Progress made on the first call."""
+    bar: list[Progress] = []
+
+    def update(done: int, total: int) -> None:
+        if not bar:
+            bar.append(Progress(what, total, unit))
+        bar[0].update(done)
+
+    return update

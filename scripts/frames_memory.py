@@ -36,7 +36,7 @@ def main() -> None:
     fs = trainer.frames
     mib = lambda t: 0.0 if t is None else t.element_size() * t.numel() / 2**20
     held = {"images": mib(fs.images), "masks": mib(fs.masks), "surface_t": mib(fs.surface_t),
-            "active": mib(fs.active), "active_index": sum(mib(a) for a in fs.active_index),
+            "active_index": sum(mib(a) for a in fs.active_index),
             "geometry": sum(mib(v) for g in fs.geometry for v in vars(g).values() if torch.is_tensor(v))}
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"{len(fs)} frames of {tuple(fs.images.shape[1:3])}: read in {seconds:.1f} s, {added:.0f} MiB more "

@@ -30,9 +30,9 @@ class FrameSet:
     camera_directions: torch.Tensor  # (H*W,3) unit, camera space: every frame of a split has the same intrinsics
     rotations: torch.Tensor  # (N,3,3) float64, camera to world
     surface_t: torch.Tensor  # (N,H,W) inf where the pixel misses the mesh
-    active: torch.Tensor  # (N,H,W) bool: where training draws rays (the avatar's training_pixels)
     geometry: list[Any]  # the avatar's frame_geometry of each frame
-    active_index: list[torch.Tensor]  # per frame, the flat indices of its active pixels (training draws rays here)
+    active_index: list[torch.Tensor]  # per frame, the flat indices of the pixels training draws rays from (the
+    # avatar's training_pixels)
     plate: torch.Tensor | None = None  # (H*W,3) the background plate behind every frame's rays, if the capture has one
 
     def __len__(self) -> int:
@@ -89,16 +89,16 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
         if on_frame is not None:
             on_frame(k + 1, n)
     avatar.fit_to_capture(np.concatenate(reach) if has_masks else None)
-    active = torch.empty(n, H, W, dtype=torch.bool)
-    for k, (geo, cam) in enumerate(zip(geos, cameras, strict=True)):  # the pixels as the fitted settings see them
-        active[k] = torch.from_numpy(avatar.training_pixels(cam, raster.rasterize(geo.posed.cpu().numpy(), tris, cam)))
+    active = []
+    for geo, cam in zip(geos, cameras, strict=True):  # the pixels as the fitted settings see them
+        pixels = avatar.training_pixels(cam, raster.rasterize(geo.posed.cpu().numpy(), tris, cam))
+        active.append(torch.from_numpy(np.flatnonzero(pixels)))
     raster.release()
     plate = avatar.plate_for(cameras[0]) if cameras else None
     rotations = torch.as_tensor(np.stack([np.asarray(f.camera_to_world, np.float64)[:3, :3] for f in split.frames]))
     origins = torch.as_tensor(np.stack([f.camera_to_world[:3, 3] for f in split.frames]), dtype=torch.float32)
     return FrameSet(split, images, masks, origins, torch.from_numpy(dirs_cam.reshape(-1, 3)), rotations, surf,
-                    active, geos, [torch.nonzero(a.ravel()).squeeze(1) for a in active],
-                    None if plate is None else plate.cpu())
+                    geos, active, None if plate is None else plate.cpu())
 
 
 def validation_frame(split: CaptureSplit, background: np.ndarray) -> ValidationFrame:

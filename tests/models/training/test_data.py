@@ -37,7 +37,7 @@ def test_a_frames_rays_are_its_cameras_and_its_raster_made_afresh(tmp_path, gl):
         np.testing.assert_allclose(rays.directions.numpy(), dirs.reshape(-1, 3), atol=1e-6)
         r = raster.rasterize(fs.geometry[k].posed.numpy(), avatar.head_model.triangles, cam)
         assert torch.equal(rays.surface_t, torch.from_numpy(r.distance.astype(np.float32)).reshape(-1))
-        assert np.array_equal(fs.active[k].numpy(), avatar.training_pixels(cam, r))
+        assert np.array_equal(fs.active_index[k].numpy(), np.flatnonzero(avatar.training_pixels(cam, r)))
         yaws.add(round(float(np.degrees(np.arctan2(f.camera_to_world[0, 2], f.camera_to_world[2, 2]))), 3))
     raster.release()
     assert len(yaws) > 1  # the frames' cameras differ: each frame's own rotation is used
