@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Annotated, Literal
@@ -31,7 +31,7 @@ from models.avatars.prior.avatar import PriorAvatar, PriorConfig
 from models.avatars.prior.maps import average_texture, texture_map, texture_tensor
 from models.capture.dataset import CaptureSplit, load_split
 from models.capture.frames import camera_of, load_rgb
-from models.device import device_of
+from models.device import DeviceError, device_of
 from models.head.sources import load_head
 from models.ranges import Range
 from models.training.data import FrameSet, build_frames
@@ -146,13 +146,14 @@ class PriorTrainer:
         if cfg.frames_per_step % world:
             raise ValueError(f"--frames-per-step {cfg.frames_per_step}: not a multiple of the {world} processes")
         self.cfg, self.avatar, self.identities, self.rank, self.world = cfg, avatar, identities, rank, world
-        self.device = device_of(cfg.device)
+        device_of(cfg.device)  # (a clear error where there is no GPU)
+        self.device = process_device(cfg.device)
         avatar.to(self.device)
         for ident in identities:
             ident.frames.geometry = [g.to(self.device) for g in ident.frames.geometry]
         self.loss = PriorLoss(avatar)
         self.module = self.loss if world == 1 else nn.parallel.DistributedDataParallel(
-            self.loss, find_unused_parameters=True)
+            self.loss, device_ids=None if self.device.type == "cpu" else [self.device], find_unused_parameters=True)
         self.opt = torch.optim.Adam(avatar.parameters(), lr=cfg.lr)
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.step = 0
@@ -238,15 +239,43 @@ class PriorTrainer:
         return record
 
 
+BACKENDS = {"cpu": "gloo", "cuda": "cpu:gloo,cuda:nccl"}
+"""torch.distributed's backend for each --device. On GPUs the gradients go over NCCL, and the few CPU tensors
+(rank 0's clock, which every process stops on) over gloo: NCCL takes CUDA tensors only."""
+
+
 def distributed_from_env(device: str = "cpu") -> tuple[int, int]:
     """(rank, world size) under torchrun (RANK, WORLD_SIZE in the environment; the process group started with
-    gloo for --device cpu, NCCL for --device cuda), else (0, 1)."""
+    BACKENDS[device], each GPU process on its own GPU first, process_device), else (0, 1)."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world <= 1:
         return 0, 1
     if not dist.is_initialized():
-        dist.init_process_group("nccl" if device == "cuda" else "gloo")
+        if device == "cuda":  # NCCL refuses two ranks on one GPU, and takes the current device as the rank's
+            torch.cuda.set_device(process_device(device))
+        dist.init_process_group(BACKENDS[device])
     return dist.get_rank(), dist.get_world_size()
+
+
+def process_device(device: str, environ: Mapping[str, str] = os.environ,
+                   gpus: Callable[[], int] = torch.cuda.device_count) -> torch.device:
+    """This process's device: the CPU, or under torchrun the GPU of its LOCAL_RANK (one GPU a process, as NCCL
+    needs; torchrun numbers a node's processes 0..N-1); a clear error where the node has fewer GPUs.
+
+    >>> process_device("cuda", {"LOCAL_RANK": "1", "WORLD_SIZE": "2"}, lambda: 2)
+    device(type='cuda', index=1)
+    >>> process_device("cuda", {}, lambda: 1)  # one process: the current GPU
+    device(type='cuda', index=0)
+    >>> process_device("cpu", {"LOCAL_RANK": "1", "WORLD_SIZE": "2"}, lambda: 0)
+    device(type='cpu')
+    """
+    if device != "cuda":
+        return torch.device(device)
+    local = int(environ.get("LOCAL_RANK", "0"))
+    if local >= gpus():
+        raise DeviceError(f"--device cuda: process {local} of this node needs GPU {local}, and torch sees "
+                          f"{gpus()}; start at most that many processes (torchrun --nproc-per-node)")
+    return torch.device("cuda", local)
 
 
 def prepare_prior(cfg: PriorTrainConfig, gl: GLContext, rank: int = 0, world: int = 1,

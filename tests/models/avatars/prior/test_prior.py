@@ -205,6 +205,51 @@ def test_two_gloo_processes_take_the_step_one_takes(corpus, tmp_path):
     assert sum(float((single[k] - init[k]).abs().sum()) for k in init) > 0  # the three steps moved the weights
 
 
+def _torchrun_like(rank: int, world: int, port: int, out: str) -> None:
+    """What prior-train does first in each process torchrun starts: the group from torchrun's environment, then a
+    CPU broadcast (rank 0's clock) and a gradient-sized all-reduce."""
+    import os
+
+    import torch.distributed as dist
+
+    from models.training.prior import distributed_from_env, process_device
+
+    os.environ.update(RANK=str(rank), LOCAL_RANK=str(rank), WORLD_SIZE=str(world), MASTER_ADDR="127.0.0.1",
+                      MASTER_PORT=str(port))
+    got = distributed_from_env("cpu")
+    clock = torch.tensor([10.0 + rank], dtype=torch.float64)
+    dist.broadcast(clock, 0)
+    total = torch.tensor([float(rank + 1)])
+    dist.all_reduce(total)
+    (Path(out) / f"rank{rank}.json").write_text(json.dumps(
+        {"got": list(got), "backend": dist.get_backend(), "device": str(process_device("cpu")),
+         "clock": float(clock), "total": float(total)}))
+    dist.destroy_process_group()
+
+
+def test_processes_started_as_torchrun_starts_them_form_one_group(tmp_path):
+    """prior-train's own start under torchrun (RANK, LOCAL_RANK, WORLD_SIZE, MASTER_* in the environment): each
+    process finds its rank in a gloo group of two, rank 0's clock reaches both (so they stop on one step), and an
+    all-reduce sums 1 + 2."""
+    import torch.multiprocessing as mp
+
+    mp.spawn(_torchrun_like, args=(2, _free_port(), str(tmp_path)), nprocs=2, join=True)
+    for rank in (0, 1):
+        r = json.loads((tmp_path / f"rank{rank}.json").read_text())
+        assert r == {"got": [rank, 2], "backend": "gloo", "device": "cpu", "clock": 10.0, "total": 3.0}
+
+
+def test_each_gpu_process_takes_its_own_gpu():
+    """NCCL needs one GPU a process: torchrun's LOCAL_RANK picks it, and a node with too few GPUs is told so (no GPU
+    here: the device count is given)."""
+    from models.device import DeviceError
+    from models.training.prior import process_device
+
+    assert [process_device("cuda", {"LOCAL_RANK": str(k)}, lambda: 4).index for k in range(4)] == [0, 1, 2, 3]
+    with pytest.raises(DeviceError, match="process 2 of this node needs GPU 2, and torch sees 2"):
+        process_device("cuda", {"LOCAL_RANK": "2"}, lambda: 2)
+
+
 def test_corpus_prior_and_personalize_from_the_command_line(tmp_path, capsys):
     """corpus (two people, two views), prior-train (three steps), personalize a held-out person (seed 1000): an
     ordinary avatar folder whose neutral maps are the person's, that renders; and the corpus refuses held-out
