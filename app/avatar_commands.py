@@ -20,7 +20,7 @@ from app.turntable import INSPECT, TurntableConfig, buffer_image, render_needs, 
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
 from models.capture.dataset import check_images, load_split
-from models.capture.frames import background_plate, camera_of, load_rgb
+from models.capture.frames import background_plate, frame_camera, load_rgb
 from models.capture.synthetic import read_png16
 from models.device import device_of
 from models.files import FolderBusy, WriterLock, atomic_write_bytes, foreign_files
@@ -134,7 +134,7 @@ def shadow_metrics(avatar, frame, split, raster, truth: np.ndarray, on: np.ndarr
     share of the key light blocked; and where the capture has the frame without cast shadows, PSNR over the
     head of the render without them against it (unshadowed_psnr) and, for scale, of the render itself
     (unshadowed_psnr_render: what doing nothing scores). Returns the panels: without shadows, the shadows x4."""
-    out = avatar.render_image(frame.controls, camera_of(split, frame.camera_to_world), raster, inspect=True)
+    out = avatar.render_image(frame.controls, frame_camera(split, frame), raster, inspect=True)
     taken = luminance(out["rgb_no_shadows"]) - luminance(out["rgb"])
     gt = load_rgb(frame.extra["shadow_path"])[..., 0]
     if on.any():
@@ -163,7 +163,7 @@ def run_eval(cfg: EvalConfig) -> int:
     for f in frames:
         truth = load_rgb(f.image_path, avatar.background.numpy())
         t0 = time.perf_counter()
-        out = avatar.render_image(f.controls, camera_of(split, f.camera_to_world), raster)
+        out = avatar.render_image(f.controls, frame_camera(split, f), raster)
         times.append(time.perf_counter() - t0)
         face = face_mask_of(f, truth.shape)
         row = {"frame": f.index, "psnr": psnr(out["rgb"], truth), "ssim": ssim(out["rgb"], truth),

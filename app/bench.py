@@ -32,7 +32,7 @@ from models.avatars.effects import effects_name
 from models.avatars.quality import PRESET_NAMES, Preset, Quality, pareto, save_presets
 from models.avatars.registry import BASELINE_MODEL, load_avatar, untrained_avatar
 from models.capture.dataset import load_split
-from models.capture.frames import camera_of, load_rgb
+from models.capture.frames import frame_camera, load_rgb
 from models.files import atomic_write_bytes, foreign_files
 from models.head.sources import load_head
 from models.ranges import Range
@@ -146,7 +146,7 @@ class TestFrames:
         self.frames = [split.frames[i] for i in pick]
         self.cameras, self.truth, self.face = [], [], []
         for f in self.frames:
-            cam = camera_of(split, f.camera_to_world)
+            cam = frame_camera(split, f)
             scale = size / cam.width_px
             self.cameras.append(cam.resized(size, round(cam.height_px * scale)))
             truth = load_rgb(f.image_path, background)

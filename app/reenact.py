@@ -178,7 +178,8 @@ def driver_from_video(cfg: ReenactConfig, head: HeadModel, head_spec: str) -> Dr
                           head)
     times = [f["time_s"] - tracked.kept[0]["time_s"] for f in tracked.kept]
     report = {"frames_read": tracked.read, "landmark_error_px_median": round(float(np.median(tracked.errors)), 3),
-              "crop": {"x0": tracked.crop.x0, "y0": tracked.crop.y0, "side": tracked.crop.side},
+              "crop": {"x0": tracked.framing.x0, "y0": tracked.framing.y0, "side": tracked.framing.side,
+                       "following": tracked.framing.following},
               "source_frames": [f["source_frame"] for f in tracked.kept]}
     return Driver(tracked.result.controls, times, min(cfg.fps or tracked.info.fps, tracked.info.fps), head, head_spec,
                   lambda k: tracked.kept[k]["image"], report, time.perf_counter() - t0)

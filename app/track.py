@@ -1,7 +1,9 @@
 """`avatar-studio track`: a monocular video of one face -> a capture dataset that `train` accepts.
 
 Frames are decoded at a chosen rate; MediaPipe's face landmarker finds 478 landmarks, blendshape scores and
-a head pose in each; one face-centred square crop serves every frame (fixed intrinsics); the head model is
+a head pose in each; one face-centred square crop serves every frame (fixed intrinsics), or where the head
+travels so far that one crop would leave the face small, a crop that follows it (each frame its own window of
+one canvas, and its own principal point: models/tracking/video.py); the head model is
 fitted (identity once, then per frame head pose, jaw and expression, from landmark reprojection with temporal
 smoothness; gaze from the blendshape scores); GrabCut cuts a foreground mask per frame, and the room behind the
 person becomes a background plate (models/tracking/masks.py) that avatars composite over; the frames are
@@ -21,7 +23,7 @@ import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import cv2
 import numpy as np
@@ -42,7 +44,7 @@ from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
 from models.tracking.landmarker import Face, Landmarker
 from models.tracking.masks import background_plate, foreground_mask
-from models.tracking.video import VideoInfo, cropped_frames, face_crop, sampled_frames, video_info
+from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames, video_info
 from render.video import write_video
 
 
@@ -63,6 +65,10 @@ class TrackConfig:
     """Use only the video's first SECONDS (default: all of it)."""
     size: Annotated[int, Range(32, 2048)] = 256
     """Width and height of the dataset's images, pixels."""
+    crop: Literal["auto", "fixed", "follow"] = "auto"
+    """fixed: one square crop about the face for the whole video (wider where the head travels); follow: each
+    frame's crop follows the head (each its own principal point, the room one plate behind them all); auto: follow
+    where one crop would leave the face at 80% of its size or less."""
     fov_deg: Annotated[float, Range(0, 170, above=True)] = 40.0
     """Horizontal field of view of the video's full frame, degrees (a guess unless you know your camera)."""
     test_fraction: Annotated[float, Range(0, 0.9, above=True)] = 0.1
@@ -145,10 +151,10 @@ def sharpness(rgb: np.ndarray, landmarks_px: np.ndarray) -> float:
     return float(cv2.Laplacian(grey, cv2.CV_64F).var()) if grey.size else 0.0
 
 
-def face_width_px(faces: list[Face], crop) -> dict:
-    """How wide the face is in the dataset's images (the extent of MediaPipe's 468 face landmarks across, crop
+def face_width_px(faces: list[Face], framing: Framing) -> dict:
+    """How wide the face is in the dataset's images (the extent of MediaPipe's 468 face landmarks across, image
     pixels): median, least and most over the frames."""
-    widths = np.array([np.ptp(crop.points(f.landmarks_px[:468])[:, 0]) for f in faces])
+    widths = np.array([np.ptp(framing.points(f.landmarks_px[:468])[:, 0]) for f in faces])
     return {"median": round(float(np.median(widths)), 1), "min": round(float(widths.min()), 1),
             "max": round(float(widths.max()), 1)}
 
@@ -162,13 +168,14 @@ def split_of(k: int, n: int, n_test: int) -> str:
 @dataclass
 class Tracked:
     """A video tracked: the kept frames (source index, time, MediaPipe face, sharpness, and the frame's crop as
-    "image", RGB uint8), the crop they share, its intrinsics, the head model's fit, and where the fitted head puts
-    every landmark."""
+    "image", RGB uint8), where their crops lie (the framing's canvas), the canvas's intrinsics, the head model's
+    fit, and where the fitted head puts every landmark (targets and pixels: canvas pixels; a frame's image pixels
+    are these less its offset)."""
 
     kept: list[dict]
     dropped: list[dict]
     read: int
-    crop: object
+    framing: Framing
     intrinsics: Intrinsics
     result: object
     targets: np.ndarray
@@ -196,22 +203,24 @@ def track_video(cfg: TrackConfig, model) -> Tracked:
     t_landmarks = time.perf_counter() - t_start
     print(f"{cfg.video}: {len(kept)} of {read} frames kept ({len(dropped)} dropped) in {t_landmarks:.1f} s",
           flush=True)
-    crop = face_crop([f["face"].landmarks_px for f in kept], cfg.size, (info.width, info.height))
-    for f, image in zip(kept, cropped_frames(cfg.video, cfg.fps, crop, [f["source_frame"] for f in kept]),
+    framing = face_framing([f["face"].landmarks_px for f in kept], cfg.size, (info.width, info.height), cfg.crop)
+    windows = [framing.window(j) for j in range(len(kept))]
+    for f, image in zip(kept, cropped_frames(cfg.video, cfg.fps, windows, [f["source_frame"] for f in kept]),
                         strict=True):
         f["image"] = image
+    # The fit works on the canvas (one camera for every frame; a frame's window is the canvas cut at its offset).
     f_full = 0.5 * info.width / math.tan(math.radians(cfg.fov_deg) / 2)
-    cx, cy = crop.points(np.array([info.width / 2, info.height / 2], np.float32))
-    k = Intrinsics(f_full * crop.scale, f_full * crop.scale, float(cx), float(cy))
+    cx, cy = framing.points(np.array([info.width / 2, info.height / 2], np.float32))
+    k = Intrinsics(f_full * framing.scale, f_full * framing.scale, float(cx), float(cy))
     faces: list[Face] = [f["face"] for f in kept]
-    targets = np.stack([crop.points(f.landmarks_px[corr.mp_ids]) for f in faces])
+    targets = np.stack([framing.points(f.landmarks_px[corr.mp_ids]) for f in faces])
     result = fit_frames(cfg, model, corr.vertex_ids, faces, targets, k)
     # The error that counts: the full head model's forward pass with the fitted controls, projected.
     with torch.inference_mode():
         verts = Head(model).pose(result.controls)[0]
     pixels = project(verts, k).numpy()
     errors = np.linalg.norm(pixels[:, corr.vertex_ids] - targets, axis=-1)
-    return Tracked(kept, dropped, read, crop, k, result, targets, pixels, errors, corr.mp_ids, corr.vertex_ids,
+    return Tracked(kept, dropped, read, framing, k, result, targets, pixels, errors, corr.mp_ids, corr.vertex_ids,
                    info, t_landmarks)
 
 
@@ -220,7 +229,7 @@ def run_track(cfg: TrackConfig) -> int:
     check_config(cfg)
     model = load_head(cfg.head)
     tr = track_video(cfg, model)
-    kept, dropped, read, crop, k, result = tr.kept, tr.dropped, tr.read, tr.crop, tr.intrinsics, tr.result
+    kept, dropped, read, framing, k, result = tr.kept, tr.dropped, tr.read, tr.framing, tr.intrinsics, tr.result
     faces, targets, pixels, errors, t_landmarks = tr.faces, tr.targets, tr.pixels, tr.errors, tr.seconds_landmarks
 
     with partial_folder(cfg.out) as partial:
@@ -228,13 +237,14 @@ def run_track(cfg: TrackConfig) -> int:
         print("cutting masks...", flush=True)
         t_masks = time.perf_counter()
         crops = [f["image"] for f in kept]
-        masks = [foreground_mask(img, crop.points(face.landmarks_px[:468]))
-                 for img, face in zip(crops, faces, strict=True)]
+        masks = [foreground_mask(img, framing.points(face.landmarks_px[:468]) - framing.offsets[j])
+                 for j, (img, face) in enumerate(zip(crops, faces, strict=True))]
         t_masks = time.perf_counter() - t_masks
-        splits, per_frame, plate_report = write_frames(cfg, partial, kept, crops, masks, crop, k, result, errors,
+        splits, per_frame, plate_report = write_frames(cfg, partial, kept, crops, masks, framing, k, result, errors,
                                                        tr.info.fps)
         if cfg.overlay:
-            write_video((overlay(img, pixels[j], model, targets[j], pixels[j][tr.vertex_ids])
+            o = framing.offsets
+            write_video((overlay(img, pixels[j] - o[j], model, targets[j] - o[j], pixels[j][tr.vertex_ids] - o[j])
                          for j, img in enumerate(crops)), partial / "tracking" / "overlay.mp4",
                         fps=cfg.fps or tr.info.fps)
         total = time.perf_counter() - t_start
@@ -243,9 +253,10 @@ def run_track(cfg: TrackConfig) -> int:
             "frames_kept": len(kept),
             "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
             "landmarks_used": len(tr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
-            "face_width_px": face_width_px(faces, crop),
-            "crop": {"x0": round(crop.x0, 1), "y0": round(crop.y0, 1), "side": round(crop.side, 1),
-                     "whole_frame": crop.side >= min(tr.info.width, tr.info.height) - 0.5},
+            "face_width_px": face_width_px(faces, framing),
+            "crop": {"x0": round(framing.x0, 1), "y0": round(framing.y0, 1), "side": round(framing.side, 1),
+                     "whole_frame": framing.side >= min(tr.info.width, tr.info.height) - 0.5,
+                     "following": framing.following, "canvas_px": [framing.width, framing.height]},
             "fov_deg": cfg.fov_deg, "background_plate": plate_report,
             "landmark_error_px": {"median": round(float(np.median(errors)), 3),
                                   "p95": round(float(np.percentile(errors, 95)), 3),
@@ -321,32 +332,38 @@ def fit_frames(cfg: TrackConfig, model, vertex_ids: np.ndarray, faces: list[Face
 
 
 def write_frames(cfg: TrackConfig, partial: Path, kept: list[dict], crops: list[np.ndarray], masks: list[np.ndarray],
-                 crop, k: Intrinsics, result, errors: np.ndarray, video_fps: float
+                 framing: Framing, k: Intrinsics, result, errors: np.ndarray, video_fps: float
                  ) -> tuple[dict[str, list[dict]], list[dict], dict]:
     """The frames as the camera saw them, their masks, the background plate (from the training frames: nothing
-    of the held-out ones) and the three splits' transforms; returns the splits, each frame's landmark error and
-    the plate's report."""
+    of the held-out ones; the canvas's size, with its own intrinsics, where the crop follows the head: each frame
+    then has its own intrinsics, the canvas's less its window's offset) and the three splits' transforms; returns
+    the splits, each frame's landmark error and the plate's report."""
     (partial / "images").mkdir()
     (partial / "masks").mkdir()
     n_test = max(1, math.ceil(cfg.test_fraction * len(kept)))
     train = [j for j in range(len(kept)) if split_of(j, len(kept), n_test) == "train"]
     plate, inpainted = background_plate([crops[j] for j in train], [masks[j] for j in train],
-                                        grow_px=max(1, round(0.01 * cfg.size)))
+                                        grow_px=max(1, round(0.01 * cfg.size)), offsets=framing.offsets[train],
+                                        canvas_wh=(framing.width, framing.height))
     write_png8(partial / "background.png", plate / 255.0)
     plate_report = {"file": "background.png", "inpainted_share": round(inpainted, 4),
                     "frames": len(train)}
-    header = {"camera_angle_x": 2 * math.atan(0.5 * cfg.size / k.fx), "intrinsics": [k.fx, k.fy, k.cx, k.cy],
+    own = [[k.fx, k.fy, k.cx - float(ox), k.cy - float(oy)] for ox, oy in framing.offsets]  # each window's camera
+    header = {"camera_angle_x": 2 * math.atan(0.5 * cfg.size / k.fx), "intrinsics": own[0],
               "width": cfg.size, "height": cfg.size, "head_model": absolute_head_spec(cfg.head),
               "shape": result.shape.tolist(), "background": "background.png",
               "source": {"video": str(cfg.video.resolve()), "fps": cfg.fps or video_fps, "fov_deg": cfg.fov_deg,
-                         "crop": {"x0": crop.x0, "y0": crop.y0, "side": crop.side}}}
+                         "crop": {"x0": framing.x0, "y0": framing.y0, "side": framing.side,
+                                  "following": framing.following}}}
+    if framing.following:
+        header["background_intrinsics"] = [k.fx, k.fy, k.cx, k.cy]
     splits: dict[str, list[dict]] = {"train": [], "val": [], "test": []}
     per_frame = []
     for j, (f, img, mask, c) in enumerate(zip(kept, crops, masks, result.controls, strict=True)):
         name = f"{j:04d}.png"
         write_png8(partial / "images" / name, img / 255.0)
         write_png8(partial / "masks" / name, mask)
-        lm = crop.points(f["face"].landmarks_px[:468])
+        lm = framing.points(f["face"].landmarks_px[:468]) - framing.offsets[j]
         lo, hi = lm.min(0), lm.max(0)
         pad = 0.1 * (hi - lo)
         lo, hi = np.clip((lo - pad) / cfg.size, 0, 1), np.clip((hi + pad) / cfg.size, 0, 1)
@@ -356,7 +373,7 @@ def write_frames(cfg: TrackConfig, partial: Path, kept: list[dict], crops: list[
             "expression": c.expression.tolist(),
             "controls": {key: v for key, v in controls_to_dict(c).items() if key != "shape"},
             "bbox": [float(lo[1]), float(hi[1]), float(lo[0]), float(hi[0])],
-            "source_frame": f["source_frame"]})
+            "source_frame": f["source_frame"], **({"intrinsics": own[j]} if framing.following else {})})
         e = errors[j]
         per_frame.append({"frame": j, "split": split, "source_frame": f["source_frame"],
                           "time_s": round(f["time_s"], 3), "median_px": round(float(np.median(e)), 3),

@@ -77,6 +77,22 @@ def camera_directions(camera: Camera) -> np.ndarray:
     return np.stack([(j - cx) / fx, -(i - cy) / fy, -np.ones_like(j)], -1)
 
 
+def pixel_directions(intrinsics, width_px: int, pixels: np.ndarray) -> np.ndarray:
+    """(R,3) unit directions in camera space through the centres of some pixels (flat indices, rows top first) of
+    any pinhole camera (fx, fy, cx, cy): camera_directions' ((u - cx) / fx, -(v - cy) / fy, -1), normalised in
+    float64, for those pixels alone (a frame of a following crop has its own principal point; its (H,W,3) table is
+    not kept).
+
+    >>> d = pixel_directions((100.0, 100.0, 10.0, 20.0), 64, np.array([20 * 64 + 9]))  # pixel (9, 20): centre
+    >>> d.round(6)  # (9.5, 20.5), half a pixel left of and below the principal point: (-0.005, -0.005, -1) / 1.000025
+    array([[-0.005   , -0.005   , -0.999975]])
+    """
+    j, i = pixels % width_px + 0.5, pixels // width_px + 0.5
+    fx, fy, cx, cy = intrinsics
+    d = np.stack([(j - cx) / fx, -(i - cy) / fy, -np.ones_like(j)], -1)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
 def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     """World origin (3,) and unit directions (H,W,3) through pixel centres, rows top first."""
     d_cam = camera_directions(camera)

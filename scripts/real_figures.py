@@ -19,7 +19,7 @@ import torch
 
 from models.avatars.registry import load_avatar
 from models.capture.dataset import load_split
-from models.capture.frames import camera_of
+from models.capture.frames import frame_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
@@ -27,7 +27,7 @@ from render.gl.raster import Rasterizer
 def median_ms(avatar, frames, split, raster, size: int | None = None, repeats: int = 1) -> float:
     times = []
     for f in frames:
-        cam = camera_of(split, f.camera_to_world)
+        cam = frame_camera(split, f)
         cam = cam if size is None else cam.resized(size, size)
         for _ in range(repeats):
             t0 = time.perf_counter()

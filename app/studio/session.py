@@ -18,7 +18,7 @@ from app.animation import Animation
 from models.avatars.base import Avatar
 from models.avatars.registry import load_avatar
 from models.capture.dataset import CaptureSplit, DatasetError, load_split
-from models.capture.frames import camera_of
+from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from render.camera import Camera, framing_camera
 
@@ -283,7 +283,7 @@ class Session:
         cap = self.capture
         if cap is not None and 0 <= self.timeline_frame < len(cap.frames):
             height = max(8, round(size * cap.height / cap.width))
-            return camera_of(cap, cap.frames[self.timeline_frame].camera_to_world).resized(size, height)
+            return frame_camera(cap, cap.frames[self.timeline_frame]).resized(size, height)
         return self.view.camera(self.avatar.rest_vertices(), size, size)
 
     def controls(self) -> Controls:

@@ -36,6 +36,9 @@ class Frame:
     controls: Controls | None  # None for NerFACE captures (no head model)
     bbox: tuple[float, float, float, float] | None = None  # top, bottom, left, right, normalised
     extra: dict[str, Path] = field(default_factory=dict)  # mask_path, normal_path, ...
+    intrinsics: tuple[float, float, float, float] | None = None
+    """fx, fy, cx, cy of this frame where they are not the split's (a crop that follows a moving head: each frame's
+    window of the video has its own principal point)."""
 
 
 @dataclass(frozen=True)
@@ -56,6 +59,12 @@ class CaptureSplit:
     depth_scale_m: float = 1e-4
     tracked: bool = False
     """Tracked from a video (`avatar-studio track`): the head poses carry the tracker's error."""
+    background_intrinsics: tuple[float, float, float, float] | None = None
+    """fx, fy, cx, cy of the background plate's own camera where its image is not the frames' (a following crop's
+    plate covers every frame's window: each frame sees a part of it); None: the split's intrinsics and size."""
+
+    def frame_intrinsics(self, frame: Frame) -> tuple[float, float, float, float]:
+        return self.intrinsics if frame.intrinsics is None else frame.intrinsics
 
     @property
     def trains_codynerf(self) -> bool:
@@ -132,6 +141,7 @@ def check_images(split: CaptureSplit, progress=None) -> int:
     paths = [p for f in split.frames for p in (f.image_path, *f.extra.values())]
     if isinstance(split.background, Path):
         paths.append(split.background)
+    own_size = split.background if split.background_intrinsics is not None else None  # a plate of its own size
     for k, path in enumerate(paths):
         try:
             with Image.open(path) as im:
@@ -139,7 +149,7 @@ def check_images(split: CaptureSplit, progress=None) -> int:
                 size = im.size
         except (OSError, ValueError, SyntaxError) as e:
             raise DatasetError(f"{path}: not a readable image ({e})") from None
-        if size != (split.width, split.height):
+        if size != (split.width, split.height) and path != own_size:
             raise DatasetError(f"{path}: {size[0]}x{size[1]} pixels, but the capture's images are "
                                f"{split.width}x{split.height}")
         if progress is not None:
@@ -188,6 +198,9 @@ def _load_ours(folder: Path, split: str, path: Path, data: dict) -> CaptureSplit
         bg: np.ndarray | Path = _resolve(folder, background, path, "field 'background' ")
     else:
         bg = _numbers(path, "field 'background' ", background, (3,))
+    bg_intr = _intrinsics(path, "field 'background_intrinsics' ", data.get("background_intrinsics"))
+    if bg_intr is not None and not isinstance(bg, Path):
+        raise _fail(path, "", "field 'background_intrinsics' needs a background image (field 'background')")
     frames = []
     for i, f in enumerate(_frames_list(path, data)):
         where = f"frame {i}: "
@@ -210,10 +223,21 @@ def _load_ours(folder: Path, split: str, path: Path, data: dict) -> CaptureSplit
             controls=controls,
             bbox=_bbox(path, where, f.get("bbox")),
             extra=extra,
+            intrinsics=_intrinsics(path, f"{where}field 'intrinsics' ", f.get("intrinsics")),
         ))
     return CaptureSplit(folder, split, "avatar-studio", w, h, tuple(intr), head_model, shape, bg,
                         data.get("lighting"), frames, float(data.get("depth_scale_m", 1e-4)),
-                        isinstance(data.get("source"), dict) and "video" in data["source"])
+                        isinstance(data.get("source"), dict) and "video" in data["source"], bg_intr)
+
+
+def _intrinsics(path: Path, where: str, value: object) -> tuple[float, float, float, float] | None:
+    """Optional fx, fy, cx, cy (pixels), focal lengths positive."""
+    if value is None:
+        return None
+    k = _numbers(path, where, value, (4,))
+    if k[0] <= 0 or k[1] <= 0:
+        raise _fail(path, where, f"must be [fx, fy, cx, cy] with positive focal lengths, got {k.tolist()}")
+    return tuple(float(x) for x in k)
 
 
 def _bbox(path: Path, where: str, value: object) -> tuple[float, float, float, float] | None:

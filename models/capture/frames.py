@@ -9,19 +9,29 @@ import numpy as np
 from PIL import Image
 from scipy.ndimage import distance_transform_edt
 
-from models.capture.dataset import CaptureSplit, DatasetError
+from models.capture.dataset import CaptureSplit, DatasetError, Frame
 from render.camera import Camera
 
 
+def frame_camera(split: CaptureSplit, frame: Frame) -> Camera:
+    """The camera of one of the split's frames (its own intrinsics where it has them: a following crop's)."""
+    return pinhole_camera(split.frame_intrinsics(frame), split.width, split.height, frame.camera_to_world)
+
+
 def camera_of(split: CaptureSplit, c2w: np.ndarray) -> Camera:
-    """A frame's camera: any pinhole (principal point anywhere, fx and fy apart); centred cameras with square
-    pixels (within 1e-6 px) keep the centred form."""
-    fx, fy, cx, cy = split.intrinsics
+    """The split's camera (its intrinsics and image size) placed at c2w."""
+    return pinhole_camera(split.intrinsics, split.width, split.height, c2w)
+
+
+def pinhole_camera(intrinsics, width: int, height: int, c2w: np.ndarray) -> Camera:
+    """Any pinhole (principal point anywhere, fx and fy apart); centred cameras with square pixels (within 1e-6 px)
+    keep the centred form."""
+    fx, fy, cx, cy = intrinsics
     view = np.linalg.inv(c2w)
-    if max(abs(cx - split.width / 2), abs(cy - split.height / 2), abs(fx - fy)) < 1e-6:
-        fov = math.degrees(2 * math.atan(0.5 * split.height / fy))
-        return Camera(view, fov, split.width, split.height, near_m=0.05, far_m=10.0)
-    return Camera.from_intrinsics(view, fx, fy, cx, cy, split.width, split.height, near_m=0.05, far_m=10.0)
+    if max(abs(cx - width / 2), abs(cy - height / 2), abs(fx - fy)) < 1e-6:
+        fov = math.degrees(2 * math.atan(0.5 * height / fy))
+        return Camera(view, fov, width, height, near_m=0.05, far_m=10.0)
+    return Camera.from_intrinsics(view, fx, fy, cx, cy, width, height, near_m=0.05, far_m=10.0)
 
 
 def load_rgb(path, background: np.ndarray | None = None) -> np.ndarray:
@@ -35,20 +45,24 @@ def load_rgb(path, background: np.ndarray | None = None) -> np.ndarray:
 
 def background_plate(split: CaptureSplit) -> tuple[np.ndarray, Camera] | None:
     """The capture's background plate (H,W,3) and the one camera it belongs to, where its "background" names an
-    image (a tracked video's room); None where the background is a colour."""
+    image (a tracked video's room); None where the background is a colour. The plate is the frames' size, or of
+    its own size with its own intrinsics (a following crop's: every frame's window lies in it)."""
     if not isinstance(split.background, Path):
         return None
     try:
         plate = load_rgb(split.background)
     except (OSError, ValueError) as e:
         raise DatasetError(f"{split.background}: the background plate cannot be read ({e})") from None
-    if plate.shape[:2] != (split.height, split.width):
+    if split.background_intrinsics is None and plate.shape[:2] != (split.height, split.width):
         raise DatasetError(f"{split.background}: the background plate is {plate.shape[1]}x{plate.shape[0]} pixels; "
                            f"the capture's images are {split.width}x{split.height}")
     c2w = [f.camera_to_world for f in split.frames]
     if c2w and not all(np.allclose(m, c2w[0], atol=1e-6) for m in c2w):
         raise DatasetError(f"{split.background}: a background plate needs one fixed camera, and the frames of "
                            f"{split.folder / f'transforms_{split.split}.json'} have several")
+    if split.background_intrinsics is not None:
+        return plate, pinhole_camera(split.background_intrinsics, plate.shape[1], plate.shape[0],
+                                     c2w[0] if c2w else np.eye(4))
     return plate, camera_of(split, c2w[0] if c2w else np.eye(4))
 
 

@@ -14,6 +14,12 @@ import cv2
 import numpy as np
 
 
+GRABCUT_SAMPLES = 10
+"""Background and foreground pixels GrabCut needs at least (each colour model has five components); a frame that
+the person fills (a crop close about a large head), or one the face has left (a fixed crop the frame bounds), keeps
+the seeds as they are."""
+
+
 def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int = 3) -> np.ndarray:
     """(H,W) float32 mask in {0,1} for one (H,W,3) uint8 frame and its face landmarks (N,2) in its pixels."""
     h, w = rgb.shape[:2]
@@ -44,6 +50,9 @@ def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int =
     top = int(hi[1])
     mask[:top, : max(0, int(lo[0]) - side)] = cv2.GC_BGD
     mask[:top, min(w, int(hi[0]) + side):] = cv2.GC_BGD
+    room = np.count_nonzero((mask == cv2.GC_BGD) | (mask == cv2.GC_PR_BGD))
+    if room < GRABCUT_SAMPLES or mask.size - room < GRABCUT_SAMPLES:  # the person fills the frame, or left it
+        return ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.float32)  # the seeds, as they are
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     cv2.grabCut(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), mask, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
     fg = ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.uint8)
@@ -57,32 +66,47 @@ def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int =
     return fg.astype(np.float32)
 
 
-def background_plate(frames: list[np.ndarray], masks: list[np.ndarray], grow_px: int, min_share: float = 0.2
+def background_plate(frames: list[np.ndarray], masks: list[np.ndarray], grow_px: int, min_share: float = 0.2,
+                     offsets: np.ndarray | None = None, canvas_wh: tuple[int, int] | None = None
                      ) -> tuple[np.ndarray, float]:
     """The room behind the person as a fixed camera saw it (the background NerFACE composites over): per pixel
     the median of the frames (H,W,3 uint8) in which the person's mask (H,W), grown by grow_px, leaves it free;
-    pixels free in fewer than min_share of the frames (behind the person, or a mask that missed hair, most of the
-    time) are inpainted from their surroundings. Returns the plate (H,W,3) uint8 and the share of its pixels
-    inpainted.
+    pixels free in fewer than min_share of the frames that see them, or fewer than 3 (behind the person, or a
+    mask that missed hair, most of the time), are inpainted from their surroundings. Frames of a following crop each cover their
+    window of a larger canvas (offsets (N,2): each window's top-left in it; canvas_wh its size). Returns the plate
+    (H,W,3) uint8 (the canvas's size) and the share of its pixels inpainted.
 
     A pixel the room shows in a fifth of the frames is better as the median of those than inpainted: the plate
     against the held-out frames of the three shared clips, on their masks' background, at 256 px: 31.8 / 24.9 /
     34.6 dB (talking_hdtf, expressions_d3, expressions_d19) with a grow of 1% of the image and min_share 0.2,
     26.6 / 23.6 / 33.5 with 3% and 0.5; 0.05 was better on two clips and 1.1 dB worse on d3, whose masks miss
     hair."""
-    h, w = frames[0].shape[:2]
+    fh, fw = frames[0].shape[:2]
+    offsets = np.zeros((len(frames), 2), np.int64) if offsets is None else np.asarray(offsets)
+    w, h = canvas_wh or (fw, fh)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow_px + 1, 2 * grow_px + 1))
-    free = np.stack([cv2.dilate((m > 0.5).astype(np.uint8), kernel) == 0 for m in masks])  # (N,H,W)
+    free = np.zeros((len(frames), h, w), bool)  # (N,H,W) the room seen, on the canvas
+    seen = np.zeros((h, w), np.int64)  # how many frames' windows hold each canvas pixel
+    for k, ((ox, oy), m) in enumerate(zip(offsets, masks, strict=True)):
+        free[k, oy:oy + fh, ox:ox + fw] = cv2.dilate((m > 0.5).astype(np.uint8), kernel) == 0
+        seen[oy:oy + fh, ox:ox + fw] += 1
     plate = np.zeros((h, w, 3), np.uint8)
-    need = max(3, int(np.ceil(min_share * len(frames))))
+    # at least 3 frames' word for a pixel (one frame's mask may miss hair), or every one where fewer hold it (the
+    # edges of a following crop's canvas); none hold a corner no window reached: inpainted
+    need = np.maximum(np.maximum(np.minimum(3, seen), np.ceil(min_share * seen)), 1)
     rows = max(1, (1 << 22) // (len(frames) * w * 3))  # a few million values at a time
     for r0 in range(0, h, rows):
-        block = np.stack([f[r0:r0 + rows] for f in frames]).astype(np.float32)  # (N,h',W,3)
-        block[~free[:, r0:r0 + rows]] = np.nan
+        r1 = min(h, r0 + rows)
+        block = np.zeros((len(frames), r1 - r0, w, 3), np.float32)  # (N,h',W,3)
+        for k, ((ox, oy), f) in enumerate(zip(offsets, frames, strict=True)):
+            a, b = max(r0, oy), min(r1, oy + fh)
+            if a < b:
+                block[k, a - r0:b - r0, ox:ox + fw] = f[a - oy:b - oy]
+        block[~free[:, r0:r1]] = np.nan
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pixels: inpainted below
             med = np.nanmedian(block, axis=0)
-        plate[r0:r0 + rows] = np.nan_to_num(med).round().clip(0, 255).astype(np.uint8)
+        plate[r0:r1] = np.nan_to_num(med).round().clip(0, 255).astype(np.uint8)
     hole = (free.sum(0) < need).astype(np.uint8)
     if hole.all():
         return np.zeros_like(plate) + np.median(np.stack(frames).reshape(-1, 3), 0).astype(np.uint8), 1.0

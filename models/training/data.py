@@ -11,12 +11,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from models.avatars.base import Avatar
-from models.capture.dataset import CaptureSplit
-from models.capture.frames import camera_of, foreground_reach_m, load_mask, load_rgb
+from models.avatars.base import Avatar, camera_key, plate_window
+from models.capture.dataset import CaptureSplit, DatasetError
+from models.capture.frames import camera_of, foreground_reach_m, frame_camera, load_mask, load_rgb
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
-from render.rays import Rays, camera_directions
+from render.rays import Rays, camera_directions, pixel_directions
 
 
 @dataclass
@@ -27,13 +27,16 @@ class FrameSet:
     images: torch.Tensor  # (N,H,W,3)
     masks: torch.Tensor | None  # (N,H,W) coverage, if the capture has masks
     origins: torch.Tensor  # (N,3)
-    camera_directions: torch.Tensor  # (H*W,3) unit, camera space: every frame of a split has the same intrinsics
+    camera_directions: torch.Tensor  # (H*W,3) unit, camera space, of the split's intrinsics
     rotations: torch.Tensor  # (N,3,3) float64, camera to world
     surface_t: torch.Tensor  # (N,H,W) inf where the pixel misses the mesh
     geometry: list[Any]  # the avatar's frame_geometry of each frame
     active_index: list[torch.Tensor]  # per frame, the flat indices of the pixels training draws rays from (the
     # avatar's training_pixels)
-    plate: torch.Tensor | None = None  # (H*W,3) the background plate behind every frame's rays, if the capture has one
+    plate: torch.Tensor | None = None  # (Hp*Wp,3) the background plate behind the frames' rays, if the capture has one
+    own_intrinsics: list[tuple[float, float, float, float] | None] | None = None  # per frame, where not the split's
+    plate_windows: list[tuple[int, int]] | None = None  # per frame, its image's top-left in the plate (x0, y0)
+    plate_width: int = 0  # Wp
 
     def __len__(self) -> int:
         return len(self.images)
@@ -41,10 +44,25 @@ class FrameSet:
     def rays(self, frame: int, pixels: torch.Tensor) -> Rays:
         """The rays of a frame's pixels (flat indices), their world directions made here from the camera's and the
         frame's rotation: a frame's own (H,W,3) directions are not kept (0.75 MB a frame at 256 px, gigabytes for a
-        long video)."""
-        d = (self.camera_directions[pixels].double() @ self.rotations[frame].T).float()
+        long video). A frame with its own intrinsics (a following crop's) has its directions made for these pixels
+        alone, and its plate read from its window of it."""
+        own = None if self.own_intrinsics is None else self.own_intrinsics[frame]
+        if own is None:
+            d_cam = self.camera_directions[pixels].double()
+        else:
+            d_cam = torch.from_numpy(pixel_directions(own, self.images.shape[2], pixels.numpy()).astype(np.float32))
+            d_cam = d_cam.double()
+        d = (d_cam @ self.rotations[frame].T).float()
         return Rays(self.origins[frame].expand(len(pixels), 3), d, self.surface_t[frame].reshape(-1)[pixels],
-                    None if self.plate is None else self.plate[pixels])
+                    None if self.plate is None else self.plate[self.plate_pixels(frame, pixels)])
+
+    def plate_pixels(self, frame: int, pixels: torch.Tensor) -> torch.Tensor:
+        """A frame's pixels (flat indices) as the plate's (its window's place in the plate)."""
+        if self.plate_windows is None:
+            return pixels
+        x0, y0 = self.plate_windows[frame]
+        w = self.images.shape[2]
+        return (pixels // w + y0) * self.plate_width + pixels % w + x0
 
 
 @dataclass(frozen=True)
@@ -65,7 +83,7 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
     fitted. on_frame(done, total) after each frame is read (a long video takes minutes)."""
     bg = avatar.background.numpy()
     n = len(split.frames)
-    d = camera_directions(camera_of(split, np.eye(4)))  # every frame of a split has the same intrinsics
+    d = camera_directions(camera_of(split, np.eye(4)))  # the split's intrinsics (frames may have their own)
     dirs_cam = (d / np.linalg.norm(d, axis=-1, keepdims=True)).astype(np.float32)
     H, W = dirs_cam.shape[:2]
     images, surf = torch.empty(n, H, W, 3), torch.empty(n, H, W)
@@ -77,7 +95,7 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
     for k, f in enumerate(split.frames):
         images[k] = torch.from_numpy(np.asarray(load_rgb(f.image_path, bg), np.float32))
         geo = avatar.frame_geometry(f.controls, raster)
-        cam = camera_of(split, f.camera_to_world)
+        cam = frame_camera(split, f)
         r = raster.rasterize(geo.posed.cpu().numpy(), tris, cam)
         if has_masks:
             mask = load_mask(f.extra["mask_path"])
@@ -94,14 +112,36 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
         pixels = avatar.training_pixels(cam, raster.rasterize(geo.posed.cpu().numpy(), tris, cam))
         active.append(torch.from_numpy(np.flatnonzero(pixels)))
     raster.release()
-    plate = avatar.plate_for(cameras[0]) if cameras else None
+    plate, windows, plate_width = frames_on_plate(split, avatar, cameras)
+    own = [f.intrinsics for f in split.frames]
     rotations = torch.as_tensor(np.stack([np.asarray(f.camera_to_world, np.float64)[:3, :3] for f in split.frames]))
     origins = torch.as_tensor(np.stack([f.camera_to_world[:3, 3] for f in split.frames]), dtype=torch.float32)
     return FrameSet(split, images, masks, origins, torch.from_numpy(dirs_cam.reshape(-1, 3)), rotations, surf,
-                    geos, active, None if plate is None else plate.cpu())
+                    geos, active, plate, None if all(k is None for k in own) else own, windows, plate_width)
+
+
+def frames_on_plate(split: CaptureSplit, avatar: Avatar, cameras: list
+                    ) -> tuple[torch.Tensor | None, list[tuple[int, int]] | None, int]:
+    """The avatar's plate (Hp*Wp,3) and where each frame's image lies in it (None where every frame sees it whole,
+    as a fixed crop's do), its width; (None, None, 0) without a plate. A frame whose camera sees no part of the
+    plate is an error naming it (its rays would composite over nothing the capture recorded)."""
+    if all(f.intrinsics is None for f in split.frames):
+        plate = avatar.plate_for(cameras[0]) if cameras else None
+        return None if plate is None else plate.cpu(), None, 0
+    key = getattr(avatar, "plate_camera", None)
+    if key is None:
+        return None, None, 0
+    key, windows = key.cpu().numpy(), []
+    for f, cam in zip(split.frames, cameras, strict=True):
+        w = plate_window(key, camera_key(cam))
+        if w is None or w[2:] != (cam.width_px, cam.height_px):
+            raise DatasetError(f"{split.folder / f'transforms_{split.split}.json'}: frame {f.index}: its camera "
+                               f"(intrinsics {list(split.frame_intrinsics(f))}) sees no window of the background plate")
+        windows.append(w[:2])
+    return avatar.plate.reshape(-1, 3).cpu(), windows, int(key[0])
 
 
 def validation_frame(split: CaptureSplit, background: np.ndarray) -> ValidationFrame:
     """The split's first frame, read."""
     f = split.frames[0]
-    return ValidationFrame(f.controls, camera_of(split, f.camera_to_world), load_rgb(f.image_path, background))
+    return ValidationFrame(f.controls, frame_camera(split, f), load_rgb(f.image_path, background))

@@ -30,7 +30,7 @@ from models.avatars.effects import parse_effects
 from models.avatars.prior.avatar import PriorAvatar, PriorConfig
 from models.avatars.prior.maps import average_texture, texture_map, texture_tensor
 from models.capture.dataset import CaptureSplit, load_split
-from models.capture.frames import camera_of, load_rgb
+from models.capture.frames import frame_camera, load_rgb
 from models.device import DeviceError, device_of
 from models.head.sources import load_head
 from models.ranges import Range
@@ -93,7 +93,7 @@ def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, fra
     for k in np.argsort(amount)[:frames]:
         f = split.frames[int(k)]
         geo = avatar.geometry(f.controls)
-        cam = camera_of(split, f.camera_to_world)
+        cam = frame_camera(split, f)
         posed = geo.posed.cpu().numpy()
         r = raster.rasterize(posed, avatar.head_model.triangles, cam)
         c, w = texture_map(avatar.sampler, avatar.triangles.cpu(), geo.posed.cpu(), cam, load_rgb(f.image_path, bg), r)

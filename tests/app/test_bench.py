@@ -18,7 +18,7 @@ from app.cli import main
 from models.avatars.quality import Quality, load_presets, pareto
 from models.avatars.registry import load_avatar, untrained_avatar
 from models.capture.dataset import load_split
-from models.capture.frames import camera_of
+from models.capture.frames import frame_camera
 from models.training.metrics import psnr
 from models.training.trainer import TrainConfig, prepare_training
 from render.gl.raster import Rasterizer
@@ -88,7 +88,7 @@ def test_every_setting_is_finite_and_near_the_reference(tiny_avatar, capture, gl
     assert avatar.quality_knobs == ("samples", "fine", "bf16")
     split = load_split(capture, "test")
     f = split.frames[0]
-    cam = camera_of(split, f.camera_to_world)
+    cam = frame_camera(split, f)
     raster = Rasterizer(gl)
 
     def render(q: Quality) -> dict:

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from app.cli import main
 from models.avatars.registry import load_avatar
 from models.capture.dataset import load_split
-from models.capture.frames import camera_of
+from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from models.tracking.video import sampled_frames
 from models.training.trainer import TrainConfig, prepare_training
@@ -144,7 +144,7 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     assert log[-1]["photometric"] < 0.7 * log[0]["photometric"], (log[0], log[-1])
     avatar, _ = load_avatar(out)
     test = load_split(d3_dataset, "test")
-    assert avatar.plate_for(camera_of(test, test.frames[0].camera_to_world)) is not None
+    assert avatar.plate_for(frame_camera(test, test.frames[0])) is not None
     assert avatar.pose_corrections is not None and 0 < avatar.pose_corrections.abs().max() < 0.05  # learned, small
     # New controls are placed where the video held the head (the field reads world positions): the rest pose is the
     # training frames' mean translation, half a metre in front of the camera.
@@ -157,7 +157,7 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     train = load_split(d3_dataset, "train")
     assert avatar.code_weights(train.frames[3].controls).argmax().item() == 3
     raster = Rasterizer(gl)
-    img = avatar.render_image(test.frames[0].controls, camera_of(test, test.frames[0].camera_to_world), raster)
+    img = avatar.render_image(test.frames[0].controls, frame_camera(test, test.frames[0]), raster)
     raster.release()
     assert np.isfinite(img["rgb"]).all() and img["opacity"].max() > 0.1
     assert run_eval(EvalConfig(avatar=out, dataset=d3_dataset, out=tmp_path / "eval")) == 0
@@ -355,3 +355,83 @@ def test_a_landscape_or_rotated_hd_video_tracks_to_the_same_face(stored, face_vi
         expected = cv2.resize(rgb[y0:y0 + side, x0:x0 + side].astype(float), (96, 96), interpolation=cv2.INTER_AREA)
         got = cv2.cvtColor(cv2.imread(str(out / "images" / f"{j:04d}.png")), cv2.COLOR_BGR2RGB).astype(float)
         assert 10 * np.log10(255**2 / np.mean((got - expected) ** 2)) > 38
+
+
+def _room(h: int, w: int) -> np.ndarray:
+    """A room with texture everywhere (a plate that is wrong anywhere shows)."""
+    y, x = np.mgrid[0:h, 0:w]
+    room = np.stack([90 + 60 * np.sin(x / 37.0), 110 + 50 * np.cos(y / 23.0), 120 + 40 * np.sin((x + y) / 51.0)], -1)
+    return room.astype(np.uint8)
+
+
+def test_a_head_that_travels_gets_a_crop_that_follows_it(face_video, landmarker, tmp_path, gl):
+    """The real clip's first 2 s (the middle 300 columns of its 512 px frame, shrunk to 140 x 240: the face about
+    130 px) walking 330 px across a 960 x 720 room: one crop for the whole video would be about twice a still
+    face's, so the crop follows it (auto; measured: windows of 299 px against one crop of 564, the face 28.1 px
+    wide at 64 px against 14.9). Each image is its window of the
+    video's frame (30 dB against OpenCV's area filter of the window), the plate is the room where the frames saw
+    it, and a training run reads each frame's rays through its own camera and the plate through its window: every
+    ray equals its camera's pixel ray, and its plate pixel the one render and eval read."""
+    from render.rays import pixel_rays
+
+    frames = [rgb for _, _, rgb in sampled_frames(face_video, 10)][:20]
+    room, video_frames, xs = _room(720, 960), [], np.linspace(200, 530, len(frames)).round().astype(int)
+    for x, rgb in zip(xs, frames, strict=True):
+        canvas = room.copy()
+        canvas[400:640, x:x + 140] = cv2.resize(rgb[:, 106:406], (140, 240), interpolation=cv2.INTER_AREA)
+        video_frames.append(canvas)
+    video = _write_video(tmp_path / "walk.mp4", video_frames)
+    runs = {}
+    for crop in ("auto", "fixed"):
+        out = tmp_path / crop
+        assert main(["track", str(video), "--head", "builtin", "--out", str(out), "--landmarker", str(landmarker),
+                     "--size", "64", "--no-overlay", "--iterations", "50", "--crop", crop]) == 0
+        runs[crop] = json.loads((out / "tracking" / "report.json").read_text())
+    follow, fixed = runs["auto"]["crop"], runs["fixed"]["crop"]
+    assert follow["following"] and not fixed["following"] and fixed["side"] > 1.8 * follow["side"], (follow, fixed)
+    widths = runs["auto"]["face_width_px"]["median"], runs["fixed"]["face_width_px"]["median"]
+    assert widths[0] > 1.8 * widths[1], widths
+    out = tmp_path / "auto"
+    train = load_split(out, "train")
+    decoded = [rgb for _, _, rgb in sampled_frames(video, None)]
+    for f in train.frames[::4]:
+        _, _, cx, cy = train.frame_intrinsics(f)  # the canvas's principal point less the window's offset
+        x0 = follow["x0"] + (train.background_intrinsics[2] - cx) * follow["side"] / 64
+        y0 = follow["y0"] + (train.background_intrinsics[3] - cy) * follow["side"] / 64
+        side = round(follow["side"])
+        window = decoded[json.loads((out / "transforms_train.json").read_text())["frames"][f.index]["source_frame"]]
+        window = window[round(y0):round(y0) + side, round(x0):round(x0) + side].astype(float)
+        expected = cv2.resize(window, (64, 64), interpolation=cv2.INTER_AREA)
+        got = cv2.cvtColor(cv2.imread(str(f.image_path)), cv2.COLOR_BGR2RGB).astype(float)
+        assert 10 * np.log10(255**2 / np.mean((got - expected) ** 2)) > 30
+    trainer = prepare_training(TrainConfig(dataset=out, out=tmp_path / "avatar", steps=2), gl)
+    fs, avatar = trainer.frames, trainer.avatar
+    assert fs.plate_windows is not None and len(set(fs.plate_windows)) > 5
+    for k in (0, len(fs) // 2, len(fs) - 1):
+        cam = frame_camera(train, train.frames[k])
+        pixels = torch.arange(64 * 64)
+        rays = fs.rays(k, pixels)
+        origin, dirs = pixel_rays(cam)
+        np.testing.assert_allclose(rays.directions.numpy(), dirs.reshape(-1, 3), atol=1e-6)
+        np.testing.assert_allclose(rays.origins[0].numpy(), origin, atol=1e-6)
+        np.testing.assert_array_equal(rays.background.numpy(), avatar.plate_for(cam).numpy())
+    # the plate is the room as the frames saw it, each through its window: where a training frame's pixel shows the
+    # room alone (outside the strip the walking frame ever covered: x 200..670, y 400..640 of the video), the
+    # plate's pixel at the frame's offset shows the same, within 3 levels, wherever enough frames saw it free (the
+    # rest is inpainted: 63% of this plate, whose edges few windows reach). The room's texture changes by about 30
+    # levels a plate pixel, so a window placed a pixel off would match nowhere.
+    plate = cv2.cvtColor(cv2.imread(str(out / "background.png")), cv2.COLOR_BGR2RGB).astype(float)
+    ph, pw = plate.shape[:2]
+    assert [pw, ph] == follow["canvas_px"] and pw > 1.5 * 64  # the windows span the walk
+    px, (_, _, pcx, pcy) = follow["side"] / 64, train.background_intrinsics  # source pixels a canvas pixel
+    v, u = np.mgrid[0:64, 0:64]
+    diffs = []
+    for f in train.frames:
+        _, _, cx, cy = train.frame_intrinsics(f)
+        ox, oy = round(pcx - cx), round(pcy - cy)
+        x, y = follow["x0"] + (ox + u + 0.5) * px, follow["y0"] + (oy + v + 0.5) * px
+        room_only = (y < 400 - 2 * px) | (y > 640 + 2 * px) | (x < 200 - 2 * px) | (x > 670 + 2 * px)
+        image = cv2.cvtColor(cv2.imread(str(f.image_path)), cv2.COLOR_BGR2RGB).astype(float)
+        diffs.append(np.abs(plate[oy:oy + 64, ox:ox + 64] - image)[room_only].max(-1))
+    diffs = np.concatenate(diffs)
+    assert len(diffs) > 1000 and (diffs <= 3).mean() > 0.4, (len(diffs), (diffs <= 3).mean())

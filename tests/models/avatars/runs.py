@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from models.avatars.registry import load_avatar
-from models.capture.frames import camera_of
+from models.capture.frames import frame_camera
 from models.training.trainer import prepare_training
 from render.gl.raster import Rasterizer
 
@@ -45,7 +45,7 @@ def gpu_run_matches_cpu(cfg, gl, progress: float, buffers: tuple[str, ...] = ("r
     gpu.save()
     avatar, _ = load_avatar(gpu.cfg.out, "cuda")
     f = cpu.split.frames[0]
-    cam, r = camera_of(cpu.split, f.camera_to_world), Rasterizer(gl)
+    cam, r = frame_camera(cpu.split, f), Rasterizer(gl)
     on_gpu, on_cpu = avatar.render_image(f.controls, cam, r), cpu.avatar.render_image(f.controls, cam, r)
     for name in buffers:
         assert np.isfinite(on_gpu[name]).all() and np.abs(on_gpu[name] - on_cpu[name]).max() < 0.01, name

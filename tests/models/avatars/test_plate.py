@@ -12,7 +12,7 @@ from models.avatars.checkpoint import save_checkpoint
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
 from models.tracking.masks import background_plate
-from render.camera import framing_camera
+from render.camera import Camera, framing_camera
 from render.gl.raster import Rasterizer
 from tests.conftest import CODYNERF_DEMO
 
@@ -43,6 +43,63 @@ def test_plate_is_the_room_where_the_person_leaves_it_free():
                                           min_share=0.5)
     assert inpainted2 == pytest.approx(36 / 480)
     assert 60 < plate2[4:10, 0:6].mean() < 200  # filled from the room around (random colours, mean 127.5), not 0
+
+
+def test_windows_of_a_following_crop_make_one_plate_of_the_room():
+    """A following crop's frames each see a 10x12 window of a 20x30 room (offsets along a diagonal), a person at the
+    window's centre: the plate is the room wherever the windows that hold a pixel saw it free in half of them and in
+    3, or in all where fewer than 3 hold it (the canvas's edges); the corners no window held are inpainted. Every
+    window at offset zero on a plate of its own size is the fixed crop's plate, bit for bit."""
+    rng = np.random.default_rng(3)
+    room = rng.integers(0, 256, (20, 30, 3), dtype=np.uint8)
+    offsets = np.array([[3 * k, k] for k in range(7)])  # x 0..18, y 0..6
+    frames, masks = [], []
+    for ox, oy in offsets:
+        frame, mask = room[oy:oy + 10, ox:ox + 12].copy(), np.zeros((10, 12), np.float32)
+        frame[3:7, 4:8] = 255 - frame[3:7, 4:8]
+        mask[3:7, 4:8] = 1.0
+        frames.append(frame)
+        masks.append(mask)
+    plate, inpainted = background_plate(frames, masks, grow_px=0, min_share=0.5, offsets=offsets, canvas_wh=(30, 20))
+    assert plate.shape == (20, 30, 3)
+    seen = np.zeros((20, 30), int)
+    free = np.zeros((20, 30), int)
+    for (ox, oy), m in zip(offsets, masks, strict=True):
+        seen[oy:oy + 10, ox:ox + 12] += 1
+        free[oy:oy + 10, ox:ox + 12] += m < 0.5
+    good = (seen > 0) & (free >= np.maximum(np.minimum(3, seen), np.ceil(0.5 * seen)))
+    np.testing.assert_array_equal(plate[good], room[good])
+    assert good.sum() > 0.4 * good.size and inpainted == pytest.approx(1 - good.mean())
+    fixed, share = background_plate(frames, masks, grow_px=1, min_share=0.2)
+    again, share_again = background_plate(frames, masks, grow_px=1, min_share=0.2, offsets=np.zeros((7, 2), int),
+                                          canvas_wh=(12, 10))
+    np.testing.assert_array_equal(fixed, again)
+    assert share == share_again
+
+
+@pytest.mark.gl
+def test_a_frames_window_of_the_plate_composites_behind_it(gl):
+    """A plate wider than the frames (a following crop's canvas): a frame's camera, the plate's cut at (x0, y0),
+    composites over exactly that window of it (at its own size, and scaled to half); a window reaching past the
+    plate, or a principal point off the whole pixels, has none."""
+    avatar, _ = load_avatar(CODYNERF_DEMO)
+    canvas = framing_camera(avatar.head_model.template, 0.0, 0.0, fov_y_deg=30.0, width_px=60, height_px=40)
+    fx, fy, cx, cy = canvas.intrinsics
+    plate = np.random.default_rng(4).random((40, 60, 3)).astype(np.float32)
+    avatar.set_plate(plate, canvas)
+    window = canvas.cropped(14, 6, 24, 20)
+    np.testing.assert_array_equal(avatar.plate_for(window).numpy(), plate[6:26, 14:38].reshape(-1, 3))
+    r = Rasterizer(gl)
+    out = avatar.render_image(Controls(), window, r)
+    r.release()
+    assert out["opacity"][0, 0] < 1e-3  # no head in the window's corner: the plate's pixel (14, 6) shows
+    np.testing.assert_allclose(out["rgb"][0, 0], plate[6, 14], atol=1e-3)
+    half = window.resized(12, 10)
+    np.testing.assert_allclose(avatar.plate_for(half).numpy().reshape(10, 12, 3)[0, 0], plate[6:8, 14:16].mean((0, 1)),
+                               atol=1e-6)
+    past = canvas.cropped(40, 0, 24, 20)  # x 40..64 of a 60-wide plate
+    between = Camera.from_intrinsics(canvas.view, fx, fy, cx - 14.5, cy - 6, 24, 20, near_m=0.05, far_m=10.0)
+    assert avatar.plate_for(past) is None and avatar.plate_for(between) is None
 
 
 @pytest.mark.gl

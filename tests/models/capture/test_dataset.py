@@ -62,6 +62,9 @@ def test_loads_ours(ours):
     (lambda d: d.update(head_model="smpl"), "field 'head_model' must be builtin"),
     (lambda d: d.pop("width"), "field 'width' is missing"),
     (lambda d: d["frames"][0].update(bbox=[0.5, 0.2, 0, 1]), "frame 0: field 'bbox'"),
+    (lambda d: d["frames"][2].update(intrinsics=[0.0, 50, 20, 15]), "frame 2: field 'intrinsics' must be [fx, fy"),
+    (lambda d: d["frames"][1].update(intrinsics=[50, 50, 20]), "frame 1: field 'intrinsics' must have shape"),
+    (lambda d: d.update(background_intrinsics=[50, 50, 20, 15]), "field 'background_intrinsics' needs a background"),
 ])
 def test_errors_name_file_frame_field(ours, edit, message):
     path = ours / "transforms_train.json"
@@ -71,6 +74,24 @@ def test_errors_name_file_frame_field(ours, edit, message):
     with pytest.raises(DatasetError, match="transforms_train.json: .*" + message.replace("(", r"\(").replace(
             "[", r"\[").replace(".", r"\.")):
         load_split(ours, "train")
+
+
+def test_a_frame_of_its_own_intrinsics_has_its_own_camera(ours):
+    """A following crop's frame: its own principal point (the others keep the split's), and its camera's rays are
+    the split camera's shifted by the whole pixels between them."""
+    from models.capture.frames import camera_of, frame_camera
+    from render.rays import pixel_rays
+
+    path = ours / "transforms_train.json"
+    data = json.loads(path.read_text())
+    data["frames"][1]["intrinsics"] = [50.0, 50.0, 20.0 - 6, 15.0 + 2]
+    path.write_text(json.dumps(data))
+    s = load_split(ours, "train")
+    assert s.frames[0].intrinsics is None and s.frame_intrinsics(s.frames[1]) == (50.0, 50.0, 14.0, 17.0)
+    own = pixel_rays(frame_camera(s, s.frames[1]))[1]
+    shared = pixel_rays(camera_of(s, s.frames[1].camera_to_world))[1]
+    np.testing.assert_allclose(own[2:, :34], shared[:-2, 6:], atol=1e-12)  # its pixel (x, y) is the split's (x+6, y-2)
+    assert frame_camera(s, s.frames[0]).intrinsics == (50.0, 50.0, 20.0, 15.0)
 
 
 def test_cli_exit_2_on_bad_dataset(ours, capsys):

@@ -13,7 +13,7 @@ from PIL import Image
 
 from app.avatar_commands import EvalConfig, run_eval
 from models.capture.dataset import load_split
-from models.capture.frames import camera_of
+from models.capture.frames import frame_camera
 from models.training.trainer import TrainConfig, prepare_training
 from render.gl.raster import Rasterizer
 
@@ -43,7 +43,7 @@ def test_off_centre_capture_trains_and_sees_the_same_pixels(synth_capture, gl, t
     dst = tmp_path / "cropped"
     crop_capture(src, dst)
     split = load_split(dst, "train")
-    cam = camera_of(split, split.frames[0].camera_to_world)
+    cam = frame_camera(split, split.frames[0])
     assert not cam.centred and cam.intrinsics[2:] == (16.0 - LEFT, 16.0 - TOP)
     t = prepare_training(TrainConfig(dataset=dst, out=tmp_path / "avatar", effects="none", steps=30,
                                      rays_per_step=256, checkpoint_seconds=1e9), gl)
@@ -55,7 +55,7 @@ def test_off_centre_capture_trains_and_sees_the_same_pixels(synth_capture, gl, t
     original = load_split(src, "train")
     f = original.frames[0]
     r = Rasterizer(gl)
-    full = t.avatar.eval().render_image(f.controls, camera_of(original, f.camera_to_world), r, frame=0)["rgb"]
+    full = t.avatar.eval().render_image(f.controls, frame_camera(original, f), r, frame=0)["rgb"]
     part = t.avatar.render_image(f.controls, cam, r, frame=0)["rgb"]
     # Away from the crop's border (the rendered pixels are the mesh's silhouette grown by a few pixels, and the
     # crop does not see the silhouette beyond its border), the same pixels.

@@ -8,7 +8,7 @@ import torch
 
 from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig
 from models.capture.dataset import load_split
-from models.capture.frames import camera_of
+from models.capture.frames import frame_camera
 from models.capture.synthetic import SynthConfig, synthesize
 from models.head.sources import load_builtin
 from models.training.data import build_frames
@@ -30,7 +30,7 @@ def test_a_frames_rays_are_its_cameras_and_its_raster_made_afresh(tmp_path, gl):
     raster = Rasterizer(gl)
     yaws = set()
     for k, f in enumerate(split.frames):
-        cam = camera_of(split, f.camera_to_world)
+        cam = frame_camera(split, f)
         origin, dirs = pixel_rays(cam)
         rays = fs.rays(k, torch.arange(32 * 32))
         np.testing.assert_allclose(rays.origins.numpy(), np.broadcast_to(origin, (32 * 32, 3)), atol=1e-6)

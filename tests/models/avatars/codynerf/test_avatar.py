@@ -83,9 +83,9 @@ def test_shell_sampler_matches_dense_reference(trained, gl):
     density at the surface, where the shell looks)."""
     t, _, _ = trained
     f = t.split.frames[3]
-    from models.capture.frames import camera_of
+    from models.capture.frames import frame_camera
 
-    cam = camera_of(t.split, f.camera_to_world)
+    cam = frame_camera(t.split, f)
     r = Rasterizer(gl)
     fast = t.avatar.render_image(f.controls, cam, r, frame=3)["rgb"]
     t.avatar.render_cfg = replace(t.avatar.render_cfg, dense_samples=256)
@@ -107,10 +107,10 @@ def test_effect_sets_build_only_what_they_need(capture, gl, tmp_path):
     assert full.avatar.field.normals is not None
     # No density gradients for `none`: it renders under inference_mode, where autograd cannot run at all.
     f = none.split.frames[0]
-    from models.capture.frames import camera_of
+    from models.capture.frames import frame_camera
 
     with torch.inference_mode():
-        out = none.avatar.render_image(f.controls, camera_of(none.split, f.camera_to_world), Rasterizer(gl))
+        out = none.avatar.render_image(f.controls, frame_camera(none.split, f), Rasterizer(gl))
     assert "normals" not in out and np.isfinite(out["rgb"]).all()
     assert parse_effects("specular, shading") == ("shading", "specular")
     with pytest.raises(ValueError, match="unknown effect"):
@@ -147,9 +147,9 @@ def test_occupancy_grid_is_off_by_default_and_its_error_is_known(trained, gl):
     av = t.avatar
     assert bool(av.occupancy.built) and float(av.occupancy.occupied.float().mean()) < 0.9
     f = t.split.frames[5]
-    from models.capture.frames import camera_of
+    from models.capture.frames import frame_camera
 
-    cam, r = camera_of(t.split, f.camera_to_world), Rasterizer(gl)
+    cam, r = frame_camera(t.split, f), Rasterizer(gl)
     default = av.render_image(f.controls, cam, r, frame=5)["rgb"]
     av.occupancy.built.fill_(False)
     try:
@@ -176,7 +176,7 @@ def test_inspection_buffers(capture, gl, tmp_path):
     counterfactual of the neutral head's shadow inputs: equal to the render for the neutral head, different
     with the head turned and the jaw open."""
     from models.avatars.checkpoint import save_checkpoint
-    from models.capture.frames import camera_of
+    from models.capture.frames import frame_camera
 
     t = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "all", effects="all", steps=30, rays_per_step=512,
                             checkpoint_seconds=1e9), gl)
@@ -185,7 +185,7 @@ def test_inspection_buffers(capture, gl, tmp_path):
     av = t.avatar.eval()
     assert av.inspection_buffers() == ("rgb_no_shadows", "rgb_light", "rgb_flat")
     f = t.split.frames[3]
-    cam, r = camera_of(t.split, f.camera_to_world), Rasterizer(gl)
+    cam, r = frame_camera(t.split, f), Rasterizer(gl)
     out = av.render_image(f.controls, cam, r, frame=3, inspect=True)
     assert np.array_equal(out["rgb"], av.render_image(f.controls, cam, r, frame=3)["rgb"])
     assert all(np.isfinite(out[k]).all() for k in ("rgb", "rgb_no_shadows", "rgb_light", "rgb_flat"))

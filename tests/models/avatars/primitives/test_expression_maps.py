@@ -15,7 +15,7 @@ from models.avatars.checkpoint import CheckpointError
 from models.avatars.primitives.avatar import EXPRESSION_MAP_UNIT_M, PrimitivesAvatar, PrimitivesConfig
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import ELEVATION_DEG
-from models.capture.frames import camera_of
+from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from models.ranges import OptionError
 from models.training.trainer import TrainConfig, prepare_training
@@ -137,7 +137,7 @@ def test_trained_with_expression_maps_saves_and_renders(synth_capture, gl, tmp_p
     avatar, meta = saved_and_reloaded(t)
     assert meta["primitives"]["expression_maps"] is True and avatar.decoder.geometry_channels == 3
     f = t.split.frames[0]
-    cam, r = camera_of(t.split, f.camera_to_world), Rasterizer(gl)
+    cam, r = frame_camera(t.split, f), Rasterizer(gl)
     np.testing.assert_array_equal(avatar.render_image(f.controls, cam, r)["rgb"],
                                   t.avatar.render_image(f.controls, cam, r)["rgb"])
     # the options are the new avatar's: a resumed one keeps its own, a bad one names itself

@@ -20,7 +20,7 @@ from models.avatars.primitives.layout import (
     surface_frames,
 )
 from models.avatars.registry import load_avatar
-from models.capture.frames import camera_of
+from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from models.head.flame import load_flame
 from models.head.lbs import rotation_matrix_from_axis_angle
@@ -152,7 +152,7 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     avatar, meta = saved_and_reloaded(t)
     assert isinstance(avatar, PrimitivesAvatar) and meta["model"] == "primitives"
     f = t.split.frames[0]
-    cam = camera_of(t.split, f.camera_to_world)
+    cam = frame_camera(t.split, f)
     r = Rasterizer(gl)
     out = avatar.render_image(f.controls, cam, r)
     again = avatar.render_image(f.controls, cam, r)

@@ -346,7 +346,7 @@ def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker
     from app.cli import main
     from models.avatars.registry import load_avatar
     from models.capture.dataset import load_split
-    from models.capture.frames import camera_of
+    from models.capture.frames import frame_camera
 
     if not (PRIOR / "avatar.json").is_file():
         pytest.skip(f"no shipped prior at {PRIOR}")
@@ -356,7 +356,7 @@ def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker
     assert main(["personalize", str(scan), "--prior", str(PRIOR), "--out", str(out), "--steps", "2"]) == 0
     avatar, _ = load_avatar(out)
     split = load_split(scan, "test")
-    camera = camera_of(split, split.frames[0].camera_to_world)
+    camera = frame_camera(split, split.frames[0])
     plate = avatar.plate_for(camera)
     assert plate is not None  # the room was kept with the weights
     image = avatar.render_image(split.frames[0].controls, camera, None)["rgb"]
