@@ -150,7 +150,8 @@ class Framing:
 
     x0: float
     y0: float
-    scale: float
+    side: float
+    """A window's side in source pixels."""
     width: int
     height: int
     size: int
@@ -161,9 +162,8 @@ class Framing:
         return bool(np.any(self.offsets))
 
     @property
-    def side(self) -> float:
-        """A window's side in source pixels."""
-        return self.size / self.scale
+    def scale(self) -> float:
+        return self.size / self.side
 
     def points(self, px: np.ndarray) -> np.ndarray:
         """Source-frame pixels (...,2) -> canvas pixels."""
@@ -176,7 +176,7 @@ class Framing:
 
     @classmethod
     def fixed(cls, crop: Crop, frames: int) -> Framing:
-        return cls(crop.x0, crop.y0, crop.scale, crop.size, crop.size, crop.size, np.zeros((frames, 2), np.int64))
+        return cls(crop.x0, crop.y0, crop.side, crop.size, crop.size, crop.size, np.zeros((frames, 2), np.int64))
 
 
 FOLLOW_WHEN = 1.25
@@ -225,5 +225,5 @@ def face_framing(landmarks_px: list[np.ndarray], size: int, frame_wh: tuple[int,
     scale = size / side
     origin = corner.min(0)
     offsets = np.round((corner - origin) * scale).astype(np.int64)
-    return Framing(float(origin[0]), float(origin[1]), scale, int(offsets[:, 0].max()) + size,
+    return Framing(float(origin[0]), float(origin[1]), side, int(offsets[:, 0].max()) + size,
                    int(offsets[:, 1].max()) + size, size, offsets)
