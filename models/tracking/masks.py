@@ -13,7 +13,6 @@ import warnings
 import cv2
 import numpy as np
 
-
 GRABCUT_SAMPLES = 10
 """Background and foreground pixels GrabCut needs at least (each colour model has five components); a frame that
 the person fills (a crop close about a large head), or one the face has left (a fixed crop the frame bounds), keeps
@@ -72,9 +71,9 @@ def background_plate(frames: list[np.ndarray], masks: list[np.ndarray], grow_px:
     """The room behind the person as a fixed camera saw it (the background NerFACE composites over): per pixel
     the median of the frames (H,W,3 uint8) in which the person's mask (H,W), grown by grow_px, leaves it free;
     pixels free in fewer than min_share of the frames that see them, or fewer than 3 (behind the person, or a
-    mask that missed hair, most of the time), are inpainted from their surroundings. Frames of a following crop each cover their
-    window of a larger canvas (offsets (N,2): each window's top-left in it; canvas_wh its size). Returns the plate
-    (H,W,3) uint8 (the canvas's size) and the share of its pixels inpainted.
+    mask that missed hair, most of the time), are inpainted from their surroundings. Frames of a following crop
+    each cover their window of a larger canvas (offsets (N,2): each window's top-left in it; canvas_wh its size).
+    Returns the plate (H,W,3) uint8 (the canvas's size) and the share of its pixels inpainted.
 
     A pixel the room shows in a fifth of the frames is better as the median of those than inpainted: the plate
     against the held-out frames of the three shared clips, on their masks' background, at 256 px: 31.8 / 24.9 /
