@@ -35,7 +35,7 @@ def main() -> None:
     seconds, added = time.perf_counter() - t0, resident_mib() - before
     fs = trainer.frames
     mib = lambda t: 0.0 if t is None else t.element_size() * t.numel() / 2**20
-    held = {"images": mib(fs.images), "masks": mib(fs.masks), "surface_t": mib(fs.surface_t),
+    held = {"images": mib(fs.images), "surface_t": mib(fs.surface_t),
             "active_index": sum(mib(a) for a in fs.active_index),
             "geometry": sum(mib(v) for g in fs.geometry for v in vars(g).values() if torch.is_tensor(v))}
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

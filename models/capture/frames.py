@@ -34,7 +34,15 @@ def pinhole_camera(intrinsics, width: int, height: int, c2w: np.ndarray) -> Came
     return Camera.from_intrinsics(view, fx, fy, cx, cy, width, height, near_m=0.05, far_m=10.0)
 
 
+def load_rgb8(path) -> np.ndarray:
+    """(H,W,3) uint8 as the file holds it, or (H,W,4) where it has an alpha channel."""
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGBA" if im.mode in ("RGBA", "LA") else "RGB"))
+
+
 def load_rgb(path, background: np.ndarray | None = None) -> np.ndarray:
+    """(H,W,3) float32 in [0,1]: the file's colours, composited over `background` where it has alpha (white where
+    none is given)."""
     with Image.open(path) as im:
         a = np.asarray(im.convert("RGBA" if im.mode in ("RGBA", "LA") else "RGB"), np.float32) / 255.0
     if a.shape[-1] == 4:

@@ -13,7 +13,7 @@ import torch
 
 from models.avatars.base import Avatar, camera_key, plate_window
 from models.capture.dataset import CaptureSplit, DatasetError
-from models.capture.frames import camera_of, foreground_reach_m, frame_camera, load_mask, load_rgb
+from models.capture.frames import camera_of, foreground_reach_m, frame_camera, load_mask, load_rgb, load_rgb8
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 from render.rays import Rays, camera_directions, pixel_directions
@@ -24,8 +24,8 @@ class FrameSet:
     """N frames of one split, H x W."""
 
     split: CaptureSplit
-    images: torch.Tensor  # (N,H,W,3)
-    masks: torch.Tensor | None  # (N,H,W) coverage, if the capture has masks
+    images: torch.Tensor  # (N,H,W,C) uint8 as the files hold them, C = 4 where they have alpha (target composites)
+    background: torch.Tensor  # (3,) what an image's alpha composites over
     origins: torch.Tensor  # (N,3)
     camera_directions: torch.Tensor  # (H*W,3) unit, camera space, of the split's intrinsics
     rotations: torch.Tensor  # (N,3,3) float64, camera to world
@@ -40,6 +40,20 @@ class FrameSet:
 
     def __len__(self) -> int:
         return len(self.images)
+
+    @property
+    def pixel_count(self) -> int:
+        """H * W."""
+        return self.images.shape[1] * self.images.shape[2]
+
+    def target(self, frame: int, pixels: torch.Tensor) -> torch.Tensor:
+        """(R,3) float32 colours of a frame's pixels (flat indices): load_rgb's, bit for bit (the bytes / 255, alpha
+        composited over the background), made for these pixels alone: a frame is kept as its bytes (0.19 MB at
+        256 px, where float32 colours took 0.75)."""
+        px = self.images[frame].reshape(-1, self.images.shape[-1])[pixels].float() / 255.0
+        if px.shape[1] == 3:
+            return px
+        return px[:, :3] * px[:, 3:] + self.background * (1 - px[:, 3:])
 
     def rays(self, frame: int, pixels: torch.Tensor) -> Rays:
         """The rays of a frame's pixels (flat indices), their world directions made here from the camera's and the
@@ -80,26 +94,28 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
     distance along each pixel's ray, and let the avatar fit its settings to the capture and choose where
     training draws rays. One frame at a time into tensors made once: what a frame's raster holds (3 MB at 256 px)
     is not kept for every frame of a long video, the mesh is rasterized again once the avatar's settings are
-    fitted. on_frame(done, total) after each frame is read (a long video takes minutes)."""
-    bg = avatar.background.numpy()
+    fitted; the masks only say how far the person reaches (not kept), the images are kept as bytes, the training
+    pixels' indices as int32. on_frame(done, total) after each frame is read (a long video takes minutes)."""
     n = len(split.frames)
     d = camera_directions(camera_of(split, np.eye(4)))  # the split's intrinsics (frames may have their own)
     dirs_cam = (d / np.linalg.norm(d, axis=-1, keepdims=True)).astype(np.float32)
     H, W = dirs_cam.shape[:2]
-    images, surf = torch.empty(n, H, W, 3), torch.empty(n, H, W)
+    images = torch.empty(n, H, W, 4 if any(has_alpha(f.image_path) for f in split.frames) else 3, dtype=torch.uint8)
+    surf = torch.empty(n, H, W)
     has_masks = n > 0 and all("mask_path" in f.extra for f in split.frames)
-    masks = torch.empty(n, H, W) if has_masks else None
     geos, cameras, reach = [], [], []
     raster = Rasterizer(gl)
     tris = avatar.head_model.triangles
     for k, f in enumerate(split.frames):
-        images[k] = torch.from_numpy(np.asarray(load_rgb(f.image_path, bg), np.float32))
+        rgb = load_rgb8(f.image_path)
+        if rgb.shape[-1] < images.shape[-1]:  # an opaque frame among frames with alpha
+            rgb = np.concatenate([rgb, np.full_like(rgb[..., :1], 255)], -1)
+        images[k] = torch.from_numpy(np.array(rgb))  # (PIL's array is read-only)
         geo = avatar.frame_geometry(f.controls, raster)
         cam = frame_camera(split, f)
         r = raster.rasterize(geo.posed.cpu().numpy(), tris, cam)
         if has_masks:
             mask = load_mask(f.extra["mask_path"])
-            masks[k] = torch.from_numpy(np.asarray(mask, np.float32))
             reach.append(foreground_reach_m(r.hit, r.depth, mask, cam.focal_px()))
         surf[k] = torch.from_numpy(r.distance.astype(np.float32))
         geos.append(geo)
@@ -110,14 +126,23 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
     active = []
     for geo, cam in zip(geos, cameras, strict=True):  # the pixels as the fitted settings see them
         pixels = avatar.training_pixels(cam, raster.rasterize(geo.posed.cpu().numpy(), tris, cam))
-        active.append(torch.from_numpy(np.flatnonzero(pixels)))
+        active.append(torch.from_numpy(np.flatnonzero(pixels).astype(np.int32)))
     raster.release()
     plate, windows, plate_width = frames_on_plate(split, avatar, cameras)
     own = [f.intrinsics for f in split.frames]
     rotations = torch.as_tensor(np.stack([np.asarray(f.camera_to_world, np.float64)[:3, :3] for f in split.frames]))
     origins = torch.as_tensor(np.stack([f.camera_to_world[:3, 3] for f in split.frames]), dtype=torch.float32)
-    return FrameSet(split, images, masks, origins, torch.from_numpy(dirs_cam.reshape(-1, 3)), rotations, surf,
+    background = avatar.background.detach().cpu().float()
+    return FrameSet(split, images, background, origins, torch.from_numpy(dirs_cam.reshape(-1, 3)), rotations, surf,
                     geos, active, plate, None if all(k is None for k in own) else own, windows, plate_width)
+
+
+def has_alpha(path) -> bool:
+    """Whether an image file has an alpha channel (its header alone is read)."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        return im.mode in ("RGBA", "LA")
 
 
 def frames_on_plate(split: CaptureSplit, avatar: Avatar, cameras: list

@@ -167,12 +167,12 @@ class PriorTrainer:
             fs = ident.frames
             fid = int(torch.randint(len(fs), (1,), generator=g))
             idx = fs.active_index[fid]
-            pick = idx[torch.randint(len(idx), (self.cfg.rays_per_frame,), generator=g)] if len(idx) else idx
+            pick = (idx[torch.randint(len(idx), (self.cfg.rays_per_frame,), generator=g)] if len(idx) else idx).long()
             if k % self.world != self.rank or len(pick) == 0:
                 continue
             rays = fs.rays(fid, pick).to(self.device)
             own = torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + self.step * 4096 + k)
-            out.append(TrainingBatch(fid, rays, fs.images[fid].reshape(-1, 3)[pick].to(self.device),
+            out.append(TrainingBatch(fid, rays, fs.target(fid, pick).to(self.device),
                                      fs.geometry[fid], 0.0, own))
         return out
 

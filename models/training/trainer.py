@@ -226,10 +226,9 @@ class Trainer:
             for fid in frame_ids.tolist():
                 if len(fs.active_index[fid]) == 0:
                     continue
-                pick = self.avatar.draw_training_pixels(fs.active_index[fid], fs.images[fid][..., 0].numel(),
-                                                        per_frame, g)
+                pick = self.avatar.draw_training_pixels(fs.active_index[fid], fs.pixel_count, per_frame, g).long()
                 rays = fs.rays(fid, pick).to(self.device)
-                target = fs.images[fid].reshape(-1, 3)[pick].to(self.device)
+                target = fs.target(fid, pick).to(self.device)
                 parts = self.avatar.loss_terms(TrainingBatch(fid, rays, target, fs.geometry[fid], progress, g))
                 for k, v in parts.items():
                     terms[k] = terms.get(k, 0.0) + v.detach() / len(frame_ids)

@@ -41,3 +41,30 @@ def test_a_frames_rays_are_its_cameras_and_its_raster_made_afresh(tmp_path, gl):
         yaws.add(round(float(np.degrees(np.arctan2(f.camera_to_world[0, 2], f.camera_to_world[2, 2]))), 3))
     raster.release()
     assert len(yaws) > 1  # the frames' cameras differ: each frame's own rotation is used
+
+
+@pytest.mark.gl
+def test_a_frames_colours_are_load_rgbs_bit_for_bit(tmp_path, gl):
+    """Frames are kept as their files' bytes and a step's colours made from them: the same float32 numbers load_rgb
+    gives the whole image (bytes / 255), and where a file has alpha (one frame here, among opaque ones) its colours
+    composited over the avatar's background as load_rgb composites them."""
+    from PIL import Image
+
+    from models.capture.frames import load_rgb
+
+    synthesize(SynthConfig(scene="ambient", frames=3, size=24, out=tmp_path / "c"), load_builtin(), gl)
+    split = load_split(tmp_path / "c", "train")
+    path = split.frames[1].image_path
+    rgb = np.asarray(Image.open(path).convert("RGB"))
+    alpha = np.random.default_rng(0).integers(0, 256, rgb.shape[:2], dtype=np.uint8)
+    Image.fromarray(np.dstack([rgb, alpha]), "RGBA").save(path)
+    background = np.array([0.2, 0.7, 0.45], np.float32)
+    avatar = PrimitivesAvatar(load_builtin(), PrimitivesConfig(grid=8, voxels=2, width=16), len(split.frames),
+                              background)
+    fs = build_frames(split, avatar, gl)
+    assert fs.images.dtype == torch.uint8 and fs.images.shape[-1] == 4
+    assert fs.active_index[0].dtype == torch.int32
+    for k, f in enumerate(split.frames):
+        expected = torch.from_numpy(load_rgb(f.image_path, background)).reshape(-1, 3)
+        assert torch.equal(fs.target(k, torch.arange(24 * 24)), expected), k
+    assert not torch.equal(fs.target(1, torch.arange(24 * 24)), torch.from_numpy(rgb / np.float32(255)).reshape(-1, 3))
