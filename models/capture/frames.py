@@ -34,6 +34,12 @@ def pinhole_camera(intrinsics, width: int, height: int, c2w: np.ndarray) -> Came
     return Camera.from_intrinsics(view, fx, fy, cx, cy, width, height, near_m=0.05, far_m=10.0)
 
 
+def has_alpha(path) -> bool:
+    """Whether an image file has an alpha channel, as load_rgb and load_rgb8 read it (its header alone is read)."""
+    with Image.open(path) as im:
+        return im.mode in ("RGBA", "LA")
+
+
 def load_rgb8(path) -> np.ndarray:
     """(H,W,3) uint8 as the file holds it, or (H,W,4) where it has an alpha channel."""
     with Image.open(path) as im:

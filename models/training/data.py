@@ -13,7 +13,7 @@ import torch
 
 from models.avatars.base import Avatar, camera_key, plate_window
 from models.capture.dataset import CaptureSplit, DatasetError
-from models.capture.frames import camera_of, foreground_reach_m, frame_camera, load_mask, load_rgb, load_rgb8
+from models.capture.frames import camera_of, foreground_reach_m, frame_camera, has_alpha, load_mask, load_rgb, load_rgb8
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 from render.rays import Rays, camera_directions, pixel_directions
@@ -135,14 +135,6 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
     background = avatar.background.detach().cpu().float()
     return FrameSet(split, images, background, origins, torch.from_numpy(dirs_cam.reshape(-1, 3)), rotations, surf,
                     geos, active, plate, None if all(k is None for k in own) else own, windows, plate_width)
-
-
-def has_alpha(path) -> bool:
-    """Whether an image file has an alpha channel (its header alone is read)."""
-    from PIL import Image
-
-    with Image.open(path) as im:
-        return im.mode in ("RGBA", "LA")
 
 
 def frames_on_plate(split: CaptureSplit, avatar: Avatar, cameras: list
