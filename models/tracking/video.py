@@ -114,13 +114,19 @@ def cropped_frames(path: Path, fps: float | None, crop: Crop | list[Crop], wante
     return [out[i] for i in wanted]
 
 
-def one_crop(landmarks_px: list[np.ndarray], margin: float, reach: float) -> tuple[np.ndarray, float]:
-    """face_crop's centre (source pixels) and side before the frame bounds it."""
+def face_boxes(landmarks_px: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, float]:
+    """Each frame's face box, (N,2) least and most (source pixels), and how far below the box's middle a crop's
+    centre goes (the neck rather than the air: 0.08 of the median face height)."""
     lo = np.stack([p.min(0) for p in landmarks_px])
     hi = np.stack([p.max(0) for p in landmarks_px])
+    return lo, hi, 0.08 * float(np.median(hi[:, 1] - lo[:, 1]))
+
+
+def one_crop(lo: np.ndarray, hi: np.ndarray, lower: float, margin: float, reach: float) -> tuple[np.ndarray, float]:
+    """face_crop's centre (source pixels) and side before the frame bounds it, from face_boxes."""
     extent = float(np.max(hi - lo))
     centre = np.median(0.5 * (lo + hi), 0)
-    centre[1] += 0.08 * float(np.median(hi[:, 1] - lo[:, 1]))
+    centre[1] += lower
     travel = float(np.max(np.maximum(hi - centre, centre - lo)))  # farthest any face's edge gets from the centre
     return centre, max(margin * extent, 2 * (travel + reach * extent))
 
@@ -134,7 +140,7 @@ def face_crop(landmarks_px: list[np.ndarray], size: int, frame_wh: tuple[int, in
 
     A face 100 px across that never moves: side 190 px; the same face 120 px right of its median place in one
     frame: that box's far edge is 50 + 120 = 170 px from the centre, so side = 2 (170 + 30) = 400 px."""
-    centre, side = one_crop(landmarks_px, margin, reach)
+    centre, side = one_crop(*face_boxes(landmarks_px), margin, reach)
     side = min(side, float(min(frame_wh)))
     x0 = float(np.clip(centre[0] - side / 2, 0, frame_wh[0] - side))
     y0 = float(np.clip(centre[1] - side / 2, 0, frame_wh[1] - side))
@@ -205,15 +211,14 @@ def face_framing(landmarks_px: list[np.ndarray], size: int, frame_wh: tuple[int,
     (True, [0, 150, 285, 420, 570], (760, 190), 470.0)
     """
     n = len(landmarks_px)
-    lo = np.stack([p.min(0) for p in landmarks_px])
-    hi = np.stack([p.max(0) for p in landmarks_px])
+    lo, hi, lower = face_boxes(landmarks_px)
     side = min(margin * float(np.max(hi - lo)), float(min(frame_wh)))
     # (one crop's side before the frame bounds it: a head that travels further than the frame is tall would leave
     # a crop the frame bounds)
-    if follow == "fixed" or (follow == "auto" and one_crop(landmarks_px, margin, reach)[1] < FOLLOW_WHEN * side):
+    if follow == "fixed" or (follow == "auto" and one_crop(lo, hi, lower, margin, reach)[1] < FOLLOW_WHEN * side):
         return Framing.fixed(face_crop(landmarks_px, size, frame_wh, margin, reach), n)
     centre = 0.5 * (lo + hi)
-    centre[:, 1] += 0.08 * float(np.median(hi[:, 1] - lo[:, 1]))
+    centre[:, 1] += lower
     k = min(FOLLOW_SMOOTHING, n)
     kernel = np.ones(k) / k
     padded = np.pad(centre, ((k // 2, k - 1 - k // 2), (0, 0)), mode="edge")
