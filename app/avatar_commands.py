@@ -6,17 +6,16 @@ import json
 import signal
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
 
 import numpy as np
 import torch
 
+from app.configs import AnimateConfig, EvalConfig, ExportMeshConfig, PersonalizeConfig, RenderCommandConfig
 from app.errors import UserInputError
 from app.head_commands import save_png
 from app.progress import Progress, progress_callback
-from app.turntable import INSPECT, TurntableConfig, buffer_image, render_needs, turntable_frames
+from app.turntable import INSPECT, TurntableConfig, buffer_image, render_needs, resized, turntable_frames
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
 from models.capture.dataset import check_images, load_split
@@ -25,8 +24,7 @@ from models.capture.synthetic import read_png16
 from models.device import device_of
 from models.files import FolderBusy, WriterLock, atomic_write_bytes, foreign_files
 from models.head.controls import Controls, load_controls
-from models.ranges import Range
-from models.training.metrics import face_mse, luminance, normal_angle_deg, pearson, psnr, ssim
+from models.training.metrics import face_mse, luminance, normal_angles_deg, pearson, psnr, ssim
 from models.training.prior import PriorTrainConfig, corpus_folders, distributed_from_env, prepare_prior
 from models.training.trainer import TrainConfig, prepare_training
 from render.camera import framing_camera
@@ -91,23 +89,6 @@ def train_locked(cfg: TrainConfig) -> int:
     print(f"wrote {cfg.out}: {trainer.step} steps in {trainer.elapsed / 60:.1f} min, "
           f"last loss {last.get('loss', 0):.5f}")
     return 0
-
-
-@dataclass(frozen=True)
-class EvalConfig:
-    avatar: Path
-    """Avatar folder."""
-    dataset: Path
-    """Capture folder to evaluate on."""
-    split: Literal["train", "val", "test"] = "test"
-    out: Path = Path("out/eval")
-    """Folder for metrics.json and side-by-side images."""
-    max_frames: Annotated[int, Range(0)] = 0
-    """Evaluate at most this many frames (0: all)."""
-    every: Annotated[int, Range(1)] = 1
-    """Evaluate every n-th frame of the split (a slow model on a long split)."""
-    device: Literal["cpu", "cuda"] = "cpu"
-    """Where the networks run."""
 
 
 def face_mask_of(frame, image_shape) -> np.ndarray:
@@ -175,43 +156,21 @@ def run_eval(cfg: EvalConfig) -> int:
                 gt_n = read_png16(f.extra["normal_path"]) * 2 - 1
                 on = face & (out["opacity"] > 0.5)
                 if on.any():
-                    row["normal_deg"] = normal_angle_deg(out["normals"], gt_n, on)
+                    angles = normal_angles_deg(out["normals"], gt_n, on)
+                    row["normal_deg"], row["normal_median_deg"] = float(angles.mean()), float(np.median(angles))
         if "rgb_no_shadows" in shadow_views and "shadow_path" in f.extra:
             panels += shadow_metrics(avatar, f, split, raster, truth, face & (out["opacity"] > 0.5), row)
         rows.append(row)
         save_png(cfg.out / f"{cfg.split}_{f.index:04d}.png",
                  (np.concatenate(panels, 1) * 255).round().astype(np.uint8))
     metrics = {k: float(np.mean([r[k] for r in rows if k in r])) for k in ("psnr", "ssim", "face_mse", "normal_deg",
-               *SHADOW_METRICS) if any(k in r for r in rows)}
+               "normal_median_deg", *SHADOW_METRICS) if any(k in r for r in rows)}
     metrics["render_ms"] = 1e3 * float(np.median(times))
     report = {"avatar": str(cfg.avatar), "dataset": str(cfg.dataset), "split": cfg.split, "frames": len(rows),
               "effects": meta.get("effects"), "training": meta.get("provenance"), "metrics": metrics, "per_frame": rows}
     (cfg.out / "metrics.json").write_text(json.dumps(report, indent=1))
     print(json.dumps(metrics))
     return 0
-
-
-@dataclass(frozen=True)
-class RenderCommandConfig:
-    avatar: Path
-    """Avatar folder."""
-    out: Path = Path("out/render.png")
-    controls: Path | None = None
-    """JSON controls (DESIGN 2.1); neutral when left out."""
-    yaw_deg: float = 0.0
-    """Camera orbit about the vertical axis, degrees."""
-    pitch_deg: float = 0.0
-    buffer: Literal["rgb", "normals", "grad_normals", "depth", "opacity", "rgb_no_shadows", "rgb_light",
-                    "shadow_change", "shading"] = "rgb"
-    """Which buffer to write: rgb_no_shadows (without cast shadows), rgb_light (light reaching the surface),
-    shadow_change (what the cast shadows take away) and shading (render - normals to the viewer) need an avatar
-    with those effects."""
-    preset: Literal["draft", "preview", "final"] = "preview"
-    """Quality: draft (half size, 6 samples a ray), preview (8), final (16)."""
-    size: Annotated[int, Range(8, 4096)] = 128
-    """Image width and height in pixels at the preview and final presets."""
-    device: Literal["cpu", "cuda"] = "cpu"
-    """Where the networks run."""
 
 
 def run_render(cfg: RenderCommandConfig) -> int:
@@ -234,8 +193,9 @@ def run_render(cfg: RenderCommandConfig) -> int:
     if cfg.buffer not in out and cfg.buffer not in INSPECT:
         raise UserInputError(f"--buffer {cfg.buffer}: this avatar's effect set has no normals network")
     cfg.out.parent.mkdir(parents=True, exist_ok=True)
-    save_png(cfg.out, buffer_image(out, cfg.buffer))
-    print(f"wrote {cfg.out} ({size}x{size}, {cfg.buffer}, {cfg.preset}: {ms:.0f} ms)")
+    save_png(cfg.out, resized(buffer_image(out, cfg.buffer), cfg.size))
+    scaled = f", rendered at {size}x{size}" if size != cfg.size else ""
+    print(f"wrote {cfg.out} ({cfg.size}x{cfg.size}, {cfg.buffer}, {cfg.preset}{scaled}: {ms:.0f} ms)")
     return 0
 
 
@@ -243,6 +203,7 @@ def run_turntable(cfg: TurntableConfig) -> int:
     avatar, _ = load_avatar(cfg.avatar)
     if cfg.frames < 1 or cfg.size < 8:
         raise UserInputError(f"--frames {cfg.frames} --size {cfg.size}: need at least 1 frame of 8 pixels")
+    check_video_size(cfg.size)
     if cfg.out.suffix.lower() != ".mp4":
         raise UserInputError(f"{cfg.out}: the turntable is written as an .mp4")
     gl = GLContext.headless()
@@ -279,27 +240,6 @@ def run_prior_train(cfg: PriorTrainConfig) -> int:
         print(f"wrote {cfg.out}: {trainer.step} steps over {len(trainer.identities)} identities in "
               f"{trainer.elapsed / 60:.1f} min on {world} process(es), last loss {last.get('loss', 0):.5f}")
     return 0
-
-
-@dataclass(frozen=True)
-class PersonalizeConfig:
-    scan: Path
-    """A short capture of one new person (a synthetic capture, or a video through `track`): a neutral head turn and
-    a few expressions."""
-    prior: Path = Path("resources/prior")
-    """The universal prior's folder (`prior-train`)."""
-    out: Path = Path("out/personal")
-    """The person's avatar folder to create."""
-    minutes: Annotated[float, Range(0, 1e6)] = 3.0
-    """Fine-tuning on the scan's frames (0: the avatar the neutral maps alone make, at once)."""
-    steps: Annotated[int, Range(1)] | None = None
-    """A step budget instead of (or as well as) --minutes."""
-    lr: Annotated[float, Range(0, 1, above=True)] = 1e-3
-    """Adam's learning rate (the seed's Section 4.2.5: 1e-3), decaying tenfold."""
-    tune: Literal["all", "decoder"] = "all"
-    """What fine-tuning changes: every weight, or the decoder alone (the encoders kept as the prior has them)."""
-    device: Literal["cpu", "cuda"] = "cpu"
-    seed: int = 0
 
 
 def run_personalize(cfg: PersonalizeConfig) -> int:
@@ -353,26 +293,10 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
     return 0
 
 
-@dataclass(frozen=True)
-class AnimateConfig:
-    avatar: Path
-    """Avatar folder."""
-    animation: Path
-    """An animation file (JSON: app/animation.py; the studio's Export panel saves one)."""
-    out: Path = Path("out/animation.mp4")
-    """The mp4 to write (H.264); PNG frames go to a folder beside it unless --no-pngs."""
-    size: Annotated[int, Range(8, 4096)] = 256
-    """Frame width and height, pixels (at the preview and final presets; draft halves it)."""
-    preset: Literal["draft", "preview", "final"] = "preview"
-    pngs: bool = True
-    meshes: Literal["none", "obj", "ply"] = "none"
-    """Also write the posed guide mesh of every frame (FOLDER_meshes/frame_0000.obj ...), for other tools."""
-
-
 def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, on_frame=None, should_stop=None,
                      on_pose=None):
-    """(size,size,3) uint8 frames of an animation played on an avatar, from its rest sliders; on_pose(k, controls)
-    before each frame is rendered."""
+    """(size,size,3) uint8 frames of an animation played on an avatar, from its rest sliders (the preset may render
+    fewer pixels: scaled up); on_pose(k, controls) before each frame is rendered."""
     from app.animation import animation_poses, rest_sliders
     from app.studio.session import View
 
@@ -383,9 +307,16 @@ def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, o
         controls = avatar.at_rest(sliders.controls())
         if on_pose:
             on_pose(k, controls)
-        yield buffer_image(avatar.render_image(controls, cam, raster, should_stop=should_stop, buffers=()), "rgb")
+        yield resized(buffer_image(avatar.render_image(controls, cam, raster, should_stop=should_stop, buffers=()),
+                                   "rgb"), size)
         if on_frame:
             on_frame(k)
+
+
+def check_video_size(size: int) -> None:
+    """An odd --size refused before any work: H.264 (yuv420p) frames have even sides."""
+    if size % 2:
+        raise UserInputError(f"--size {size}: an H.264 video's frames need an even number of pixels (try {size + 1})")
 
 
 def frames_folder(out: Path, wanted: bool, what: str) -> Path | None:
@@ -429,6 +360,7 @@ def run_animate(cfg: AnimateConfig) -> int:
         raise UserInputError(str(e)) from None
     if cfg.out.suffix.lower() != ".mp4":
         raise UserInputError(f"{cfg.out}: the animation is written as an .mp4")
+    check_video_size(cfg.size)
     pngs = frames_folder(cfg.out, cfg.pngs, "animation")
     write_mesh = guide_mesh_writer(avatar, cfg.out, cfg.meshes)
 
@@ -442,21 +374,6 @@ def run_animate(cfg: AnimateConfig) -> int:
     print(f"wrote {cfg.out} ({n} frames at {anim.fps:g} fps{f', PNGs in {pngs}' if pngs else ''}) in {seconds:.1f} s "
           f"({1e3 * seconds / max(n, 1):.0f} ms a frame, {cfg.preset})")
     return 0
-
-
-@dataclass(frozen=True)
-class ExportMeshConfig:
-    avatar: Path
-    """Avatar folder (primitives, prior or CoDyNeRF: their density makes the surface)."""
-    out: Path = Path("out/avatar.ply")
-    """The mesh to write: .ply (binary, vertex colours) or .obj (vertex colours as "v x y z r g b")."""
-    resolution: Annotated[int, Range(8, 512)] = 96
-    """Grid points along the head's longest side (the mesh's detail; time and size grow with its cube)."""
-    controls: Path | None = None
-    """A controls JSON to pose the avatar with (default: at rest)."""
-    level: Annotated[float, Range(0, 1e9, above=True)] | None = None
-    """The surface's density, per metre (default: where 1 cm of matter lets half the light through, 69.3; in a
-    field that never gets that dense, half its highest density)."""
 
 
 def run_export_mesh(cfg: ExportMeshConfig) -> int:

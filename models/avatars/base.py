@@ -31,7 +31,8 @@ from models.head.head import Head
 from models.head.model import HeadModel
 from render.camera import Camera, clipping_around
 from render.gl.raster import Rasterizer
-from render.rays import Raster, Rays, image_rays, rays_to_images
+from render.normals import depth_normal_image, mesh_normal_image, surface_normal_image
+from render.rays import Raster, Rays, image_rays, pixel_rays, rays_to_images
 
 BACKGROUND = "background"
 """The fill of colour buffers outside the rendered pixels: the avatar's background colour."""
@@ -80,6 +81,10 @@ class Avatar(nn.Module, ABC):
     model always renders the same way, as the dense NerFACE baseline does)."""
     config_class: ClassVar[type | None] = None
     """The frozen dataclass for_capture's `config` is (`train --model-options` sets its fields); None: none."""
+    normals_from_surface: ClassVar[bool] = False
+    """The normals buffer is the rendered surface's (render/normals.py: the guide mesh's normals where the render's
+    depth lies on the mesh, the depth's own elsewhere), made by render_image, not by render_rays: for a model with
+    no normals of its own worth showing (a density's gradient, voxel by voxel, is noise)."""
 
     @classmethod
     def default_config(cls, tracked: bool) -> Any:
@@ -276,6 +281,11 @@ class Avatar(nn.Module, ABC):
         """How the avatar renders, in a few words (reports)."""
         return self.name
 
+    def describe_display(self) -> str:
+        """Which code rendered the last display batch, for a model with more than one (the primitives' march: "C",
+        or torch and why); "" for the others."""
+        return ""
+
     # ---- per frame -------------------------------------------------------------------------------------
     @abstractmethod
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> Any:
@@ -394,6 +404,8 @@ class Avatar(nn.Module, ABC):
         rays = rays.to(device)
         names = self.inspection_buffers() if inspect else ()
         wanted = tuple(b for b in self.default_buffers() if buffers is None or b in buffers)
+        surface = self.normals_from_surface and "normals" in wanted
+        wanted = tuple(b for b in wanted if not (surface and b == "normals"))
         parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *wanted, *names)}
         self.should_stop, self.display_buffers = should_stop, (*wanted, *names)
         try:
@@ -413,7 +425,26 @@ class Avatar(nn.Module, ABC):
             self.should_stop, self.display_buffers = None, None
         background = (self.background if plate is None else plate).cpu().numpy()
         layout = {k: (c, background if fill == BACKGROUND else fill) for k, (c, fill) in self.layout().items()}
-        return rays_to_images(parts, camera.height_px, camera.width_px, idx, layout)
+        images = rays_to_images(parts, camera.height_px, camera.width_px, idx, layout)
+        if surface:
+            images["normals"] = self.surface_normals(images["depth"], geo, camera, rasterizer)
+        return images
+
+    def surface_normals(self, depth: np.ndarray, geometry: Any, camera: Camera, rasterizer: Rasterizer | None
+                        ) -> np.ndarray:
+        """(H,W,3) the normals of the surface a depth image (distance along each pixel's ray, inf where nothing is
+        drawn) shows, joined to the posed guide mesh's where it lies on the mesh (render/normals.py); the depth's
+        alone without a rasterizer. The depth is smoothed over 2 px at 256 px, alike at other sizes (on the demo's test
+        frames the depth's own normals are 16-18 degrees from the truth at 2 px, 19-22 at 1 px, 14 at 4 px)."""
+        origin, directions = pixel_rays(camera)
+        from_depth = depth_normal_image(origin, directions, depth, sigma_px=max(camera.height_px, camera.width_px)
+                                        / 128.0)
+        if rasterizer is None:
+            return from_depth
+        posed = geometry.posed.detach().cpu().numpy()
+        raster = rasterizer.rasterize(posed, self.head_model.triangles, camera)
+        return surface_normal_image(from_depth, depth, mesh_normal_image(raster, posed, self.head_model.triangles),
+                                    raster.distance)
 
     def default_buffers(self) -> tuple[str, ...]:
         """The buffers render_rays gives besides rgb, opacity and depth."""

@@ -29,11 +29,21 @@ def face_mse(a: np.ndarray, b: np.ndarray, face_mask: np.ndarray) -> float:
     return float(((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2)[face_mask].mean())
 
 
-def normal_angle_deg(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
-    """Mean angle in degrees between unit normal maps over the mask."""
+def normal_angles_deg(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(N,) angles in degrees between two normal maps (...,3) at the mask's N pixels.
+
+    >>> normal_angles_deg(np.array([[0.0, 0, 1], [0, 1, 1]]), np.array([[0.0, 0, 2], [0, 0, 1]]),
+    ...                   np.array([True, True])).round(3).tolist()
+    [0.0, 45.0]
+    """
     p = pred[mask] / np.maximum(np.linalg.norm(pred[mask], axis=-1, keepdims=True), 1e-12)
     t = truth[mask] / np.maximum(np.linalg.norm(truth[mask], axis=-1, keepdims=True), 1e-12)
-    return float(np.degrees(np.arccos(np.clip((p * t).sum(-1), -1, 1))).mean())
+    return np.degrees(np.arccos(np.clip((p * t).sum(-1), -1, 1)))
+
+
+def normal_angle_deg(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
+    """Mean angle in degrees between unit normal maps over the mask."""
+    return float(normal_angles_deg(pred, truth, mask).mean())
 
 
 def pearson(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:

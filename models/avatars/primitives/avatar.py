@@ -25,13 +25,13 @@ from scipy.ndimage import binary_dilation
 from torch import nn
 
 from models.avatars.base import BACKGROUND, Avatar, RayOutput, TrainingBatch
-from models.avatars.codynerf.avatar import key_light_dir
 from models.avatars.components import losses
 from models.avatars.components.codes import frame_code, left_out_weights
 from models.avatars.components.poses import PoseCorrected
 from models.avatars.components.rigid import kabsch
+from models.avatars.effects import key_light_dir
 from models.avatars.mesh import MeshField
-from models.avatars.primitives import march, native
+from models.avatars.primitives import dispatch, march
 from models.avatars.primitives.chart import (
     GAZE_JOINTS,
     GEOMETRY_SCALE_M,
@@ -129,18 +129,6 @@ VIDEO_SETTINGS = {"front": 2.0, "expression_maps": True, "global_expression": Fa
 """PrimitivesConfig's fields for a tracked video (default_config)."""
 
 
-def grid_normals(density: torch.Tensor, rotations: torch.Tensor, half: torch.Tensor) -> torch.Tensor:
-    """(P,M,M,M,3) unit normals, world, of density grids (P,M,M,M) [z, y, x]: minus the density's gradient
-    (central differences, one-sided at the faces), from voxel steps to the box's unit frame ((M-1)/2 voxels a
-    unit), to metres (1/h) and to world (R); 0 where the density is flat."""
-    M = density.shape[1]
-    gz, gy, gx = torch.gradient(density, dim=(1, 2, 3)) if M > 1 else (torch.zeros_like(density),) * 3
-    g = torch.stack([gx, gy, gz], -1) * (0.5 * (M - 1)) / half.clamp_min(1e-9)[:, None, None, None]
-    world = torch.einsum("pij,pzyxj->pzyxi", rotations, g)
-    n2 = world.square().sum(-1, keepdim=True)
-    return -world * torch.rsqrt(n2.clamp_min(1e-12)) * (n2 > 1e-12)
-
-
 @dataclass
 class PrimitivesGeometry:
     """One frame as the primitives see it: the posed mesh, the head's rigid pose, the decoder's inputs from the
@@ -187,11 +175,16 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     config_class: ClassVar[type] = PrimitivesConfig
     config_key: ClassVar[str] = "primitives"
     """avatar.json's entry for the sizes."""
+    normals_from_surface: ClassVar[bool] = True
+    """The opacity grids' gradients, voxel by voxel, are noise (41 degrees from the truth on the demo's capture):
+    the normals buffer is the rendered surface's (base.py)."""
 
     def __init__(self, head_model: HeadModel, cfg: PrimitivesConfig, n_frames: int, background: np.ndarray,
                  effects: tuple[str, ...] = (), light_dir: tuple[float, float, float] | None = None):
         super().__init__(head_model, n_frames, background)
         self.cfg = cfg
+        self.displayed_by: dispatch.Ran | None = None
+        """Which march displayed the last batch (display_march)."""
         self._effects = tuple(effects)
         self.light_dir = light_dir if effects else None
         """The capture's key light (world, towards it) where it records one and the effects call for light: the
@@ -292,13 +285,11 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return "shadows" in self._effects and self.light_dir is not None
 
     def shown_channels(self, lit: bool = False) -> tuple[str, ...]:
-        """The colour grids' channels beyond rgb that display composites: the normals (3, from the opacity grid's
-        gradient) and the key light's visibility (1, for rgb_light), each where the avatar has it and the render
-        makes the buffer (display_buffers); none for the lit inspection pass (its rgb alone)."""
+        """The colour grids' channels beyond rgb that display composites: the key light's visibility (1, for
+        rgb_light) where the avatar casts shadows and the render makes the buffer (display_buffers); none for the
+        lit inspection pass (its rgb alone). The normals are the surface's (normals_from_surface), not composited."""
         want = self.display_buffers
-        names = [name for name, has in (("normals", self.needs_normals), ("rgb_light", self.casts_shadows))
-                 if has and not lit and (want is None or name in want)]
-        return tuple(names)
+        return ("rgb_light",) if self.casts_shadows and not lit and (want is None or "rgb_light" in want) else ()
 
     def layout(self) -> dict[str, tuple[int, float | str]]:
         return super().layout() | {"normals": (3, 0.0), "rgb_light": (3, 1.0), "rgb_no_shadows": (3, BACKGROUND)}
@@ -518,8 +509,6 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         extras = self.shown_channels(lit) if extras is None else extras
         if training:  # no loss reads the normals or the visibility: the march composites colour alone
             return march.Primitives(centres, rotations, half, density, colour), offsets
-        if "normals" in extras:
-            colour = torch.cat([colour, grid_normals(density, rotations, half)], -1)
         if "rgb_light" in extras:  # each texel's visibility through its column of voxels: the rgb_light buffer
             K, M = self.cfg.grid, self.cfg.voxels
             texels = light.reshape(K, M, K, M).permute(0, 2, 1, 3).reshape(K * K, 1, M, M, 1)[cells]
@@ -562,30 +551,28 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         code = self.training_code(frame, generator) if training and frame is not None else None
         prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit, code)
         if training:
-            out = march.march(rays.origins, rays.directions, self.ray_background(rays), prims,
-                              march.candidate_lists(rays.origins, rays.directions, prims), self.cfg.samples)
+            out, _ = dispatch.march_rays(rays.origins, rays.directions, self.ray_background(rays), prims,
+                                         self.cfg.samples)
         else:
             out = self.display_march(rays.origins, rays.directions, self.ray_background(rays), prims)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
-        if not training and "normals" in self.shown_channels(lit):
-            buffers["normals"] = out.extra[:, :3]
         return RayOutput(buffers, (prims, offsets, out, rays, frame))
 
     def display_march(self, origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor,
                       prims: march.Primitives) -> march.MarchOutput:
-        """The march as display runs it (and the bench times it): the rays in as many groups as display_cores (else
-        torch's threads; one thread a group), each with its candidate lists; in waves with early termination,
-        samples by the voxels a segment crosses, colour looked up only where it shows; render_image's should_stop
-        asked before each wave."""
+        """The march as display runs it (and the bench times it): in C where it can, else in torch (dispatch.py; what
+        ran is kept for describe_display); the rays in as many groups as display_cores (else torch's threads; one
+        thread a group); in waves with early termination, samples by the voxels a segment crosses, colour looked up
+        only where it shows; render_image's should_stop asked between waves."""
         cores = self.display_cores or torch.get_num_threads()
         parts = cores if len(origins) >= DISPLAY_PARALLEL_RAYS else 1
-        if native.available(prims, origins):  # the same march in C (native.py): 3x faster on one core
-            lists = march.candidate_lists(origins, directions, prims)
-            return native.march(origins, directions, background, prims, lists, self.samples, self.cfg.stop_below,
-                                 march.DISPLAY_MIN_WEIGHT, parts, should_stop=self.should_stop)
-        return march.march_in_parts(origins, directions, background, prims, self.samples, self.cfg.stop_below,
-                                    parts, min_weight=march.DISPLAY_MIN_WEIGHT, adaptive=True,
-                                    should_stop=self.should_stop)
+        out, self.displayed_by = dispatch.march_rays(origins, directions, background, prims, self.samples,
+                                                     dispatch.Display(self.cfg.stop_below, parts, self.should_stop))
+        return out
+
+    def describe_display(self) -> str:
+        """The march of the last display batch: "C", or torch and why (dispatch.Ran); "" before any."""
+        return "" if self.displayed_by is None else str(self.displayed_by)
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
         out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)

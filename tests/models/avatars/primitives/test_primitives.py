@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from models.avatars.base import RenderCancelled
-from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, grid_normals
+from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import (
     ELEVATION_DEG,
@@ -23,7 +23,6 @@ from models.avatars.registry import load_avatar
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from models.head.flame import load_flame
-from models.head.lbs import rotation_matrix_from_axis_angle
 from models.training.trainer import TrainConfig, prepare_training
 from render.camera import framing_camera
 from render.gl.raster import Rasterizer
@@ -103,18 +102,6 @@ def test_tiled_chart_rays_hit_what_every_triangle_test_hits(builtin_model, ict_m
     assert radius[0] == np.pi and radius[1] == np.pi and 0.5 < radius[2] < 0.6  # the last: 30.4 degrees
 
 
-def test_grid_normals_of_a_density_ramp():
-    """Density rising along a rotated box's x axis: the normal is minus that axis in world, wherever in the grid
-    (one-sided differences at the faces give the same slope for a linear ramp)."""
-    M = 5
-    rot = rotation_matrix_from_axis_angle(torch.tensor([[0.3, -0.5, 0.8]], dtype=torch.float64))
-    x = torch.linspace(-1, 1, M, dtype=torch.float64)
-    density = (100.0 + 40.0 * x)[None, None, None, :].expand(1, M, M, M).contiguous()  # [z, y, x]
-    n = grid_normals(density, rot, torch.tensor([[0.01, 0.02, 0.03]], dtype=torch.float64))
-    torch.testing.assert_close(n, (-rot[0, :, 0]).expand(1, M, M, M, 3), atol=1e-12, rtol=0)
-    assert grid_normals(torch.ones(1, M, M, M), rot.float(), torch.ones(1, 3)).abs().max() == 0  # flat: 0
-
-
 def test_gaze_enters_apart_from_expression():
     dec = SlabDecoder(10, 6, grid=8, voxels=4, width=16)
     with torch.no_grad():
@@ -190,11 +177,11 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     rays, _ = avatar.image_rays(geo, cam, r)
     with torch.inference_mode():
         avatar.render_rays(rays[:50], geo, None)
-        cached = geo.decoded[False, ("normals", "rgb_light")]
+        cached = geo.decoded[False, ("rgb_light",)]
         avatar.render_rays(rays[50:], geo, None)
-        assert geo.decoded[False, ("normals", "rgb_light")] is cached
-        assert cached[0].colour.shape[-1] == 3 + 3 + 1
-    # A render makes the buffers asked for alone: the colour render composites rgb, 3 of the grids' 7 channels,
+        assert geo.decoded[False, ("rgb_light",)] is cached
+        assert cached[0].colour.shape[-1] == 3 + 1  # the normals are the surface's (render_image), not composited
+    # A render makes the buffers asked for alone: the colour render composites rgb, 3 of the grids' 4 channels,
     # and gives the same pixels.
     plain = avatar.render_image(f.controls, cam, r, buffers=())
     assert "normals" not in plain and "normals" in out
