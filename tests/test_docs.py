@@ -1,0 +1,188 @@
+"""The README and docs/ against the repository: links that lead to files, commands the CLI knows, a README short
+enough to read, and a command table that lists every subcommand and no other."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import shlex
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+from app.cli import build_parser
+
+REPO = Path(__file__).resolve().parents[1]
+README = REPO / "README.md"
+PAGES = [README, *sorted((REPO / "docs").glob("*.md"))]
+README_MAX_LINES = 220
+
+FENCE = re.compile(r"^(```|~~~)")
+LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
+INLINE_CODE = re.compile(r"`[^`\n]*`")
+COMMAND = re.compile(r"(?:^|[\s/])avatar-studio\s+(.*)$")
+TABLE_NAME = re.compile(r"^\|\s*`([a-z][a-z0-9-]*)`\s*\|")
+
+
+def _name(page: Path) -> str:
+    return str(page.relative_to(REPO))
+
+
+def _prose(text: str) -> list[str]:
+    """The page's lines outside fenced code blocks, inline code removed (a link there is an example, not a link)."""
+    lines, fenced = [], False
+    for line in text.splitlines():
+        if FENCE.match(line.strip()):
+            fenced = not fenced
+        elif not fenced:
+            lines.append(INLINE_CODE.sub("", line))
+    return lines
+
+
+def _code_lines(text: str) -> list[str]:
+    """The logical lines of the page's fenced code blocks: backslash continuations joined, comments dropped."""
+    lines, fenced, pending = [], False, ""
+    for line in text.splitlines():
+        if FENCE.match(line.strip()):
+            fenced, pending = not fenced, ""
+            continue
+        if not fenced:
+            continue
+        line = re.sub(r"(^|\s)#.*$", "", line)  # a shell comment
+        if line.rstrip().endswith("\\"):
+            pending += line.rstrip()[:-1] + " "
+            continue
+        lines.append(pending + line)
+        pending = ""
+    return lines
+
+
+def _anchors(page: Path) -> set[str]:
+    """The fragments GitHub gives the page's headings: lower case, punctuation dropped, spaces as hyphens."""
+    headings = [line.lstrip("#").strip() for line in _prose(page.read_text()) if re.match(r"#{1,6} ", line)]
+    return {re.sub(r"[^\w\- ]", "", h.lower()).replace(" ", "-") for h in headings}
+
+
+@cache
+def _subcommands() -> dict:
+    """Subcommand name -> its argparse parser, from the CLI's own parser."""
+    parser = build_parser()
+    return dict(next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices)
+
+
+def _command_calls(text: str) -> list[tuple[str, list[str]]]:
+    """Each `avatar-studio COMMAND ...` in the page's code blocks: the command's name and its words after it."""
+    calls = []
+    for line in _code_lines(text):
+        if "..." in line:  # an elided example: its words are not all the command's own
+            continue
+        for part in re.split(r"&&|\|\||;|\|", line):
+            m = COMMAND.search(part)
+            if m:
+                words = shlex.split(m.group(1))
+                if words and not words[0].startswith("-"):  # `avatar-studio --help`: the top level's own
+                    calls.append((words[0], words[1:]))
+    return calls
+
+
+def _inline_command_calls(text: str) -> list[tuple[str, list[str]]]:
+    """Each `avatar-studio COMMAND ...` in the page's inline code (outside code blocks), a span over a line break
+    joined; option brackets and alternatives (`[--size 256]`, `obj|ply`) are read as words."""
+    lines, fenced = [], False
+    for line in text.splitlines():
+        if FENCE.match(line.strip()):
+            fenced = not fenced
+        elif not fenced:
+            lines.append(line)
+    calls = []
+    for span in re.findall(r"`([^`]*)`", "\n".join(lines)):
+        m = COMMAND.search(span.replace("\n", " "))
+        if m is None or "..." in span:
+            continue
+        words = re.sub(r"[\[\]|]", " ", m.group(1)).split()
+        # `avatar-studio COMMAND --help`: a placeholder; `avatar-studio --help`: the top level's own option
+        if words and not words[0].isupper() and not words[0].startswith("-"):
+            calls.append((words[0], words[1:]))
+    return calls
+
+
+def _unknown_options(name: str, words: list[str]) -> list[str]:
+    known = _subcommands()[name]._option_string_actions
+    return [w for w in words if w.startswith("--") and w.split("=", 1)[0] not in known]
+
+
+def test_the_pages_exist():
+    assert README.is_file()
+    assert len(PAGES) > 1, "docs/ holds no pages"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=_name)
+def test_every_relative_link_and_image_leads_to_a_file(page: Path):
+    broken = []
+    for line in _prose(page.read_text()):
+        for target in LINK.findall(line):
+            if re.match(r"[a-z][a-z0-9+.-]*:", target):  # a web address
+                continue
+            path, _, fragment = target.partition("#")
+            file = page.parent / path if path else page
+            if not file.exists():
+                broken.append(target)
+            elif fragment and file.suffix == ".md" and fragment not in _anchors(file):
+                broken.append(target)
+    assert not broken, f"{_name(page)}: links to files or headings that do not exist: {broken}"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=_name)
+def test_every_command_in_a_code_block_is_one_the_cli_knows(page: Path):
+    wrong = []
+    for name, words in _command_calls(page.read_text()):
+        if name not in _subcommands():
+            wrong.append(f"no subcommand '{name}'")
+        elif bad := _unknown_options(name, words):
+            wrong.append(f"avatar-studio {name}: no option {', '.join(bad)}")
+    assert not wrong, f"{_name(page)}: {wrong}"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=_name)
+def test_every_command_in_inline_code_is_one_the_cli_knows(page: Path):
+    wrong = []
+    for name, words in _inline_command_calls(page.read_text()):
+        if name not in _subcommands():
+            wrong.append(f"no subcommand '{name}'")
+        elif bad := _unknown_options(name, words):
+            wrong.append(f"avatar-studio {name}: no option {', '.join(bad)}")
+    assert not wrong, f"{_name(page)}: {wrong}"
+
+
+def test_the_command_check_catches_a_wrong_command_and_a_wrong_option():
+    text = ("```\n.venv/bin/avatar-studio train DATA --minutes 3 \\\n    --no-such-flag 2 --out AV  # a comment --x\n"
+            "avatar-studio no-such-command --out X\nOMP_NUM_THREADS=1 avatar-studio eval AV DATA --split test\n```\n"
+            "avatar-studio train DATA --not-in-a-code-block\n")
+    calls = _command_calls(text)
+    assert [name for name, _ in calls] == ["train", "no-such-command", "eval"]
+    assert _unknown_options("train", calls[0][1]) == ["--no-such-flag"]
+    assert "no-such-command" not in _subcommands()
+    assert _unknown_options("eval", calls[2][1]) == []
+    inline = _inline_command_calls("Run `avatar-studio render AV\n[--sise 64]` or `avatar-studio COMMAND --help`.\n")
+    assert inline == [("render", ["AV", "--sise", "64"])]
+    assert _unknown_options("render", inline[0][1]) == ["--sise"]
+
+
+def test_heading_fragments_are_the_ones_github_makes():
+    page = REPO / "docs" / "models.md"
+    assert "displays-march-in-c" in _anchors(page)
+    assert "1-open-the-demo" in _anchors(README)
+
+
+def test_the_readme_is_short():
+    lines = len(README.read_text().splitlines())
+    assert lines <= README_MAX_LINES, f"README.md has {lines} lines; keep it under {README_MAX_LINES}"
+
+
+def test_the_readme_command_table_lists_exactly_the_subcommands():
+    listed = [m.group(1) for line in README.read_text().splitlines() if (m := TABLE_NAME.match(line))]
+    assert len(listed) == len(set(listed)), f"a command listed twice: {listed}"
+    assert set(listed) == set(_subcommands()), (
+        f"missing from the README's table: {sorted(set(_subcommands()) - set(listed))}; "
+        f"listed but not commands: {sorted(set(listed) - set(_subcommands()))}")
