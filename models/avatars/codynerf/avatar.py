@@ -27,6 +27,7 @@ from models.avatars.codynerf.training import LossWeights, consistency_weight, ra
 from models.avatars.components import losses
 from models.avatars.components.codes import frame_code
 from models.avatars.components.poses import PoseCorrected
+from models.avatars.effects import key_light_dir
 from models.avatars.mesh import MeshField, front_eye
 from models.avatars.quality import Quality
 from models.head.controls import Controls
@@ -457,15 +458,3 @@ def field_config(meta: dict) -> FieldConfig:
             raise ValueError(f"field light_dir {f['light_dir']}: not a direction (three finite numbers, not all 0)")
         light = tuple(float(v) for v in light / np.linalg.norm(light))
     return FieldConfig(**{**f, "effects": tuple(f["effects"]), "light_dir": light})
-
-
-def key_light_dir(lighting: dict | None) -> tuple[float, float, float] | None:
-    """The key light's direction (world, towards the light) from a capture's lighting record, if it has one
-    (synthetic captures do; a tracked video does not)."""
-    try:
-        d = np.asarray((lighting or {})["key_light"]["direction"], np.float64)
-    except (KeyError, TypeError):
-        return None
-    if d.shape != (3,) or not np.isfinite(d).all() or np.linalg.norm(d) < 1e-9:
-        return None
-    return tuple(float(v) for v in d / np.linalg.norm(d))

@@ -12,6 +12,9 @@ screen tiles (the rays of a camera share an origin) and gives each ray its tile'
 every ray every primitive (the reference). Training marches every (ray, candidate) pair in one pass; display in
 waves of a few candidates of every live ray at once (the slab test, then samples where they meet) and stops a ray
 once it is opaque (early termination), so what lies behind the first surfaces is neither tested nor sampled.
+
+This is the reference, in torch alone, on any device. native.py does display's march and training's lookups in C on
+the CPU (tests hold the two together); dispatch.py chooses between them and says which ran.
 """
 
 from __future__ import annotations
@@ -205,6 +208,10 @@ def ray_box_segments(origins: torch.Tensor, directions: torch.Tensor, prims: Pri
     return t_in, torch.where(meet, t_out, t_in), meet, o, d
 
 
+Gather = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
+"""A trilinear lookup with `trilinear`'s arguments and result: (values (P,M,M,M,C), prim (N,), local (N,3)) -> (N,C)."""
+
+
 def trilinear(values: torch.Tensor, prim: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
     """(N,C) values (P,M,M,M,C) of primitives prim (N,) at box coordinates local (N,3) in [-1,1] (x, y, z of the
     box's axes; voxel centres at -1 + 2k/(M-1), clamped to the grid), trilinearly.
@@ -330,7 +337,7 @@ termination by groups): fewer, larger operations than one candidate a wave, and 
 
 
 def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: Primitives,
-          lists: CandidateLists, samples: int, stop_below: float = 0.0, exact_lookup: bool = False,
+          lists: CandidateLists, samples: int, stop_below: float = 0.0, gather: Gather | None = None,
           wave: int = WAVE_CANDIDATES, min_weight: float = 0.0, adaptive: bool = False,
           should_stop: Callable[[], bool] | None = None) -> MarchOutput:
     """Composite the primitives along R rays (origins, directions (R,3), background (R,3) or (3,)), each through
@@ -340,10 +347,11 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
     density is looked up first, and the colour channels only at samples whose compositing weight reaches it (the
     others, empty space and what lies behind opaque matter, add less than that each). adaptive (display): a segment
     takes one sample a voxel it crosses and one more, `samples` at most (voxel_counts), where training takes
-    `samples` on every segment. exact_lookup: the gather-based `trilinear` instead of grid_sample (the
-    reference). should_stop: asked before each wave; yes raises RenderCancelled (a newer request won)."""
+    `samples` on every segment. gather: the lookups by this trilinear function instead of grid_sample (`trilinear`:
+    the reference's gathers). should_stop: asked before each wave; yes raises RenderCancelled (a newer request
+    won)."""
     R = len(origins)
-    lookup_of = Lookups(prims, exact_lookup)
+    lookup_of = Lookups(prims, gather)
     frames = box_frames(origins, prims)
     dtype, device = prims.density.dtype, origins.device
     total = Composited.empty(R, prims.colour.shape[-1], dtype, device)
@@ -435,21 +443,15 @@ def march_in_parts(origins: torch.Tensor, directions: torch.Tensor, background: 
 
 
 class Lookups:
-    """The primitives' density (N,) and colour channels (N,C) at sample points: in C (`native.trilinear`) for
-    float32 grids on the CPU where it is built, else by grid_sample on packed volumes, or (exact) by the
-    gather-based `trilinear`. `points` places segments' samples in the coordinates the lookup reads."""
+    """The primitives' density (N,) and colour channels (N,C) at sample points: by one grid_sample on the grids
+    packed side by side, or by `gather`, a trilinear lookup of the grids as they are (`trilinear`, the reference's
+    gathers; or one that a caller passes in, as dispatch.py passes the C lookups). `points` places segments'
+    samples in the coordinates the lookup reads."""
 
-    def __init__(self, prims: Primitives, exact: bool = False):
-        from models.avatars.primitives import native
-
-        self.exact = exact
+    def __init__(self, prims: Primitives, gather: Gather | None = None):
+        self.gather = gather
         P, M = prims.density.shape[:2]
-        # float32 grids on the CPU (training's): looked up in C, gradients and all (native.TrilinearLookup: the 3D
-        # grid_sample's forward and backward took a quarter of a training step's CPU time); float64 by grid_sample.
-        self.native = (not exact and prims.density.dtype == torch.float32 and prims.density.device.type == "cpu"
-                       and native.library() is not None)
-        if exact or self.native:
-            self.trilinear = native.trilinear if self.native else trilinear
+        if gather is not None:
             self.density_grid, self.colour_grid = prims.density[..., None], prims.colour
             return
         self.packed_density = pack(prims.density[..., None])
@@ -463,12 +465,12 @@ class Lookups:
     def points(self, prim: torch.Tensor, o_box: torch.Tensor, d_box: torch.Tensor, samples: SegmentSamples
                ) -> tuple[torch.Tensor, torch.Tensor | None]:
         """The samples of segments of primitives prim (S,) (rays o' + d' t in their boxes' unit frames (S,3)),
-        clamped inside their boxes: their coordinates (N,3) (the packed volume's, or (exact) the boxes'), and
-        (exact) each sample's primitive (N,); select samples with `pick`."""
+        clamped inside their boxes: their coordinates (N,3) (the packed volume's, or (gather) the boxes'), and
+        (gather) each sample's primitive (N,); select samples with `pick`."""
         t = samples.t
         local = torch.addcmul(samples.of_segments(o_box), samples.of_segments(d_box), t[:, None]).clamp_(-1.0, 1.0)
         prim = samples.of_segments(prim)
-        if self.exact or self.native:
+        if self.gather is not None:
             return local, prim
         x = torch.addcmul(prim.to(t.dtype) * self.shift[0] + self.shift[1], local[:, 0], self.scale[0].to(t.dtype))
         return torch.cat([x[:, None], local[:, 1:]], 1), None
@@ -481,14 +483,14 @@ class Lookups:
 
     def density(self, points: tuple[torch.Tensor, torch.Tensor | None]) -> torch.Tensor:
         coords, prim = points
-        if self.exact or self.native:
-            return self.trilinear(self.density_grid, prim, coords)[:, 0]
+        if self.gather is not None:
+            return self.gather(self.density_grid, prim, coords)[:, 0]
         return lookup(self.packed_density, coords)[:, 0]
 
     def colour(self, points: tuple[torch.Tensor, torch.Tensor | None]) -> torch.Tensor:
         coords, prim = points
-        if self.exact or self.native:
-            return self.trilinear(self.colour_grid, prim, coords)
+        if self.gather is not None:
+            return self.gather(self.colour_grid, prim, coords)
         return lookup(self.packed_colour, coords)
 
 

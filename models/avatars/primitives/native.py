@@ -6,11 +6,12 @@ user's cache, called through ctypes (which lets go of Python's lock for the call
   took 92-112 ms of marching after its decode on two cores, where the studio asks for full-quality pixels 150 ms
   after a slider moves, their way to the window included. One ray at a time, the C loop keeps a ray's light, sums
   and lookups in registers and stops at the candidate where the ray turns opaque: 44 ms (bench_primitives).
-- `trilinear`, training's lookups with their gradients (march.Lookups uses it for float32 grids on the CPU): the
+- `trilinear`, training's lookups with their gradients (the torch march takes it for float32 grids on the CPU): the
   3D grid_sample's backward was a sixth of a training step's time.
 
-The torch march stays the reference (tests hold the two together) and the path for CUDA.
-`AVATAR_STUDIO_NATIVE=0` turns both off (torch then does all, as on a machine without a C compiler)."""
+The torch march stays the reference (tests hold the two together) and the path for CUDA; dispatch.py chooses which
+runs (`unavailable` says why not C). `AVATAR_STUDIO_NATIVE=0` turns both off (torch then does all, as on a machine
+without a C compiler)."""
 
 from __future__ import annotations
 
@@ -106,10 +107,22 @@ def failure() -> str | None:
     return _failure
 
 
-def available(prims: m.Primitives, origins: torch.Tensor) -> bool:
-    """Whether the C march can display these: CPU tensors, no gradient wanted, few enough channels, built."""
-    return (origins.device.type == "cpu" and prims.density.device.type == "cpu" and not torch.is_grad_enabled()
-            and prims.colour.shape[-1] <= MAX_CHANNELS and library() is not None)
+def unavailable(prims: m.Primitives, origins: torch.Tensor, display: bool) -> str:
+    """Why the C code cannot do this march ("" where it can): display's march (`march`) wants CPU tensors, no
+    gradient and at most MAX_CHANNELS colour channels; training's lookups (`trilinear`) float32 grids on the CPU;
+    both the library built."""
+    device = prims.density.device if prims.density.device.type != "cpu" else origins.device
+    if device.type != "cpu":
+        return f"tensors on {device.type}"
+    if display and torch.is_grad_enabled():
+        return "gradients wanted"
+    if display and prims.colour.shape[-1] > MAX_CHANNELS:
+        return f"{prims.colour.shape[-1]} colour channels (C holds {MAX_CHANNELS})"
+    if not display and prims.density.dtype != torch.float32:
+        return f"{str(prims.density.dtype).removeprefix('torch.')} grids"
+    if library() is None:
+        return failure() or "AVATAR_STUDIO_NATIVE=0"
+    return ""
 
 
 def _ptr(t: torch.Tensor) -> ctypes.c_void_p:

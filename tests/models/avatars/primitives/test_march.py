@@ -36,7 +36,7 @@ def camera_rays(size: int = 24, yaw: float = 20.0, distance: float = 0.6, dtype=
 def render(prims, origins, dirs, lists, samples=6, reference=False):
     """The fast path (tiled lists, grid_sample lookups); reference: every primitive on every list, gathered lookups."""
     bg = torch.tensor([0.2, 0.3, 0.4], dtype=origins.dtype)
-    return march.march(origins, dirs, bg, prims, lists, samples, exact_lookup=reference)
+    return march.march(origins, dirs, bg, prims, lists, samples, gather=march.trilinear if reference else None)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -114,8 +114,8 @@ def test_packed_lookup_is_the_trilinear_reference():
     o = torch.rand(500, 3, generator=g, dtype=torch.float64) * 2 - 1  # the points as rays o' + d' t
     t = torch.rand(500, 1, generator=g, dtype=torch.float64) + 0.5
     d = (local - o) / t
-    for exact in (False, True):
-        lookups = march.Lookups(prims, exact)
+    for gather in (None, march.trilinear):
+        lookups = march.Lookups(prims, gather)
         points = lookups.points(prim, o, d, march.SegmentSamples(torch.arange(500), t[:, 0], t[:, 0], 0))
         torch.testing.assert_close(lookups.colour(points), want, atol=1e-12, rtol=0)
         torch.testing.assert_close(lookups.density(points), want[:, 0], atol=1e-12, rtol=0)

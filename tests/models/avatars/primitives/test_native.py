@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from models.avatars.base import RenderCancelled
-from models.avatars.primitives import march, native
+from models.avatars.primitives import dispatch, march, native
 from tests.models.avatars.primitives.test_march import camera_rays, random_primitives
 
 pytestmark = pytest.mark.skipif(native.library() is None, reason=f"the C march was not built: {native.failure()}")
@@ -152,8 +152,9 @@ def test_training_marches_with_c_lookups_as_with_grid_sample(monkeypatch):
         monkeypatch.setenv("AVATAR_STUDIO_NATIVE", setting)
         leaves = [t.detach().clone().requires_grad_(True) for t in (prims.half_sizes, prims.density, prims.colour)]
         p = march.Primitives(prims.centres, prims.rotations, *leaves)
-        assert march.Lookups(p).native == (setting == "1")
-        out = march.march(origins, dirs, bg, p, march.candidate_lists(origins, dirs, p), 6)
+        out, ran = dispatch.march_rays(origins, dirs, bg, p, 6)
+        assert ran == (dispatch.Ran("torch", "c") if setting == "1" else
+                       dispatch.Ran("torch", "torch", "AVATAR_STUDIO_NATIVE=0"))
         (out.rgb.square().sum() + out.depth.sum()).backward()
         results.append((out.rgb.detach(), *(t.grad for t in leaves)))
     assert results[0][0].std() > 0.05
