@@ -16,9 +16,8 @@ import os
 import platform
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Annotated
 
 import cv2
 import numpy as np
@@ -26,6 +25,7 @@ import torch
 from tqdm import tqdm
 
 from app.avatar_commands import face_mask_of
+from app.configs import BenchConfig
 from app.errors import UserInputError
 from models.avatars.base import Avatar
 from models.avatars.effects import effects_name
@@ -35,7 +35,6 @@ from models.capture.dataset import load_split
 from models.capture.frames import frame_camera, load_rgb
 from models.files import atomic_write_bytes, foreign_files
 from models.head.sources import load_head
-from models.ranges import Range
 from models.training.metrics import face_mse, psnr
 from models.training.trainer import TrainConfig, prepare_training
 from render.gl.context import GLContext
@@ -77,31 +76,6 @@ PRESET_RULES = {"final": 45.0, "preview": 35.0, "draft": 25.0}
 """Each preset is the fastest setting on the Pareto front whose PSNR against the reference is at least this
 (dB): 45 dB is an error under 0.6% of the range (invisible), 35 dB under 2% (a flicker at edges), 25 dB a
 blurred but faithful picture."""
-
-
-@dataclass(frozen=True)
-class BenchConfig:
-    out: Path = Path("out/bench")
-    """Folder for results.json, the charts, the capture and the avatars it trains."""
-    quick: bool = False
-    """Under 5 minutes on a 2-core CPU: a 64 px capture, 25 s of training per effect set, 3 test frames."""
-    dataset: Path | None = None
-    """A capture with a test split; by default a `sun` capture of the built-in head is synthesized into OUT."""
-    avatars: tuple[Path, ...] = ()
-    """Trained avatars of that capture whose rendering is measured (one per effect set); by default the ones
-    the training curves train."""
-    nerface: Path | None = None
-    """A trained NerFACE avatar of the capture (timed and measured); by default an untrained one of the
-    published size is timed (its weights do not change the work)."""
-    train_seconds: Annotated[float, Range(0)] | None = None
-    """Training seconds per effect set for the training curves (default 300; quick: 25; 0: no curves, measure
-    the --avatars only)."""
-    size: Annotated[int, Range(8, 4096)] | None = None
-    """Image width and height, pixels (default 128; quick: 64)."""
-    test_frames: Annotated[int, Range(1)] | None = None
-    """Held-out test frames measured per setting (default 6; quick: 3)."""
-    store_presets: bool = True
-    """Write the chosen presets into each measured avatar (presets.json)."""
 
 
 def machine() -> str:

@@ -3,17 +3,13 @@ people's captures for the universal prior."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Annotated
-
+from app.configs import HELD_OUT_FROM, CorpusConfig, DatasetConfig
 from app.errors import UserInputError
 from app.progress import Progress, progress_callback
 from models.capture.dataset import SPLITS, check_images, load_split
 from models.capture.scenes import SCENE_EFFECTS
 from models.capture.synthetic import SynthConfig, synthesize
 from models.head.sources import load_head
-from models.ranges import Range
 from render.gl.context import GLContext
 
 
@@ -34,12 +30,6 @@ def run_synth(cfg: SynthConfig) -> int:
     return 0
 
 
-@dataclass(frozen=True)
-class DatasetConfig:
-    dataset: Path
-    """Capture folder: ours (transforms_*.json with a head model), NerFACE's, or IMavatar's flame_params.json."""
-
-
 def run_dataset(cfg: DatasetConfig) -> int:
     """Validate every split of a capture (its files, and every image they list opened and measured) and summarise
     it; the first problem ends with exit status 2."""
@@ -54,30 +44,6 @@ def run_dataset(cfg: DatasetConfig) -> int:
               + (f", lighting: {s.lighting.get('scene')} ({', '.join(s.lighting.get('effects', [])) or 'ambient'})"
                  if s.lighting else ""))
     return 0
-
-
-HELD_OUT_FROM = 1000
-"""Identity seeds from here up are the held-out people every evaluation of the prior uses: never in a corpus."""
-
-
-@dataclass(frozen=True)
-class CorpusConfig:
-    out: Path = Path("out/corpus")
-    """Folder to create: one capture a person (id0001, id0002, ...)."""
-    identities: Annotated[int, Range(1, HELD_OUT_FROM - 1)] = 8
-    """People in the corpus: identity seeds --first .. --first + N - 1 (shape, skin tone and features drawn from
-    the seed: `synth --identity K`)."""
-    first: Annotated[int, Range(1, HELD_OUT_FROM - 1)] = 1
-    head: str = "builtin"
-    """HEAD: builtin, ict:PATH or flame:PATH (ICT's 100 identity components give the widest spread of faces)."""
-    scenes: str = "ambient"
-    """Lighting scenes, a comma list; the K-th person is captured under the (K mod n)-th."""
-    frames: Annotated[int, Range(10, 100000)] = 60
-    """Frames of each person's range-of-motion script (held-out frames included)."""
-    views: Annotated[int, Range(1, 16)] = 4
-    """Cameras at once on every frame, evenly round the head (the seed's multi-view capture: the prior learns the
-    whole head, back and top included, which a monocular scan never shows)."""
-    size: Annotated[int, Range(16, 2048)] = 128
 
 
 def run_corpus(cfg: CorpusConfig) -> int:

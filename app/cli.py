@@ -7,36 +7,108 @@ Exit status 0 on success, 2 on bad arguments or input files (one line naming the
 from __future__ import annotations
 
 import argparse
+import difflib
 import os
+import shutil
 import sys
+import textwrap
 import traceback
+from pathlib import Path
+from typing import NoReturn
 
 if sys.argv[1:2] == ["studio"]:
     # The window shares two cores with rendering threads: idle OpenMP threads must sleep, not spin (read by
     # the OpenMP runtime when torch loads, so before the imports below).
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from app.commands import COMMANDS
+from app.commands import COMMANDS, Command
 from app.config_cli import add_config_arguments, config_from_args
-from app.errors import INPUT_ERRORS
+
+PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="avatar-studio", description="Make and drive neural 3D head portraits.")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+class Parser(argparse.ArgumentParser):
+    """argparse's parser with its errors on one line, `PROG: error: WHAT` (the usage is in --help)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def version() -> str:
+    """The installed package's version; in a checkout that was never installed, pyproject.toml's."""
+    import importlib.metadata
+
+    try:
+        return importlib.metadata.version("avatar-studio")
+    except importlib.metadata.PackageNotFoundError:
+        import tomllib
+
+        return tomllib.loads(PYPROJECT.read_text())["project"]["version"]
+
+
+def command_listing(commands: list[Command], width: int) -> str:
+    """Commands and their summaries, a column of names and the summaries wrapped beside it, as argparse lists
+    options."""
+    column = max(len(c.name) for c in commands) + 2
+    return "\n".join(textwrap.fill(c.summary, max(width, column + 20), initial_indent=c.name.ljust(column),
+                                   subsequent_indent=" " * column, break_on_hyphens=False) for c in commands)
+
+
+def build_parser() -> Parser:
+    # argparse lists one subparsers action in one section: the two listings are written here, as the groups'
+    # descriptions (kept as written: RawDescriptionHelpFormatter), at argparse's width less the sections' indent.
+    width = shutil.get_terminal_size().columns - 4
+    parser = Parser(prog="avatar-studio", description="Make and drive neural 3D head portraits.",
+                    usage="%(prog)s [-h] [--version] COMMAND ...", formatter_class=argparse.RawDescriptionHelpFormatter,
+                    epilog="avatar-studio COMMAND --help: the command's options.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
+    for research in (False, True):
+        parser.add_argument_group("research commands" if research else "commands", command_listing(
+            [c for c in COMMANDS if c.research == research], width))
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", prog=parser.prog,
+                                help=argparse.SUPPRESS)
     for cmd in COMMANDS:
-        p = sub.add_parser(cmd.name, help=cmd.summary, description=cmd.summary)
+        p = sub.add_parser(cmd.name, description=cmd.summary)
         add_config_arguments(p, cmd.config, cmd.positional)
-        p.set_defaults(_command=cmd)
+        p.set_defaults(_command=cmd, _parser=p)
     return parser
 
 
+def did_you_mean(word: str, choices: list[str]) -> str:
+    """" (did you mean X?)" for the closest of the choices, or "".
+
+    >>> did_you_mean("rendr", ["render", "train"]), did_you_mean("--sise", ["--size", "--out"]), did_you_mean("x", [])
+    (' (did you mean render?)', ' (did you mean --size?)', '')
+    """
+    close = difflib.get_close_matches(word, choices, n=1)
+    return f" (did you mean {close[0]}?)" if close else ""
+
+
+def parse(parser: Parser, argv: list[str]) -> argparse.Namespace:
+    """The arguments parsed; an unknown command or option is an error on one line naming the closest one."""
+    names = [c.name for c in COMMANDS]
+    given = next((a for a in argv if not a.startswith("-")), None)  # the top level has no option with a value
+    if given is not None and given not in names:
+        parser.error(f"unknown command {given}{did_you_mean(given, names)}")
+    args, extras = parser.parse_known_args(argv)
+    if extras:
+        command: Parser = args._parser
+        unknown = next((a.partition("=")[0] for a in extras if a.startswith("-")), None)
+        if unknown is None:
+            command.error(f"unrecognized arguments: {' '.join(extras)}")
+        options = [s for a in command._actions for s in a.option_strings if s.startswith("--")]
+        command.error(f"unknown option {unknown}{did_you_mean(unknown, options)}")
+    return args
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = parse(build_parser(), sys.argv[1:] if argv is None else argv)
     cmd = args._command
+    from app.errors import INPUT_ERRORS  # their modules import torch: loaded once a command runs, not for --help
+
     try:
         config = config_from_args(cmd.config, args)
-        return int(cmd.run(config) or 0)
+        return int(cmd.runner()(config) or 0)
     except INPUT_ERRORS as e:
         print(f"avatar-studio {cmd.name}: error: {e}", file=sys.stderr)
         return 2

@@ -14,8 +14,7 @@ import typing
 from functools import cache
 from pathlib import Path
 
-from app.errors import UserInputError
-from models.ranges import check_config
+from models.ranges import OptionError, check_config
 
 
 @cache
@@ -54,7 +53,7 @@ def add_config_arguments(parser: argparse.ArgumentParser, cls: type, positional:
                                          else f.default_factory())
         name = f.name.rstrip("_")
         help_text = docs.get(f.name, "")
-        if not required and default not in (None, (), False):
+        if not required and default not in (None, (), False, ""):
             help_text += f" (default: {' '.join(map(str, default)) if isinstance(default, tuple) else default})"
         # Help texts are the fields' docstrings, not format strings: a "10%" must not reach argparse's % formatting.
         kw: dict = {"help": help_text.replace("%", "%%"), "dest": f.name}
@@ -85,7 +84,7 @@ def add_config_arguments(parser: argparse.ArgumentParser, cls: type, positional:
 
 def config_from_args(cls: type, args: argparse.Namespace):
     """The dataclass instance from parsed arguments (tuples stay tuples), its fields checked against their declared
-    ranges (models/ranges.py): UserInputError naming the option."""
+    ranges (models/ranges.py): OptionError naming the option."""
     values = {}
     for f in dataclasses.fields(cls):
         v = getattr(args, f.name)
@@ -94,5 +93,5 @@ def config_from_args(cls: type, args: argparse.Namespace):
     try:
         check_config(cfg)
     except ValueError as e:
-        raise UserInputError(str(e)) from None
+        raise OptionError(str(e)) from None
     return cfg

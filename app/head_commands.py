@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Annotated, Literal
 
 import numpy as np
 from PIL import Image
 
+from app.configs import HeadPoseConfig, MeshConfig, PreviewConfig
 from app.errors import UserInputError
 from models.capture.scenes import eye_attribute
 from models.files import atomic_write, atomic_write_bytes
@@ -17,44 +17,9 @@ from models.head.controls import Controls, ControlsError, load_controls
 from models.head.head import Head, posed_mesh
 from models.head.model import HeadModel, portrait_vertices
 from models.head.sources import load_head
-from models.ranges import Range
 from render.camera import framing_camera
 from render.gl.context import GLContext
 from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
-
-
-@dataclass(frozen=True)
-class HeadPoseConfig:
-    head: str = "builtin"
-    """HEAD: builtin, ict:PATH (the ICT npz or a FaceXModel/ folder) or flame:PATH (a FLAME .pkl)."""
-    controls: Path | None = None
-    """JSON file of controls: shape, expression (list or {name: weight}), pose, gaze, translation."""
-    expression: tuple[str, ...] = ()
-    """Expression weights NAME=W (or INDEX=W), applied after --controls."""
-
-
-@dataclass(frozen=True)
-class PreviewConfig(HeadPoseConfig):
-    out: Path = Path("out/preview.png")
-    """Output PNG (written atomically: an existing file is replaced only by a complete image)."""
-    yaw_deg: float = 0.0
-    """Camera orbit about the vertical axis, degrees; positive moves the camera to the subject's left."""
-    pitch_deg: float = 0.0
-    """Camera elevation, degrees."""
-    size: tuple[Annotated[int, Range(8, 8192)], Annotated[int, Range(8, 8192)]] = (512, 512)
-    """Image width and height in pixels."""
-    pass_: Literal["shaded", "normals", "wireframe", "shadow"] = "shaded"
-    """What to draw: lit mesh, normals as colours, mesh with edges, or the key light's shadow mask."""
-    landmarks: bool = False
-    """Draw the head model's landmarks."""
-    shadows: bool = True
-    """Cast shadows from the key light."""
-
-
-@dataclass(frozen=True)
-class MeshConfig(HeadPoseConfig):
-    out: Path = Path("out/head.obj")
-    """Output mesh, .obj or .ply."""
 
 
 def parse_expression_args(head: HeadModel, items: tuple[str, ...], controls: Controls) -> Controls:

@@ -23,58 +23,24 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from app.animation import SLIDER_RANGES, Animation, AnimationError, load_animation, save_animation
+from app.configs import ReenactConfig
 from app.errors import UserInputError
 from app.progress import Progress
 from app.track import TrackConfig, track_video
+from app.turntable import resized
 from models.files import atomic_write_bytes
 from models.head.controls import Controls
 from models.head.model import HeadModel
 from models.head.sources import load_head
-from models.ranges import Range
 
 EXPRESSION_RANGE, JAW_RANGE_DEG = SLIDER_RANGES["expression"], SLIDER_RANGES["jaw.open"]
 GAZE_RANGE_DEG = SLIDER_RANGES["gaze"]
 """Carried values are kept inside the Controls panel's slider ranges."""
-
-
-@dataclass(frozen=True)
-class ReenactConfig:
-    avatar: Path
-    """Avatar folder to drive."""
-    video: Path
-    """The performance: a video of one face (any person), or a capture folder, or another avatar's folder (its
-    capture's frames drive this one: "drive B from A's frames")."""
-    out: Path = Path("out/reenact.mp4")
-    """The mp4 to write (H.264); the animation goes beside it (OUT.json)."""
-    landmarker: Path | None = None
-    """MediaPipe's face landmarker bundle; default: $AVATAR_STUDIO_LANDMARKER."""
-    driver_head: str = ""
-    """The head model the driver is tracked with (builtin, ict:PATH, flame:PATH); default: the avatar's own,
-    which carries every expression."""
-    size: Annotated[int, Range(16, 2048)] = 256
-    """Height of the video, pixels (each half of a side-by-side video is size x size)."""
-    preset: Literal["draft", "preview", "final"] = "preview"
-    fps: Annotated[float, Range(0, 1000, above=True)] | None = None
-    """Frames a second taken from the driving video (default: every frame); a capture's frames play at this rate
-    (default 30)."""
-    seconds: Annotated[float, Range(0, 1e6, above=True)] | None = None
-    """Use only the driving video's first SECONDS."""
-    neutral_frame: Annotated[int, Range(0)] | None = None
-    """The driver's neutral frame (an index among the tracked frames); default: the calmest frame."""
-    side_by_side: bool = True
-    """The driver's frames beside the avatar (--no-side-by-side: the avatar alone)."""
-    pngs: bool = False
-    """Also write the frames as PNGs into a folder beside the mp4."""
-    meshes: Literal["none", "obj", "ply"] = "none"
-    """Also write the posed guide mesh of every frame (OUT_meshes/frame_0000.obj ...), for other tools."""
-    iterations: Annotated[int, Range(1, 100000)] = 400
-    """Fitting iterations of the tracker."""
 
 
 @dataclass
@@ -224,7 +190,7 @@ def driver_from_capture(cfg: ReenactConfig, avatar_head: HeadModel, avatar_spec:
 
 
 def run_reenact(cfg: ReenactConfig) -> int:
-    from app.avatar_commands import animation_frames, frames_folder, guide_mesh_writer
+    from app.avatar_commands import animation_frames, check_video_size, frames_folder, guide_mesh_writer
     from models.avatars.registry import load_avatar
     from render.gl.context import GLContext
     from render.gl.raster import Rasterizer
@@ -232,6 +198,7 @@ def run_reenact(cfg: ReenactConfig) -> int:
 
     if cfg.out.suffix.lower() != ".mp4":
         raise UserInputError(f"{cfg.out}: the performance is written as an .mp4")
+    check_video_size(cfg.size)
     signal.signal(signal.SIGTERM, interrupted)  # the studio's Cancel: as Ctrl-C, no partial mp4 is left
     pngs = frames_folder(cfg.out, cfg.pngs, "performance")
     anim_path = cfg.out.with_suffix(".json")
@@ -257,17 +224,15 @@ def run_reenact(cfg: ReenactConfig) -> int:
     def driver_image(t: float) -> np.ndarray:
         return driver.picture(int(np.argmin(np.abs(np.asarray(driver.times) - t))))
 
-    height = cfg.size - cfg.size % 2
     bar = Progress("reenact", anim.frames)
     gl = GLContext.headless()
     t1 = time.perf_counter()
 
     def frames():
-        rendered = animation_frames(avatar, Rasterizer(gl), anim, height, cfg.preset,
+        rendered = animation_frames(avatar, Rasterizer(gl), anim, cfg.size, cfg.preset,
                                     on_frame=lambda k: bar.update(k + 1), on_pose=write_mesh)
         for t, image in zip(anim.times(), rendered, strict=True):
-            image = resized(image, height)
-            yield np.concatenate([resized(driver_image(t), height), image], 1) if cfg.side_by_side else image
+            yield np.concatenate([resized(driver_image(t), cfg.size), image], 1) if cfg.side_by_side else image
 
     n = write_video(frames(), cfg.out, anim.fps, pngs)
     t_render = time.perf_counter() - t1
@@ -276,7 +241,7 @@ def run_reenact(cfg: ReenactConfig) -> int:
     report = {"driver": str(cfg.video), "avatar": str(cfg.avatar), "driver_head": driver.head_spec,
               "frames_driving": len(driver.controls), "frames_written": n, "neutral_frame": how.neutral,
               "expressions_carried": how.carried, "expressions_missing": how.missing, "note": how.note,
-              "preset": cfg.preset, "size": height,
+              "preset": cfg.preset, "size": cfg.size,
               "seconds": {"track": round(driver.seconds, 2), "render": round(t_render, 2)},
               "seconds_per_frame": {"track": round(driver.seconds / max(read, 1), 4),
                                     "render": round(t_render / max(n, 1), 4)}, **driver.report}
@@ -292,11 +257,3 @@ def run_reenact(cfg: ReenactConfig) -> int:
 def interrupted(signum, frame) -> None:
     raise KeyboardInterrupt
 
-
-def resized(image: np.ndarray, size: int) -> np.ndarray:
-    """An (H,W,3) uint8 image at size x size (the avatar's render is already; the driver's crop is at --size)."""
-    if image.shape[:2] == (size, size):
-        return image
-    import cv2
-
-    return cv2.resize(image, (size, size), interpolation=cv2.INTER_AREA)

@@ -23,13 +23,13 @@ import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Annotated, Literal
 
 import cv2
 import numpy as np
 import torch
 from tqdm import tqdm
 
+from app.configs import TrackConfig
 from app.errors import UserInputError
 from models.capture.dataset import write_split
 from models.capture.synthetic import absolute_head_spec, write_png8
@@ -37,7 +37,6 @@ from models.files import partial_folder
 from models.head.controls import controls_to_dict
 from models.head.head import Head
 from models.head.sources import load_head
-from models.ranges import Range
 from models.tracking.blendshapes import expression_from_scores, gaze_from_scores, jaw_from_scores
 from models.tracking.canonical import canonical_face_mesh
 from models.tracking.correspond import correspond, skin_vertices
@@ -46,44 +45,6 @@ from models.tracking.landmarker import Face, Landmarker
 from models.tracking.masks import background_plate, foreground_mask
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames, video_info
 from render.video import write_video
-
-
-@dataclass(frozen=True)
-class TrackConfig:
-    video: Path
-    """The video of one face (any format OpenCV decodes: mp4, mov, webm...)."""
-    out: Path
-    """Dataset folder to create (must not exist)."""
-    head: str = "builtin"
-    """HEAD: builtin, ict:PATH or flame:PATH."""
-    landmarker: Path | None = None
-    """MediaPipe's face landmarker bundle (face_landmarker_v2_with_blendshapes.task, from MediaPipe's model
-    page); default: $AVATAR_STUDIO_LANDMARKER."""
-    fps: Annotated[float, Range(0, 1000, above=True)] | None = None
-    """Frames a second taken from the video (default: every frame; fewer frames track and train faster)."""
-    seconds: Annotated[float, Range(0, 1e6, above=True)] | None = None
-    """Use only the video's first SECONDS (default: all of it)."""
-    size: Annotated[int, Range(32, 2048)] = 256
-    """Width and height of the dataset's images, pixels."""
-    crop: Literal["auto", "fixed", "follow"] = "auto"
-    """fixed: one square crop about the face for the whole video (wider where the head travels); follow: each
-    frame's crop follows the head (each its own principal point, the room one plate behind them all); auto: follow
-    where one crop would leave the face at 80% of its size or less."""
-    fov_deg: Annotated[float, Range(0, 170, above=True)] = 40.0
-    """Horizontal field of view of the video's full frame, degrees (a guess unless you know your camera)."""
-    test_fraction: Annotated[float, Range(0, 0.9, above=True)] = 0.1
-    """The last part of the video held out as the test split."""
-    iterations: Annotated[int, Range(1, 100000)] = 400
-    """Fitting iterations (all frames at once)."""
-    shape_components: Annotated[int, Range(0)] = 20
-    """Identity components fitted (0: the head model's mean shape)."""
-    smooth: Annotated[float, Range(0, 1e6)] = 1.0
-    """Scale of the frame-to-frame smoothness of pose and expression (0 for frames that are not a continuous
-    motion, such as a set of photographs)."""
-    blur: Annotated[float, Range(0, 1)] = 0.3
-    """Frames whose face is sharper than this fraction of the video's median sharpness are kept."""
-    overlay: bool = True
-    """Write tracking/overlay.mp4: the fitted mesh over the frames."""
 
 
 def landmarker_path(cfg: TrackConfig) -> Path:

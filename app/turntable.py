@@ -6,43 +6,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import Annotated, Literal
+from dataclasses import replace
 
 import numpy as np
+from PIL import Image
 
+from app.configs import TurntableConfig
 from models.avatars.base import Avatar
 from models.head.controls import Controls
-from models.ranges import Range
 from render.camera import turntable_camera
 from render.gl.raster import Rasterizer
-
-
-@dataclass(frozen=True)
-class TurntableConfig:
-    avatar: Path
-    """Avatar folder."""
-    out: Path = Path("out/turntable.mp4")
-    """The mp4 to write (H.264); PNG frames go to a folder beside it unless --no-pngs."""
-    frames: Annotated[int, Range(1, 100000)] = 120
-    sweep_deg: Annotated[float, Range(0, 180)] | None = None
-    """Swing the camera this many degrees to each side of the front; 0: a full turn (default: as far as the
-    capture's views went and 10 degrees more, a full turn where they went round the head: a video's avatar has
-    seen the head only from about the front)."""
-    elevation_deg: Annotated[float, Range(-89, 89)] = 5.0
-    """Camera height above the head's centre, degrees."""
-    zoom: Annotated[float, Range(0.05, 20)] = 1.0
-    """Camera distance: 1 frames the head; 2 is twice as close."""
-    size: Annotated[int, Range(8, 4096)] = 256
-    """Frame width and height, pixels (at the preview and final presets; draft halves it)."""
-    preset: Literal["draft", "preview", "final"] = "preview"
-    animate: bool = False
-    """Talk while turning: the jaw and a smile follow slow waves."""
-    fps: Annotated[float, Range(1, 240)] = 30.0
-    pngs: bool = True
-    """Also write the frames as PNGs."""
-
 
 INSPECT = {"rgb_no_shadows": "rgb_no_shadows", "rgb_light": "rgb_light", "shadow_change": "rgb_no_shadows",
            "shading": "rgb_flat"}
@@ -96,6 +69,14 @@ def buffer_image(buffers: dict[str, np.ndarray], name: str) -> np.ndarray:
     return (np.clip(img, 0, 1) * 255).round().astype(np.uint8)
 
 
+def resized(image: np.ndarray, size: int) -> np.ndarray:
+    """An (H,W,3) uint8 image at size x size, Lanczos-filtered: a preset's smaller render scaled up to the size asked
+    for, a larger picture (a driver's frame) down."""
+    if image.shape[:2] == (size, size):
+        return image
+    return np.asarray(Image.fromarray(image).resize((size, size), Image.Resampling.LANCZOS))
+
+
 def talking(avatar: Avatar, base: Controls, phase: float) -> Controls:
     """Controls with the jaw (or the expressions named like it) and a smile moving with `phase` (radians)."""
     head = avatar.head_model
@@ -116,7 +97,8 @@ def talking(avatar: Avatar, base: Controls, phase: float) -> Controls:
 def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfig,
                      controls: Controls | None = None, on_frame: Callable[[int], None] | None = None,
                      should_stop: Callable[[], bool] | None = None) -> Iterator[np.ndarray]:
-    """(size,size,3) uint8 frames of the turntable; on_frame(k) after each."""
+    """(size,size,3) uint8 frames of the turntable (the preset may render fewer pixels: scaled up); on_frame(k)
+    after each."""
     size = avatar.apply_preset(cfg.preset, cfg.size)
     controls = avatar.at_rest(controls or Controls())
     sweep = avatar.turntable_sweep_deg() if cfg.sweep_deg is None else cfg.sweep_deg
@@ -126,6 +108,7 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
         cam = turntable_camera(avatar.rest_vertices(), yaw, cfg.elevation_deg, fov_y_deg=18.0,
                                width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
-        yield buffer_image(avatar.render_image(c, cam, rasterizer, should_stop=should_stop, buffers=()), "rgb")
+        yield resized(buffer_image(avatar.render_image(c, cam, rasterizer, should_stop=should_stop, buffers=()),
+                                   "rgb"), cfg.size)
         if on_frame:
             on_frame(k)

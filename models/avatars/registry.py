@@ -1,10 +1,10 @@
 """Which avatar models exist, by name (avatar.json's "model", `train --model`), and avatars from their folders.
-Adding a model: its folder under models/avatars/ and one line in AVATARS."""
+Adding a model: its folder under models/avatars/, one line in AVATARS and its name in ModelName
+(models/avatars/names.py: `train --model`'s choices, read without torch)."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 
@@ -24,7 +24,6 @@ AVATARS: dict[str, type[Avatar]] = {cls.name: cls for cls in (
     PrimitivesAvatar,
     PriorAvatar,
 )}
-ModelName = Literal[tuple(AVATARS)]  # the choices of --model
 DEFAULT_MODEL = "codynerf"
 VIDEO_MODEL = "primitives"
 """What `train` makes of a tracked video when no model is named: on the three shared clips (256 px, 30 minutes,

@@ -4,14 +4,12 @@ simulates only its effects."""
 from __future__ import annotations
 
 import math
-from typing import Literal
 
 import numpy as np
 
+from models.capture.configs import SceneName
 from models.head.model import HeadModel
 from render.gl.capture import Appearance, CaptureLighting
-
-SceneName = Literal["ambient", "studio", "sun"]
 
 #: The effects each scene simulates (DESIGN 3.1): ambient none, studio diffuse shading, sun all three.
 SCENE_EFFECTS: dict[str, tuple[str, ...]] = {

@@ -17,7 +17,6 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Annotated, Literal
 
 import numpy as np
 import torch
@@ -33,7 +32,7 @@ from models.capture.dataset import CaptureSplit, load_split
 from models.capture.frames import frame_camera, load_rgb
 from models.device import DeviceError, device_of
 from models.head.sources import load_head
-from models.ranges import Range
+from models.training.configs import PriorTrainConfig
 from models.training.data import FrameSet, build_frames
 from models.training.trainer import _adam_state_tensors, _load_adam_state, log_progress, optimiser_step, trim_progress
 from render.gl.context import GLContext
@@ -41,34 +40,6 @@ from render.gl.raster import Rasterizer
 
 NEUTRAL_FRAMES = 8
 """The frames of least expression whose colours make an identity's neutral texture."""
-
-
-@dataclass(frozen=True)
-class PriorTrainConfig:
-    corpus: Path
-    """A folder of captures, one folder per identity, all of one head model (`avatar-studio synth --identity K`)."""
-    out: Path = Path("out/prior")
-    """The prior's folder: avatar.json, weights, progress.jsonl."""
-    minutes: Annotated[float, Range(0, 1e6, above=True)] | None = None
-    steps: Annotated[int, Range(1)] | None = None
-    """Step budget (with neither, 2000 steps)."""
-    resume: bool = False
-    effects: str = "none"
-    """Lighting effects the prior models (the corpus's captures must record the key light for more than none)."""
-    device: Literal["cpu", "cuda"] = "cpu"
-    seed: int = 0
-    frames_per_step: Annotated[int, Range(1, 4096)] = 4
-    """Samples a step over all processes (dealt round them: a multiple of their number)."""
-    rays_per_frame: Annotated[int, Range(1, 1 << 20)] = 512
-    lr: Annotated[float, Range(0, 1, above=True)] = 2e-3
-    """Adam's learning rate at the start; it decays tenfold over the run."""
-    grid: Annotated[int, Range(8, 256)] = 16
-    voxels: Annotated[int, Range(2, 64)] = 8
-    width: Annotated[int, Range(8, 1024)] = 64
-    kl: Annotated[float, Range(0)] = 1e-5
-    """The expression code's KL weight."""
-    checkpoint_seconds: Annotated[float, Range(0, above=True)] = 120.0
-    grad_clip: Annotated[float, Range(0, above=True)] = 1.0
 
 
 @dataclass

@@ -7,9 +7,9 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
@@ -17,58 +17,18 @@ import torch
 from models.avatars.base import Avatar, TrainingBatch
 from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from models.avatars.effects import parse_effects
-from models.avatars.registry import DEFAULT_MODEL, ModelName, avatar_class, default_model
+from models.avatars.registry import DEFAULT_MODEL, avatar_class, default_model
 from models.capture.dataset import DatasetError, check_images, load_split
 from models.capture.frames import background_plate, view_range
 from models.device import device_of
 from models.files import atomic_write_bytes
 from models.head.sources import load_head
-from models.ranges import OptionError, Range, config_with
+from models.ranges import OptionError, config_with
+from models.training.configs import TrainConfig
 from models.training.data import FrameSet, ValidationFrame, build_frames, validation_frame
 from models.training.metrics import psnr
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    dataset: Path
-    """Capture folder (transforms_{train,val,test}.json with a head model)."""
-    out: Path = Path("out/avatar")
-    """Avatar folder: avatar.json, weights, progress.jsonl."""
-    effects: str | None = None
-    """Lighting effects to model: none, all, or a comma list of shading, specular, shadows (default: all; with
-    --resume the checkpoint's, and another set is an error)."""
-    model: ModelName | None = None
-    """The avatar model (models/avatars/registry.py): codynerf, the NerFACE baseline, or primitives (volumetric
-    primitives on the guide mesh, decoded once a frame); default: primitives for a tracked video, codynerf for a
-    synthetic capture."""
-    minutes: Annotated[float, Range(0, 1e6, above=True)] | None = None
-    """Time budget; training stops when it is spent (checkpointed)."""
-    steps: Annotated[int, Range(1)] | None = None
-    """Step budget (instead of, or as well as, --minutes); with neither, 2000 steps."""
-    resume: bool = False
-    """Continue the checkpoint in --out exactly where it stopped."""
-    device: Literal["cpu", "cuda"] = "cpu"
-    """Where the networks run."""
-    seed: int = 0
-    """Seed of initialisation and ray sampling."""
-    rays_per_step: Annotated[int, Range(1, 1 << 20)] | None = None
-    """Rays a step; default: the model's (1024 codynerf; 256 nerface, each of whose rays costs 128 samples of an
-    8x256 MLP)."""
-    frames_per_step: Annotated[int, Range(1, 1024)] = 4
-    model_options: tuple[str, ...] = ()
-    """The model's own settings, KEY=VALUE each, the fields of its config (the primitives': grid, voxels,
-    code_dim, code_swap, expression_maps, ...: README); the rest keep their defaults."""
-    corrections: bool | None = None
-    """On a tracked video, learn each training frame's head pose correction (and the primitives' expression
-    correction) with the avatar; default: the model's (codynerf on, primitives off: README, Real people)."""
-    lr: Annotated[float, Range(0, 1, above=True)] = 5e-3
-    """Adam learning rate at the start; it decays tenfold over the run."""
-    checkpoint_seconds: Annotated[float, Range(0, above=True)] = 60.0
-    """How often to checkpoint."""
-    grad_clip: Annotated[float, Range(0, above=True)] = 1.0
-    """Largest gradient norm of a step."""
 
 
 def _adam_state_tensors(opt: torch.optim.Adam) -> dict[str, torch.Tensor]:
