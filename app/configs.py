@@ -105,7 +105,10 @@ class TrackConfig:
     fov_deg: Annotated[float, Range(0, 170, above=True)] = 40.0
     """Horizontal field of view of the video's full frame, degrees (a guess unless you know your camera)."""
     test_fraction: Annotated[float, Range(0, 0.9, above=True)] = 0.1
-    """The last part of the video held out as the test split."""
+    """The share of the frames held out as the test split (see --split)."""
+    split: Literal["time", "view"] = "time"
+    """time: the last part of the video is held out; view: the frames where the head is turned furthest from its
+    usual facing are held out, so the avatar trains on the smaller turns and is measured beyond them."""
     iterations: Annotated[int, Range(1, 100000)] = 400
     """Fitting iterations (all frames at once)."""
     shape_components: Annotated[int, Range(0)] = 20

@@ -7,7 +7,8 @@ one canvas, and its own principal point: models/tracking/video.py); the head mod
 fitted (identity once, then per frame head pose, jaw and expression, from landmark reprojection with temporal
 smoothness; gaze from the blendshape scores); GrabCut cuts a foreground mask per frame, and the room behind the
 person becomes a background plate (models/tracking/masks.py) that avatars composite over; the frames are
-written as the camera saw them; the last part of the video is held out as the test split. A report says how
+written as the camera saw them; the last part of the video (or with --split view, the frames where the head is turned
+furthest: models/tracking/splits.py) is held out as the test split. A report says how
 well it went before anyone spends time training:
 landmark reprojection error per frame, frames dropped and why, and an overlay video of the fitted mesh.
 
@@ -43,6 +44,7 @@ from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
 from models.tracking.landmarker import Face, Landmarker
 from models.tracking.masks import background_plate, foreground_mask
+from models.tracking.splits import frame_splits
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames, video_info
 from render.video import write_video
 
@@ -118,12 +120,6 @@ def face_width_px(faces: list[Face], framing: Framing) -> dict:
     widths = np.array([np.ptp(framing.points(f.landmarks_px[:468])[:, 0]) for f in faces])
     return {"median": round(float(np.median(widths)), 1), "min": round(float(widths.min()), 1),
             "max": round(float(widths.max()), 1)}
-
-
-def split_of(k: int, n: int, n_test: int) -> str:
-    if k >= n - n_test:
-        return "test"
-    return "val" if k % 20 == 10 else "train"
 
 
 @dataclass
@@ -213,6 +209,7 @@ def run_track(cfg: TrackConfig) -> int:
             "video": str(cfg.video), "head_model": absolute_head_spec(cfg.head), "frames_read": read,
             "frames_kept": len(kept),
             "frames_dropped": len(dropped), "dropped": dropped, "splits": {s: len(v) for s, v in splits.items()},
+            "split_by": cfg.split,
             "landmarks_used": len(tr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
             "face_width_px": face_width_px(faces, framing),
             "crop": {"x0": round(framing.x0, 1), "y0": round(framing.y0, 1), "side": round(framing.side, 1),
@@ -302,7 +299,8 @@ def write_frames(cfg: TrackConfig, partial: Path, kept: list[dict], crops: list[
     (partial / "images").mkdir()
     (partial / "masks").mkdir()
     n_test = max(1, math.ceil(cfg.test_fraction * len(kept)))
-    train = [j for j in range(len(kept)) if split_of(j, len(kept), n_test) == "train"]
+    split_list = frame_splits(cfg.split, np.stack([np.asarray(c.root, np.float64) for c in result.controls]), n_test)
+    train = [j for j in range(len(kept)) if split_list[j] == "train"]
     plate, inpainted = background_plate([crops[j] for j in train], [masks[j] for j in train],
                                         grow_px=max(1, round(0.01 * cfg.size)), offsets=framing.offsets[train],
                                         canvas_wh=(framing.width, framing.height))
@@ -328,7 +326,7 @@ def write_frames(cfg: TrackConfig, partial: Path, kept: list[dict], crops: list[
         lo, hi = lm.min(0), lm.max(0)
         pad = 0.1 * (hi - lo)
         lo, hi = np.clip((lo - pad) / cfg.size, 0, 1), np.clip((hi + pad) / cfg.size, 0, 1)
-        split = split_of(j, len(kept), n_test)
+        split = split_list[j]
         splits[split].append({
             "file_path": f"images/{name}", "mask_path": f"masks/{name}", "transform_matrix": np.eye(4).tolist(),
             "expression": c.expression.tolist(),

@@ -435,3 +435,25 @@ def test_a_head_that_travels_gets_a_crop_that_follows_it(face_video, landmarker,
         diffs.append(np.abs(plate[oy:oy + 64, ox:ox + 64] - image)[room_only].max(-1))
     diffs = np.concatenate(diffs)
     assert len(diffs) > 1000 and (diffs <= 3).mean() > 0.4, (len(diffs), (diffs <= 3).mean())
+
+
+def test_split_by_view_holds_out_the_furthest_turns(face_video, landmarker, tmp_path):
+    """`--split view` on d3's first 6 s (its head turns both ways): the held-out frames are the tenth turned
+    furthest from the usual facing (every one further than every training frame), from several moments of the
+    video, not its end alone; the report says how it split."""
+    from models.tracking.splits import turn_from_usual_deg
+
+    out = tmp_path / "byview"
+    assert main(["track", str(face_video), "--out", str(out), "--landmarker", str(landmarker), "--size", "64",
+                 "--fps", "10", "--seconds", "6", "--split", "view", "--no-overlay"]) == 0
+    report = json.loads((out / "tracking" / "report.json").read_text())
+    assert report["split_by"] == "view"
+    splits = {s: load_split(out, s).frames for s in ("train", "val", "test")}
+    every = sorted((f for fs in splits.values() for f in fs), key=lambda f: int(Path(f.image_path).stem))
+    turns = turn_from_usual_deg(Rotation.from_rotvec(np.stack([f.controls.root for f in every])).as_matrix())
+    turn_of = {f.image_path: t for f, t in zip(every, turns, strict=True)}
+    held = [turn_of[f.image_path] for f in splits["test"]]
+    trained = [turn_of[f.image_path] for f in splits["train"] + splits["val"]]
+    assert len(held) == int(np.ceil(0.1 * len(every))) and min(held) >= max(trained) > 0
+    numbers = sorted(int(Path(f.image_path).stem) for f in splits["test"])
+    assert numbers[0] < len(every) - len(held)  # not simply the last frames
