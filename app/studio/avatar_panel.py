@@ -111,7 +111,8 @@ def draw(ctx: PanelContext) -> None:
             met = s.files.metrics
             imgui.text(f"test PSNR {met.get('psnr', float('nan')):.2f} dB, SSIM {met.get('ssim', float('nan')):.3f}")
             if "normal_deg" in met:
-                imgui.text(f"normal error {met['normal_deg']:.1f} deg")
+                median = f", median {met['normal_median_deg']:.1f}" if "normal_median_deg" in met else ""
+                imgui.text(f"normal error {met['normal_deg']:.1f} deg{median}")
     for e in s.errors[-3:]:
         imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.35, 1.0), "")
         imgui.same_line()

@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 SplitBy = Literal["time", "view"]
 VAL_EVERY = 20
@@ -62,8 +63,9 @@ def split_by_view(rotations: np.ndarray, n_test: int) -> list[str]:
     return out
 
 
-def frame_splits(split_by: SplitBy, rotations: np.ndarray, n_test: int) -> list[str]:
-    """Every frame's split ("train", "val" or "test"), by time or by view."""
+def frame_splits(split_by: SplitBy, roots: np.ndarray, n_test: int) -> list[str]:
+    """Every frame's split ("train", "val" or "test"), by time or by view; roots: (N,3) each frame's head rotation
+    (the controls' root, axis-angle, radians)."""
     if split_by == "view":
-        return split_by_view(rotations, n_test)
-    return split_by_time(len(rotations), n_test)
+        return split_by_view(Rotation.from_rotvec(np.asarray(roots, np.float64)).as_matrix(), n_test)
+    return split_by_time(len(roots), n_test)
