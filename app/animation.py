@@ -22,16 +22,16 @@ import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Literal
+from typing import Annotated, Literal
 
 import numpy as np
 
+from app.display import buffer_image, resized
+from app.sliders import Sliders, View
 from models.files import atomic_write_bytes
 from models.head.model import HeadModel
 from models.ranges import Range
-
-if TYPE_CHECKING:  # the studio's session holds an Animation: its types are named here, imported where used
-    from app.studio.session import Sliders, View
+from render.gl.raster import Rasterizer
 
 FORMAT = "avatar-studio/animation/1"
 POSE_CHANNELS = {f"{group}.{axis}": (group, k) for group in ("head", "neck")
@@ -223,10 +223,24 @@ def all_channels(head: HeadModel) -> list[str]:
 
 
 def rest_sliders(head: HeadModel, shape: np.ndarray | None = None) -> Sliders:
-    from app.studio.session import Sliders
-
     s = Sliders(np.zeros(head.num_expression, np.float32))
     if shape is not None:
         s.shape = np.asarray(shape, np.float32)
     return s
 
+
+def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, on_frame=None, should_stop=None,
+                     on_pose=None):
+    """(size,size,3) uint8 frames of an animation played on an avatar, from its rest sliders (the preset may render
+    fewer pixels: scaled up); on_pose(k, controls) before each frame is rendered."""
+    px = avatar.apply_preset(preset, size)
+    for k, (sliders, view) in enumerate(animation_poses(anim, rest_sliders(avatar.head_model), View(),
+                                                        avatar.head_model)):
+        cam = view.camera(avatar.rest_vertices(), px, px)
+        controls = avatar.at_rest(sliders.controls())
+        if on_pose:
+            on_pose(k, controls)
+        yield resized(buffer_image(avatar.render_image(controls, cam, raster, should_stop=should_stop, buffers=()),
+                                   "rgb"), size)
+        if on_frame:
+            on_frame(k)

@@ -12,10 +12,11 @@ import numpy as np
 import torch
 
 from app.configs import AnimateConfig, EvalConfig, ExportMeshConfig, PersonalizeConfig, RenderCommandConfig
+from app.display import INSPECT, buffer_image, render_needs, resized
 from app.errors import UserInputError
 from app.head_commands import save_png
 from app.progress import Progress, progress_callback
-from app.turntable import INSPECT, TurntableConfig, buffer_image, render_needs, resized, turntable_frames
+from app.turntable import TurntableConfig, turntable_frames
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
 from models.capture.dataset import check_images, load_split
@@ -246,7 +247,6 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
     """`personalize`: the prior's avatar of one person: the neutral maps from the scan (the head model's fitted shape,
     the colours of its least expressive frames unprojected), the identity encoder's bias maps from them, then
     fine-tuning on the scan's frames. The result is an ordinary avatar folder."""
-    from models.avatars.prior.avatar import PriorAvatar
     from models.training.data import build_frames, validation_frame
     from models.training.prior import neutral_texture
     from models.training.trainer import Trainer
@@ -257,7 +257,7 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
     split = load_split(cfg.scan, "train")
     check_images(split)
     avatar, meta = load_avatar(cfg.prior)
-    if not isinstance(avatar, PriorAvatar):
+    if not avatar.personalizes:
         raise UserInputError(f"{cfg.prior}: a {avatar.name} avatar, not a universal prior (`prior-train` makes one)")
     if (split.head_model or "").split(":")[0] != str(meta["head_model"]).split(":")[0]:
         raise UserInputError(f"{cfg.scan}: its head model is {split.head_model!r}, the prior's {meta['head_model']!r}")
@@ -291,26 +291,6 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
     print(f"wrote {cfg.out}: maps in {maps_s:.1f} s, then {trainer.step} fine-tuning steps in "
           f"{trainer.elapsed / 60:.1f} min ({cfg.tune}, lr {cfg.lr:g}) from the prior {cfg.prior}")
     return 0
-
-
-def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, on_frame=None, should_stop=None,
-                     on_pose=None):
-    """(size,size,3) uint8 frames of an animation played on an avatar, from its rest sliders (the preset may render
-    fewer pixels: scaled up); on_pose(k, controls) before each frame is rendered."""
-    from app.animation import animation_poses, rest_sliders
-    from app.studio.session import View
-
-    px = avatar.apply_preset(preset, size)
-    for k, (sliders, view) in enumerate(animation_poses(anim, rest_sliders(avatar.head_model), View(),
-                                                        avatar.head_model)):
-        cam = view.camera(avatar.rest_vertices(), px, px)
-        controls = avatar.at_rest(sliders.controls())
-        if on_pose:
-            on_pose(k, controls)
-        yield resized(buffer_image(avatar.render_image(controls, cam, raster, should_stop=should_stop, buffers=()),
-                                   "rgb"), size)
-        if on_frame:
-            on_frame(k)
 
 
 def check_video_size(size: int) -> None:
@@ -350,7 +330,7 @@ def guide_mesh_writer(avatar, out: Path, kind: str):
 
 
 def run_animate(cfg: AnimateConfig) -> int:
-    from app.animation import AnimationError, check_channels, load_animation
+    from app.animation import AnimationError, animation_frames, check_channels, load_animation
 
     avatar, _ = load_avatar(cfg.avatar)
     try:

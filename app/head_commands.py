@@ -10,8 +10,8 @@ import numpy as np
 from PIL import Image
 
 from app.configs import HeadPoseConfig, MeshConfig, PreviewConfig
+from app.display import guide_frame
 from app.errors import UserInputError
-from models.capture.scenes import eye_attribute
 from models.files import atomic_write, atomic_write_bytes
 from models.head.controls import Controls, ControlsError, load_controls
 from models.head.head import Head, posed_mesh
@@ -19,7 +19,7 @@ from models.head.model import HeadModel, portrait_vertices
 from models.head.sources import load_head
 from render.camera import framing_camera
 from render.gl.context import GLContext
-from render.gl.preview import MeshFrame, PreviewRenderer, PreviewSettings
+from render.gl.preview import PreviewRenderer, PreviewSettings
 
 
 def parse_expression_args(head: HeadModel, items: tuple[str, ...], controls: Controls) -> Controls:
@@ -70,12 +70,6 @@ def _check_out(path: Path, suffixes: tuple[str, ...]) -> None:
 def save_png(path: Path, rgb: np.ndarray) -> None:
     """Write a PNG atomically (temporary file, then rename)."""
     atomic_write(path, lambda tmp: Image.fromarray(rgb).save(tmp, format="PNG"))
-
-
-def guide_frame(head: HeadModel, verts: np.ndarray, landmarks: np.ndarray | None = None) -> MeshFrame:
-    """The posed guide mesh (V,3) as the GL preview draws it: with its rest positions and eyeballs, so the guide's
-    irises follow the gaze."""
-    return MeshFrame(verts, head.triangles, landmarks, head.template, eye_attribute(head, head.template))
 
 
 def render_head(gl: GLContext, head: HeadModel, verts: np.ndarray, lmks: np.ndarray, cfg: PreviewConfig

@@ -27,12 +27,12 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from app.animation import SLIDER_RANGES, Animation, AnimationError, load_animation, save_animation
+from app.animation import SLIDER_RANGES, Animation, AnimationError, animation_frames, load_animation, save_animation
 from app.configs import ReenactConfig
+from app.display import resized
 from app.errors import UserInputError
 from app.progress import Progress
 from app.track import TrackConfig, track_video
-from app.turntable import resized
 from models.files import atomic_write_bytes
 from models.head.controls import Controls
 from models.head.model import HeadModel
@@ -190,7 +190,7 @@ def driver_from_capture(cfg: ReenactConfig, avatar_head: HeadModel, avatar_spec:
 
 
 def run_reenact(cfg: ReenactConfig) -> int:
-    from app.avatar_commands import animation_frames, check_video_size, frames_folder, guide_mesh_writer
+    from app.avatar_commands import check_video_size, frames_folder, guide_mesh_writer
     from models.avatars.registry import load_avatar
     from render.gl.context import GLContext
     from render.gl.raster import Rasterizer

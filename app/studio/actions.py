@@ -21,10 +21,12 @@ from app.animation import (
     rest_sliders,
     save_animation,
 )
+from app.display import needs_covered
+from app.sliders import Sliders, View
 from app.studio import poses as pose_file
 from app.studio.poses import PosesError, apply_pose, avatar_key, pose_of, read_poses, write_poses
-from app.studio.session import AvatarFiles, History, Session, Sliders, View, expression_groups
-from app.turntable import TurntableConfig, needs_covered
+from app.studio.session import AvatarFiles, History, Session, expression_groups
+from app.turntable import TurntableConfig
 
 
 class Action:

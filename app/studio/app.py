@@ -18,8 +18,10 @@ import numpy as np
 from imgui_bundle import hello_imgui, imgui, immapp
 from PIL import Image
 
+from app.display import render_needs
 from app.errors import INPUT_ERRORS
 from app.jobs import JobQueue
+from app.sliders import sliders_json
 from app.studio import actions as a
 from app.studio import avatar_panel, controls_panel, export_panel, jobs_panel, quality_panel, viewport
 from app.studio.config import StudioConfig
@@ -27,8 +29,7 @@ from app.studio.context import PanelContext
 from app.studio.exporting import Exporter
 from app.studio.neural import NeuralWorker, Request
 from app.studio.script import Script
-from app.studio.session import AvatarFiles, Session, read_avatar_folder, remember_recent, sliders_json
-from app.turntable import render_needs
+from app.studio.session import AvatarFiles, Session, read_avatar_folder, remember_recent
 from render.gl.context import GLContext
 
 REPO = Path(__file__).resolve().parents[2]

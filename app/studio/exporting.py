@@ -7,7 +7,7 @@ import threading
 import time
 from pathlib import Path
 
-from app.animation import Animation
+from app.animation import Animation, animation_frames
 from app.turntable import TurntableConfig, turntable_frames
 from models.avatars.base import RenderCancelled
 from models.avatars.registry import load_avatar
@@ -37,8 +37,6 @@ class Exporter:
 
     def start_animation(self, folder: Path, anim: Animation, out: Path, size: int, preset: str) -> None:
         """Render an animation of the avatar in `folder` (its frames from the rest sliders, as `animate` does)."""
-        from app.avatar_commands import animation_frames
-
         self._run(folder, out, anim.frames, anim.fps, True,
                   lambda avatar, raster, on_frame: animation_frames(avatar, raster, anim, size, preset, on_frame,
                                                                     should_stop=self._cancel.is_set))

@@ -50,7 +50,8 @@ class PresetFigures:
     size_px: int = 0
     """The image size they were measured at: the avatar's capture's (at most 256 px), else 128."""
     march: str = ""
-    """A primitives avatar's display march: "C", or why torch's (no compiler, turned off); "" for other models."""
+    """What rendered them, where the model has more than one way (Avatar.describe_display: a primitives avatar's
+    march, "C" or torch and why); "" for the others."""
 
 
 FIRST_PIXELS_MS = 150.0
@@ -333,17 +334,6 @@ def seed_times(timed: dict[tuple[str, int], list[float]], figures: PresetFigures
         timed.setdefault((name, figures.size_px), [ms])
 
 
-def display_march_name(avatar) -> str:
-    """What marches a primitives avatar's display here: "C", or torch and why; "" for other models."""
-    if not hasattr(avatar, "display_march"):
-        return ""
-    from models.avatars.primitives import native
-
-    if native.library() is not None:
-        return "C"
-    return f"torch ({native.failure() or 'AVATAR_STUDIO_NATIVE=0'})"
-
-
 def measure_presets(avatar, raster, should_stop) -> PresetFigures:
     """Each preset's median time over 3 renders of a 3/4 view and its PSNR against `final`, at the size of
     the avatar's capture (a tracked video's 256 px costs four times a synthetic capture's 128): the colour render
@@ -352,7 +342,7 @@ def measure_presets(avatar, raster, should_stop) -> PresetFigures:
 
     size = min(avatar.capture_px or 128, 256)
     cam = framing_camera(avatar.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
-    figures = PresetFigures(size_px=size, march=display_march_name(avatar))
+    figures = PresetFigures(size_px=size)
     images = {}
     for name in ("final", "preview", "draft"):
         avatar.apply_preset(name, size)
@@ -369,4 +359,5 @@ def measure_presets(avatar, raster, should_stop) -> PresetFigures:
             (h, w), (H, W) = images[name].shape[:2], reference.shape[:2]  # a preview at 3/4 of 256 px is 192)
             images[name] = images[name][np.arange(H) * h // H][:, np.arange(W) * w // W]
         figures.psnr_vs_final[name] = float("inf") if name == "final" else psnr(images[name], reference)
+    figures.march = avatar.describe_display()
     return figures

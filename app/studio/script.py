@@ -64,10 +64,11 @@ from imgui_bundle import hello_imgui
 from PIL import Image
 
 from app.jobs import JobQueue
+from app.sliders import sliders_json
 from app.studio import actions as a
 from app.studio.exporting import Exporter
 from app.studio.neural import NeuralWorker
-from app.studio.session import Session, sliders_json
+from app.studio.session import Session
 from app.studio.viewport import Viewport
 from app.turntable import TurntableConfig
 from models.avatars.quality import PRESET_NAMES

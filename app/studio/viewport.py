@@ -9,12 +9,11 @@ import numpy as np
 from imgui_bundle import imgui
 from PIL import Image
 
-from app.head_commands import guide_frame
+from app.display import INSPECT, PLAIN, buffer_image, guide_frame
 from app.studio import actions as a
 from app.studio.context import PanelContext
 from app.studio.neural import Result
 from app.studio.session import Session
-from app.turntable import INSPECT, PLAIN, buffer_image
 from models.avatars.base import Avatar
 from models.head.head import posed_mesh
 from render.gl.context import GLContext

@@ -81,6 +81,8 @@ class Avatar(nn.Module, ABC):
     model always renders the same way, as the dense NerFACE baseline does)."""
     config_class: ClassVar[type | None] = None
     """The frozen dataclass for_capture's `config` is (`train --model-options` sets its fields); None: none."""
+    personalizes: ClassVar[bool] = False
+    """Whether `personalize` makes one person's avatar of this one from a scan of them (a universal prior does)."""
     normals_from_surface: ClassVar[bool] = False
     """The normals buffer is the rendered surface's (render/normals.py: the guide mesh's normals where the render's
     depth lies on the mesh, the depth's own elsewhere), made by render_image, not by render_rays: for a model with

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from app.animation import Animation, AnimationError, channel_value, load_animation, rest_sliders, save_animation
-from app.studio.session import View
+from app.sliders import View
 from models.head.sources import load_builtin
 from tests.conftest import DEMO
 

@@ -99,8 +99,7 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
 def test_reenact_a_real_video(tmp_path, face_video, landmarker, capsys, gl):
     """The first 1.5 s of a real video at 10 frames a second drive the demo avatar: the mp4's left half is the
     video's crop, its right half the avatar's render of the saved animation, frame for frame."""
-    from app.animation import check_channels, load_animation
-    from app.avatar_commands import animation_frames
+    from app.animation import animation_frames, check_channels, load_animation
     from app.cli import main
     from models.avatars.registry import load_avatar
     from models.tracking.video import Crop, sampled_frames

@@ -57,18 +57,29 @@ def test_the_quality_panels_figures_compare_every_preset_at_the_final_size(gl):
     assert figures.size_px == avatar.capture_px == 256
     assert set(figures.ms) == {"draft", "preview", "final"} and all(ms > 0 for ms in figures.ms.values())
     assert figures.psnr_vs_final["final"] == float("inf")
+    assert figures.march == avatar.describe_display() != ""  # the primitives' march, C or torch
     assert 15.0 < figures.psnr_vs_final["draft"] < figures.psnr_vs_final["preview"] < 60.0
 
 
 @pytest.mark.gl
 def test_the_quality_panel_says_which_march_displays(gl, monkeypatch):
-    from app.studio.neural import display_march_name
+    """The avatar says what rendered its last display batch: the primitives' march, C or torch and why (nothing
+    before it renders); a model with one way, nothing."""
     from models.avatars.primitives import native
     from tests.conftest import CODYNERF_DEMO
 
     avatar, _ = load_avatar(DEMO)
-    assert display_march_name(avatar) == ("C" if native.library() is not None else f"torch ({native.failure()})")
+    raster = Rasterizer(gl)
+    cam = framing_camera(avatar.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=16, height_px=16)
+
+    def shown() -> str:
+        avatar.render_image(avatar.at_rest(Controls()), cam, raster, buffers=())
+        return avatar.describe_display()
+
+    assert avatar.describe_display() == ""
+    assert shown() == ("C" if native.library() is not None else f"torch ({native.failure()})")
     if native.failure() is None:  # built: turned off, the torch march and why
         monkeypatch.setenv("AVATAR_STUDIO_NATIVE", "0")
-        assert display_march_name(avatar) == "torch (AVATAR_STUDIO_NATIVE=0)"
-    assert display_march_name(load_avatar(CODYNERF_DEMO)[0]) == ""
+        assert shown() == "torch (AVATAR_STUDIO_NATIVE=0)"
+    raster.release()
+    assert load_avatar(CODYNERF_DEMO)[0].describe_display() == ""
