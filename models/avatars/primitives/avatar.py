@@ -40,9 +40,11 @@ from models.avatars.primitives.chart import (
     expression_share,
     eye_cells,
     geometry_map,
+    texel_points,
 )
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
+from models.avatars.primitives.seen import edge_fade, inside_share
 from models.avatars.quality import Quality
 from models.head.controls import Controls
 from models.head.lbs import rotation_matrix_from_axis_angle
@@ -470,6 +472,47 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         pairs = zip(frames.geometry, frames.origins, strict=True)
         return torch.stack([self.view_of(geo, eye.to(geo.translation)) for geo, eye in pairs])
 
+    def note_views(self, frames) -> None:
+        """The base's views, and how far inside the training frames each texel of the chart came (seen.py): the
+        primitives' opacity fades out where the capture stopped seeing the head (seen_fade)."""
+        super().note_views(frames)
+        self.note_reach(frames)
+
+    @torch.no_grad()
+    def note_reach(self, frames) -> None:
+        """seen_fade (S,S), in the chart's (and the slabs') layout: 1 on every texel that lay inside some training
+        frame (and off the head, where the chart has no texel), falling to 0 EDGE_SHARE of the frame beyond."""
+        S = self.cfg.grid * self.cfg.voxels
+        if self.chart is None:
+            self.chart = chart_sampler(self.head_model, S, self.cfg.front)
+        height, width = frames.images.shape[1:3]
+        reach = torch.full((S * S,), -torch.inf)
+        for k, geo in enumerate(frames.geometry):
+            to_world = torch.eye(4, dtype=torch.float64)
+            to_world[:3, :3], to_world[:3, 3] = frames.rotations[k].double(), frames.origins[k].double()
+            intrinsics = torch.tensor(frames.split.frame_intrinsics(frames.split.frames[k]), dtype=torch.float64)
+            points = texel_points(self.chart, self.triangles.to(geo.posed.device), geo.posed).double().cpu()
+            reach = torch.maximum(reach, inside_share(points, torch.linalg.inv(to_world), intrinsics, width,
+                                                      height).float())
+        reach[~torch.as_tensor(self.chart.valid)] = torch.inf
+        self.register_buffer("seen_fade", edge_fade(reach).reshape(S, S).to(self.background.device))
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        """Weights that carry seen_fade (avatars trained since it came) give the avatar the buffer to load into;
+        older ones fade nothing."""
+        if prefix + "seen_fade" in state_dict:
+            self.register_buffer("seen_fade", torch.empty_like(state_dict[prefix + "seen_fade"]))
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
+
+    def slab_fade(self) -> torch.Tensor | None:
+        """(P,1,M,M) seen_fade at each primitive's voxel columns (the slab's layout, as slab_visibility's), or None
+        where the avatar has none."""
+        fade = getattr(self, "seen_fade", None)
+        if fade is None:
+            return None
+        K, M = self.cfg.grid, self.cfg.voxels
+        return fade.reshape(K, M, K, M).permute(0, 2, 1, 3).reshape(K * K, 1, M, M)[self.layout_cells]
+
     def frame_inputs(self, geo: PrimitivesGeometry, frame: int | None) -> tuple[torch.Tensor, torch.Tensor]:
         """The posed mesh (V,3) and the condition (1,D) the decode reads: a training frame's with its expression
         correction (the mesh posed again with the corrected weights), else the geometry's own."""
@@ -505,6 +548,9 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         centres = centres + (rotations @ (offsets[:, :3] * self.layout_half[:, None])[..., None])[..., 0]
         rotations = rotations @ rotation_matrix_from_axis_angle(offsets[:, 3:6])
         density = F.softplus(density_raw - 1.0) * self.cfg.density_scale
+        fade = self.slab_fade()
+        if fade is not None:  # nothing where the capture never looked (seen.py)
+            density = density * fade.to(density)
         colour = torch.sigmoid(colour_raw)
         extras = self.shown_channels(lit) if extras is None else extras
         if training:  # no loss reads the normals or the visibility: the march composites colour alone
