@@ -30,7 +30,7 @@ from app.errors import UserInputError
 from models.avatars.base import Avatar
 from models.avatars.effects import effects_name
 from models.avatars.quality import PRESET_NAMES, Preset, Quality, pareto, save_presets
-from models.avatars.registry import BASELINE_MODEL, load_avatar, untrained_avatar
+from models.avatars.registry import BASELINE_MODEL, DEFAULT_MODEL, load_avatar, untrained_avatar
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera, load_rgb
 from models.files import atomic_write_bytes, foreign_files
@@ -68,9 +68,9 @@ def settings_for(avatar: Avatar) -> tuple[list[Quality], Quality]:
 
 
 def series_name(model: str, effects: str) -> str:
-    """What a bench's rows and charts call one avatar's settings: its effect set, and its model where it is not
-    CoDyNeRF (a primitives avatar of `all` beside CoDyNeRF's)."""
-    return effects if model == "codynerf" else f"{model} {effects}"
+    """What a bench's rows and charts call one avatar's settings: its effect set, and its model where it is not the
+    registry's default (a primitives avatar of `all` beside CoDyNeRF's)."""
+    return effects if model == DEFAULT_MODEL else f"{model} {effects}"
 
 PRESET_RULES = {"final": 45.0, "preview": 35.0, "draft": 25.0}
 """Each preset is the fastest setting on the Pareto front whose PSNR against the reference is at least this

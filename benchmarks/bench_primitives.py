@@ -21,6 +21,7 @@ from pathlib import Path
 import torch
 
 from benchmarks.bench_render import median_seconds
+from models.avatars.checkpoint import CheckpointError
 from models.avatars.primitives import march, native
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
@@ -35,11 +36,10 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int, buffers: 
     alone, None every buffer), the march in C (native.py) or in torch (its lookups timed apart)."""
     os.environ["AVATAR_STUDIO_NATIVE"] = "1" if in_c else "0"
     cam = framing_camera(avatar.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=size, height_px=size)
-    avatar.display_buffers = buffers
     geo = avatar.frame_geometry(controls, raster)
     rays, _ = avatar.image_rays(geo, cam, raster)
     eye = rays.origins[0]
-    with torch.inference_mode():
+    with torch.inference_mode(), avatar.displaying(buffers):  # the decode and the march make those buffers alone
         code = avatar.codes(None, geo.code_weights)
         decode = median_seconds(lambda: avatar.decode(geo, code, eye))
         prims, _ = avatar.decode(geo, code, eye)
@@ -80,9 +80,10 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=Path("benchmarks/results/primitives.json"))
     p.add_argument("--sizes", type=int, nargs="+", default=[128, 256, 512])
     args = p.parse_args()
-    avatar, meta = load_avatar(args.avatar)
-    if meta.get("model") != "primitives":
-        raise SystemExit(f"{args.avatar}: a {meta.get('model')} avatar, not a primitives one")
+    try:
+        avatar, _ = load_avatar(args.avatar, model="primitives")
+    except CheckpointError as e:
+        raise SystemExit(str(e)) from None
     raster = Rasterizer(GLContext.headless())
     controls = avatar.at_rest(Controls())
     rows = []

@@ -17,6 +17,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.head_commands import save_png
+from models.avatars.checkpoint import CheckpointError
 from models.avatars.primitives import march
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
@@ -42,9 +43,10 @@ def main() -> int:
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--yaw", type=float, default=20.0)
     args = ap.parse_args()
-    avatar, meta = load_avatar(args.avatar)
-    if meta.get("model") != "primitives":
-        print(f"{args.avatar}: a {meta.get('model')} avatar, not a primitives one", file=sys.stderr)
+    try:
+        avatar, _ = load_avatar(args.avatar, model="primitives")
+    except CheckpointError as e:
+        print(e, file=sys.stderr)
         return 2
     controls = avatar.at_rest(Controls())
     cam = framing_camera(avatar.rest_vertices(), args.yaw, 5.0, fov_y_deg=18.0, width_px=args.size,

@@ -111,11 +111,11 @@ class Avatar(nn.Module, ABC):
         """Where its capture held the head (avatar.json "rest_pose": the training frames' mean translation): the
         field reads world positions, so new controls (sliders, turntables, `render`) place the head there."""
         self.should_stop: Callable[[], bool] | None = None
-        """While render_image runs: its should_stop, for models whose batches are long (the primitives' march asks
-        it between waves) to stop within a batch."""
+        """While render_image runs (within `displaying`): its should_stop, for models whose batches are long (the
+        primitives' march asks it between waves) to stop within a batch."""
         self.display_buffers: tuple[str, ...] | None = None
-        """While render_image runs: the optional buffers it makes (of default_buffers and the inspection buffers,
-        those asked for), for models that can leave out the work of the others; None: all of them."""
+        """While render_image runs (within `displaying`): the optional buffers it makes (of default_buffers and the
+        inspection buffers, those asked for), for models that can leave out the work of the others; None: all."""
         self.display_cores: int | None = None
         """Cores a display render may spread its work over where the model can (None: torch's thread count); the
         studio's renderer keeps torch to one thread and gives the primitives' march groups the machine's cores."""
@@ -409,8 +409,7 @@ class Avatar(nn.Module, ABC):
         surface = self.normals_from_surface and "normals" in wanted
         wanted = tuple(b for b in wanted if not (surface and b == "normals"))
         parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *wanted, *names)}
-        self.should_stop, self.display_buffers = should_stop, (*wanted, *names)
-        try:
+        with self.displaying((*wanted, *names), should_stop):
             with self.display_mode():
                 chunk = chunk_rays or self.chunk_rays
                 for a in range(0, len(rays), chunk):
@@ -423,8 +422,6 @@ class Avatar(nn.Module, ABC):
                     for k, v in made.items():
                         if k in parts:  # a model that makes a buffer anyway: kept where asked for
                             parts[k].append(v.detach())
-        finally:
-            self.should_stop, self.display_buffers = None, None
         background = (self.background if plate is None else plate).cpu().numpy()
         layout = {k: (c, background if fill == BACKGROUND else fill) for k, (c, fill) in self.layout().items()}
         images = rays_to_images(parts, camera.height_px, camera.width_px, idx, layout)
@@ -447,6 +444,18 @@ class Avatar(nn.Module, ABC):
         raster = rasterizer.rasterize(posed, self.head_model.triangles, camera)
         return surface_normal_image(from_depth, depth, mesh_normal_image(raster, posed, self.head_model.triangles),
                                     raster.distance)
+
+    @contextlib.contextmanager
+    def displaying(self, buffers: tuple[str, ...] | None = None, should_stop: Callable[[], bool] | None = None):
+        """Within it, render_rays renders for display as render_image's batches do: only the optional `buffers` (of
+        default_buffers and the inspection buffers; None: all of them), and should_stop asked within a batch by a
+        model whose batches are long. The settings before it come back after."""
+        before = self.should_stop, self.display_buffers
+        self.should_stop, self.display_buffers = should_stop, buffers
+        try:
+            yield
+        finally:
+            self.should_stop, self.display_buffers = before
 
     def default_buffers(self) -> tuple[str, ...]:
         """The buffers render_rays gives besides rgb, opacity and depth."""

@@ -46,15 +46,19 @@ def avatar_class(name: str) -> type[Avatar]:
         raise ValueError(f"unknown avatar model {name!r}: expected one of {', '.join(AVATARS)}") from None
 
 
-def load_avatar(folder: str | Path, device: str = "cpu") -> tuple[Avatar, dict]:
+def load_avatar(folder: str | Path, device: str = "cpu", model: str | None = None) -> tuple[Avatar, dict]:
     """The avatar avatar.json describes (its "model"; avatars written before models had names are CoDyNeRF's)
-    with its weights and presets, on `device`, in eval mode; and avatar.json."""
+    with its weights and presets, on `device`, in eval mode; and avatar.json. model: the one model a caller works
+    with (a model's own benchmark or pictures): a CheckpointError where the folder holds another's."""
     ck = load_checkpoint(folder)
     meta = ck.meta
+    name = meta.get("model", DEFAULT_MODEL)
+    if model is not None and name != model:
+        raise CheckpointError(f"{folder}: a {name} avatar, not a {model} one")
     try:
         check_meta(meta)
         head = load_head(meta["head_model"])
-        cls = avatar_class(meta.get("model", DEFAULT_MODEL))
+        cls = avatar_class(name)
         avatar = cls.from_meta(head, meta)
     except (KeyError, TypeError, ValueError) as e:
         raise CheckpointError(f"{Path(folder) / 'avatar.json'}: {e}") from None

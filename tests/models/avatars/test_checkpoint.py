@@ -111,3 +111,14 @@ def test_leftovers_of_killed_writes_are_cleaned_and_nothing_else(tmp_path):
     save_checkpoint(folder, {"model": "codynerf"}, {"w": torch.zeros(2)}, 5)
     assert not any(p.exists() for p in left)
     assert all(p.exists() for p in mine)  # not the program's names: not touched
+
+
+def test_a_tool_for_one_model_is_refused_another_models_avatar():
+    """load_avatar(model=...): a model's own benchmark or picture gets that model's avatar, or one clear line naming
+    the model the folder holds (before any weights are read)."""
+    from models.avatars.registry import load_avatar
+
+    avatar, meta = load_avatar(DEMO, model="primitives")
+    assert avatar.name == meta["model"] == "primitives"
+    with pytest.raises(CheckpointError, match=r"codynerf_avatar: a codynerf avatar, not a primitives one"):
+        load_avatar(CODYNERF_DEMO, model="primitives")
