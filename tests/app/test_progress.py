@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import re
 
 from app.progress import Progress
 
@@ -25,3 +26,15 @@ def test_a_terminal_gets_one_line_redrawn():
     for k in (1, 2, 3):
         p.update(k, "ok")
     assert out.getvalue().count("\r") == 3 and out.getvalue().endswith("synth: 3/3 frames  ok   \n")
+
+
+def test_a_terminal_bar_says_the_time_left_then_the_time_taken():
+    out = io.StringIO()
+    p = Progress("turntable", 4, stream=out, tty=True)
+    for k in range(1, 5):
+        p.update(k)
+    first, second, _, last = out.getvalue().split("\r")[1:]
+    # 1 of 4 is 25%: 3 of the bar's 12 cells; no rate yet after the first frame, so no time left either
+    assert first == " 25%|###         | ? left  turntable: 1/4 frames   "
+    assert re.fullmatch(r" 50%\|###### {6}\| \d\d:\d\d left  turntable: 2/4 frames {3}", second)
+    assert re.fullmatch(r"100%\|#{12}\| \d\d:\d\d in all  turntable: 4/4 frames {3}\n", last)
