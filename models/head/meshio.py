@@ -1,4 +1,4 @@
-"""Minimal, fast OBJ reading and OBJ/PLY writing that keep the vertex order."""
+"""Minimal, fast OBJ reading, and OBJ/PLY writing through trimesh, both keeping the vertex order."""
 
 from __future__ import annotations
 
@@ -56,33 +56,18 @@ def read_npz(path: str | Path, required: tuple[str, ...], kind: str, missing_hin
 
 def mesh_bytes(suffix: str, vertices: np.ndarray, triangles: np.ndarray, colours: np.ndarray | None = None) -> bytes:
     """(V,3) vertices and (F,3) triangles as the bytes of an OBJ or a binary PLY file (suffix ".obj" or ".ply"),
-    vertex order kept; colours (V,3) uint8: vertex colours (PLY's red/green/blue, OBJ's "v x y z r g b" in [0,1],
-    which Blender and MeshLab read). The caller writes them (atomically: models/files.py)."""
-    v = np.asarray(vertices, np.float64)
-    f = np.asarray(triangles, np.int64)
-    c = None if colours is None else np.asarray(colours, np.uint8).reshape(-1, 3)
+    written by trimesh, vertex order kept; colours (V,3) uint8: vertex colours (PLY's red/green/blue/alpha, OBJ's
+    "v x y z r g b" in [0,1], which Blender and MeshLab read). The caller writes them (atomically: models/files.py)."""
+    import trimesh  # half a second to import (scipy): only when a mesh is written
+
     suffix = suffix.lower()
-    if suffix == ".obj":
-        if c is None:
-            body = "".join(f"v {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in v)
-        else:
-            body = "".join(f"v {x:.7g} {y:.7g} {z:.7g} {r / 255:.4g} {g / 255:.4g} {b / 255:.4g}\n"
-                           for (x, y, z), (r, g, b) in zip(v, c, strict=True))
-        body += "".join(f"f {a + 1} {b + 1} {c_ + 1}\n" for a, b, c_ in f)
-        data = body.encode()
-    elif suffix == ".ply":
-        colour_props = "property uchar red\nproperty uchar green\nproperty uchar blue\n" if c is not None else ""
-        header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n"
-                  f"property float x\nproperty float y\nproperty float z\n{colour_props}"
-                  f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
-        vert_rec = np.zeros(len(v), dtype=[("p", "<f4", (3,))] + ([("c", "u1", (3,))] if c is not None else []))
-        vert_rec["p"] = v
-        if c is not None:
-            vert_rec["c"] = c
-        face_rec = np.zeros(len(f), dtype=[("n", "u1"), ("idx", "<i4", (3,))])
-        face_rec["n"] = 3
-        face_rec["idx"] = f
-        data = header.encode() + vert_rec.tobytes() + face_rec.tobytes()
-    else:
+    if suffix not in (".obj", ".ply"):
         raise ValueError(f"mesh output must end in .obj or .ply, not {suffix!r}")
-    return data
+    c = None if colours is None else np.asarray(colours, np.uint8).reshape(-1, 3)
+    # process=False: no merging or reordering, so that vertex k is the head model's vertex k
+    mesh = trimesh.Trimesh(np.asarray(vertices, np.float64), np.asarray(triangles, np.int64), vertex_colors=c,
+                           process=False)
+    if suffix == ".obj":
+        return trimesh.exchange.obj.export_obj(mesh, include_normals=False, include_texture=False,
+                                               header=None).encode()
+    return trimesh.exchange.ply.export_ply(mesh, encoding="binary", vertex_normal=False)
