@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from models.head.controls import Controls
-from render.marching import marching_tetrahedra
+from render.marching import iso_surface
 
 HALF_LIGHT_IN_1CM = math.log(2.0) / 0.01
 """The density (per metre) at which 1 cm of matter lets half the light through: the default surface level."""
@@ -69,7 +69,7 @@ def avatar_mesh(avatar, controls: Controls | None = None, resolution: int = 96, 
     density = in_chunks(field.density, torch.as_tensor(grid.reshape(-1, 3), dtype=torch.float32))
     values = density.cpu().numpy().reshape(grid.shape[:3])
     level = surface_level(values) if level is None else level
-    verts, tris = marching_tetrahedra(values, level, lo, spacing)
+    verts, tris = iso_surface(values, level, lo, spacing)
     if len(verts) == 0:
         raise ValueError(f"no surface: the density nowhere reaches {level:g} per metre")
     rgb = in_chunks(field.colour, torch.as_tensor(verts, dtype=torch.float32))
