@@ -36,6 +36,9 @@ class SynthConfig:
     """Background colour, linear RGB in [0, 1]."""
     fov_y_deg: Annotated[float, Range(1, 170)] = 18.0
     """Camera field of view, degrees (a portrait lens)."""
+    turn_deg: Annotated[float, Range(0, 90)] = 45.0
+    """The largest head turn (yaw, either way) of the script, degrees; the camera's pan scales with it (40 at 45).
+    20: a capture that sees only the front, as a phone's does."""
     views: Annotated[int, Range(1, 16)] = 1
     """Cameras at once: every frame of the script is drawn from this many cameras spaced evenly round the head (the
     script's first), as a capture dome would (--frames counts the script's frames)."""

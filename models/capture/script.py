@@ -110,8 +110,14 @@ def expression_track(n: int, rng: np.random.Generator) -> list[dict[str, float]]
     return [{c: float(np.clip(w[c][i], 0, 1)) for c in CHANNELS if w[c][i] > 1e-3} for i in range(n)]
 
 
-def training_script(n: int, rng: np.random.Generator) -> list[FrameSpec]:
-    """n frames of the capture protocol."""
+TURN_DEG = 45.0
+"""The protocol's largest head turn (yaw) in its second half; the camera pans to 40 degrees in the first."""
+
+
+def training_script(n: int, rng: np.random.Generator, turn_deg: float = TURN_DEG) -> list[FrameSpec]:
+    """n frames of the capture protocol; turn_deg scales its yaws (the head's turns and the camera's pan) to at
+    most that many degrees either way (20: a capture that sees only the front, as a phone's does)."""
+    share = turn_deg / TURN_DEG
     expr = expression_track(n, rng)
     half = n // 2
     frames = []
@@ -119,18 +125,18 @@ def training_script(n: int, rng: np.random.Generator) -> list[FrameSpec]:
         if i < half:  # camera pans around a nearly still head
             s = i / max(half - 1, 1)
             frames.append(FrameSpec(expr[i], 2.0 * math.sin(5.1 * s), 1.5 * math.sin(3.7 * s),
-                                    40.0 * math.sin(2 * math.pi * s), 8.0 * math.sin(4 * math.pi * s)))
+                                    40.0 * share * math.sin(2 * math.pi * s), 8.0 * math.sin(4 * math.pi * s)))
         else:  # camera fixed at head height, the head turns
             s = (i - half) / max(n - half - 1, 1)
-            frames.append(FrameSpec(expr[i], 45.0 * math.sin(2 * math.pi * s), 20.0 * math.sin(6 * math.pi * s + 0.7),
-                                    0.0, 0.0))
+            frames.append(FrameSpec(expr[i], turn_deg * math.sin(2 * math.pi * s),
+                                    20.0 * math.sin(6 * math.pi * s + 0.7), 0.0, 0.0))
     return frames
 
 
-def held_out_script(n: int, train: list[FrameSpec], rng: np.random.Generator, min_distance: float = 0.25
-                    ) -> list[FrameSpec]:
+def held_out_script(n: int, train: list[FrameSpec], rng: np.random.Generator, min_distance: float = 0.25,
+                    turn_deg: float = TURN_DEG) -> list[FrameSpec]:
     """n frames whose expression-and-pose vectors are at least `min_distance` from every training frame's:
-    several expressions at once under head poses off the training path."""
+    several expressions at once under head poses off the training path (yaws within 40/45 of turn_deg)."""
     train_vecs = np.stack([f.control_vector() for f in train])
     out = []
     while len(out) < n:
@@ -139,7 +145,8 @@ def held_out_script(n: int, train: list[FrameSpec], rng: np.random.Generator, mi
         weights["jaw"] = float(rng.uniform(0.3, 0.9))
         if rng.uniform() < 0.4:
             weights["blink_l"] = weights["blink_r"] = float(rng.uniform(0.6, 1.0))
-        spec = FrameSpec(weights, float(rng.uniform(-40, 40)), float(rng.uniform(-18, 18)), 0.0, 0.0)
+        yaw = 40.0 * (turn_deg / TURN_DEG)
+        spec = FrameSpec(weights, float(rng.uniform(-yaw, yaw)), float(rng.uniform(-18, 18)), 0.0, 0.0)
         if np.linalg.norm(train_vecs - spec.control_vector(), axis=1).min() >= min_distance:
             out.append(spec)
     return out

@@ -141,9 +141,9 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
         (out / sub).mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(cfg.seed)
     n_test = max(1, round(0.1 * cfg.frames))
-    script = training_script(cfg.frames - n_test, rng)
+    script = training_script(cfg.frames - n_test, rng, cfg.turn_deg)
     val_ids = set(range(7, len(script), 20))
-    test = held_out_script(n_test, [s for k, s in enumerate(script) if k not in val_ids], rng)
+    test = held_out_script(n_test, [s for k, s in enumerate(script) if k not in val_ids], rng, turn_deg=cfg.turn_deg)
     rig = make_rig(head)
     shape = identity_coefficients(head, cfg.identity)
     model = Head(head)
@@ -165,6 +165,7 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
         "lighting": lighting_record(cfg.scene, lighting, cfg.light_deg),
         "depth_scale_m": DEPTH_SCALE_M,
         "protocol": {"frames": cfg.frames, "seed": cfg.seed, "identity": cfg.identity, "views": cfg.views,
+                     "turn_deg": cfg.turn_deg,
                      "expression_channels": {c: d.tolist() for c, d in rig.directions.items()},
                      "jaw_joint": rig.jaw_joint},
     }
