@@ -201,3 +201,22 @@ def test_synth_cli_refuses_a_folder_in_use(tmp_path):
     (out / "keep.txt").write_text("mine")
     assert main(["synth", "--frames", "10", "--size", "32", "--out", str(out)]) == 2
     assert (out / "keep.txt").read_text() == "mine" and len(list(out.iterdir())) == 1
+
+
+def test_a_front_only_script_keeps_every_view_within_its_turn():
+    """turn_deg scales the protocol's yaws: at 20 degrees no training or held-out frame turns the head, or pans the
+    camera, beyond 20 either way (at the default 45, the head reaches 44.9 and the camera 40 in 300 frames: the
+    default script is the one the shipped captures were made with, bit for bit)."""
+    from models.capture.script import held_out_script, training_script
+
+    for turn in (20.0, 45.0):
+        rng = np.random.default_rng(0)
+        train = training_script(270, rng, turn)
+        test = held_out_script(30, train, rng, turn_deg=turn)
+        head = np.array([abs(f.head_yaw_deg) for f in train + test])
+        camera = np.array([abs(f.camera_yaw_deg) for f in train + test])
+        assert head.max() <= turn + 1e-9 and head.max() > 0.9 * turn
+        assert camera.max() <= turn * 40 / 45 + 1e-9 and camera.max() > 0.9 * turn * 40 / 45
+    default = training_script(50, np.random.default_rng(3))
+    assert [f.head_yaw_deg for f in default] == [f.head_yaw_deg for f in training_script(50, np.random.default_rng(3),
+                                                                                          45.0)]
