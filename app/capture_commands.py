@@ -3,6 +3,9 @@ people's captures for the universal prior."""
 
 from __future__ import annotations
 
+import shlex
+from pathlib import Path
+
 from app.configs import HELD_OUT_FROM, CorpusConfig, DatasetConfig
 from app.errors import UserInputError
 from app.progress import Progress, progress_callback
@@ -27,7 +30,14 @@ def run_synth(cfg: SynthConfig) -> int:
     n = summary["frames"]
     print(f"wrote {cfg.out}: {n['train']} train, {n['val']} val, {n['test']} test frames "
           f"({cfg.scene} scene, {cfg.size}x{cfg.size}) in {summary['seconds']:.1f} s")
+    print(next_train(cfg.out))
     return 0
+
+
+def next_train(capture: Path) -> str:
+    """The line that ends a command that made or checked a capture: what to run next."""
+    avatar = capture.with_name(capture.name + "_avatar")
+    return f"next: avatar-studio train {shlex.quote(str(capture))} --out {shlex.quote(str(avatar))}"
 
 
 def run_dataset(cfg: DatasetConfig) -> int:
@@ -43,6 +53,7 @@ def run_dataset(cfg: DatasetConfig) -> int:
               + (f", {', '.join(e.removesuffix('_path') for e in extras)}" if extras else "")
               + (f", lighting: {s.lighting.get('scene')} ({', '.join(s.lighting.get('effects', [])) or 'ambient'})"
                  if s.lighting else ""))
+    print(next_train(cfg.dataset))
     return 0
 
 

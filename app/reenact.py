@@ -190,8 +190,7 @@ def driver_from_capture(cfg: ReenactConfig, avatar_head: HeadModel, avatar_spec:
 
 
 def run_reenact(cfg: ReenactConfig) -> int:
-    from app.avatar_commands import check_video_size, frames_folder, guide_mesh_writer
-    from models.avatars.registry import load_avatar
+    from app.avatar_commands import check_video_size, frames_folder, guide_mesh_writer, open_avatar
     from render.gl.context import GLContext
     from render.gl.raster import Rasterizer
     from render.video import write_video
@@ -208,7 +207,7 @@ def run_reenact(cfg: ReenactConfig) -> int:
         except AnimationError:
             raise UserInputError(f"{anim_path}: the performance's animation goes there, and it holds another file; "
                                  "choose another --out") from None
-    avatar, meta = load_avatar(cfg.avatar)
+    avatar, meta = open_avatar(cfg.avatar)
     write_mesh = guide_mesh_writer(avatar, cfg.out, cfg.meshes)
     if cfg.video.is_dir():
         driver = driver_from_capture(cfg, avatar.head_model, meta["head_model"])

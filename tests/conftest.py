@@ -19,6 +19,16 @@ DEMO = REPO / "resources" / "demo_avatar"  # what the studio opens: a primitives
 CODYNERF_DEMO = REPO / "resources" / "codynerf_avatar"  # the CoDyNeRF avatar shipped beside it
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _config_folder_of_the_run(tmp_path_factory) -> Iterator[Path]:
+    """What the program remembers for its user (app/user_config.py: a --landmarker that worked) goes to a folder of
+    the test run's, never the real home's; the commands that tests run in subprocesses inherit it."""
+    with pytest.MonkeyPatch.context() as mp:
+        folder = tmp_path_factory.mktemp("xdg_config")
+        mp.setenv("XDG_CONFIG_HOME", str(folder))
+        yield folder
+
+
 @pytest.fixture(scope="session")
 def ict_npz() -> Path:
     if not ICT_NPZ.is_file():

