@@ -104,10 +104,14 @@ def parse(parser: Parser, argv: list[str]) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse(build_parser(), sys.argv[1:] if argv is None else argv)
     cmd = args._command
-    from app.errors import INPUT_ERRORS  # their modules import torch: loaded once a command runs, not for --help
+    from app.errors import INPUT_ERRORS, UserInputError  # they import torch: loaded once a command runs
+    from models.files import unwritable
 
     try:
         config = config_from_args(cmd.config, args)
+        out = getattr(config, "out", None)
+        if isinstance(out, Path) and (why := unwritable(out)):  # before the work, not after it
+            raise UserInputError(f"{out}: cannot be written there: {why}")
         return int(cmd.runner()(config) or 0)
     except INPUT_ERRORS as e:
         print(f"avatar-studio {cmd.name}: error: {e}", file=sys.stderr)

@@ -13,19 +13,34 @@ _UMASK = os.umask(0o022)
 os.umask(_UMASK)  # read once, at import (setting it is the only way to read it)
 
 
+def _about(e: OSError, users: Path) -> OSError:
+    """An error about one of the program's own temporary files retold about the user's path: the temporary's name
+    means nothing to them."""
+    return e if e.errno is None else type(e)(e.errno, e.strerror, str(users))
+
+
 def atomic_write(path: str | Path, write: Callable[[str], None]) -> None:
     """Call write(tmp) on a temporary file beside `path`, fsync it, then rename it over `path`.
-    On any failure the temporary file is removed and `path` is untouched. The file gets the permissions any new
-    file would (mkstemp's own are owner-only)."""
+    On any failure the temporary file is removed and `path` is untouched; an error about the temporary names
+    `path`. The file gets the permissions any new file would (the user's umask: mkstemp's are owner-only, and a
+    writer that replaces the temporary, as safetensors does, makes its own), set after the rename."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.fchmod(fd, 0o666 & ~_UMASK)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as e:
+        raise _about(e, path) from None
     os.close(fd)
     try:
         write(tmp)
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)
+        os.chmod(path, 0o666 & ~_UMASK)
+    except OSError as e:
+        Path(tmp).unlink(missing_ok=True)
+        if e.filename is None or Path(e.filename) == Path(tmp):
+            raise _about(e, path) from None
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -41,36 +56,55 @@ class FolderBusy(RuntimeError):
 
 class WriterLock:
     """One writer per folder: an OS file lock (flock) on FOLDER/.writer.lock, held while the owner runs and freed
-    by the OS when it ends however it ends (a kill leaves no stale lock). The file says who holds it."""
+    by the OS when it ends however it ends (a kill leaves no stale lock). The file says who holds it. On leaving,
+    the lock file is removed, and so are the folders entering made (FOLDER, and parents it had to make) where
+    they hold nothing: a run that failed leaves no trace."""
 
     NAME = ".writer.lock"
 
     def __init__(self, folder: str | Path, what: str):
         self.folder, self.what = Path(folder), what
         self._fd: int | None = None
+        self._made: list[Path] = []
 
     def __enter__(self) -> WriterLock:
         import fcntl
 
+        self._made = [p for p in (self.folder, *self.folder.parents) if not p.exists()]
         self.folder.mkdir(parents=True, exist_ok=True)
         path = self.folder / self.NAME
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another process"
+        while True:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666 & ~_UMASK)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another process"
+                os.close(fd)
+                raise FolderBusy(f"{self.folder}: in use by {holder}; wait for it to finish (or stop it) or choose "
+                                 "another folder") from None
+            # The holder before us removes the file before it lets go: locked, it is ours only if still in place.
+            try:
+                if os.stat(path).st_ino == os.fstat(fd).st_ino:
+                    break
+            except FileNotFoundError:
+                pass
             os.close(fd)
-            raise FolderBusy(f"{self.folder}: in use by {holder}; wait for it to finish (or stop it) or choose "
-                             "another folder") from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{self.what} (pid {os.getpid()})\n".encode(), 0)
         self._fd = fd
         return self
 
     def __exit__(self, *exc) -> None:
-        if self._fd is not None:
-            os.close(self._fd)  # closing the descriptor frees the lock
-            self._fd = None
+        if self._fd is None:
+            return
+        (self.folder / self.NAME).unlink(missing_ok=True)  # while still held: no one else has it yet
+        os.close(self._fd)  # closing the descriptor frees the lock
+        self._fd = None
+        for made in self._made:  # deepest first
+            try:
+                made.rmdir()
+            except OSError:  # it holds something (or was never made): kept
+                break
 
 
 def _alive(pid: int) -> bool:
@@ -105,7 +139,10 @@ def partial_folder(out: str | Path) -> Iterator[Path]:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     clean_partials(out)
-    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.partial-{os.getpid()}-"))
+    try:
+        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.partial-{os.getpid()}-"))
+    except OSError as e:
+        raise _about(e, out) from None
     os.chmod(tmp, 0o777 & ~_UMASK)
     try:
         yield tmp
@@ -127,3 +164,18 @@ def foreign_files(folder: str | Path, ours: str) -> list[Path]:
     if not folder.is_dir():
         return []
     return sorted(p for p in folder.iterdir() if not pattern.fullmatch(p.name))
+
+
+def unwritable(out: str | Path) -> str | None:
+    """Why a file or folder to be written at `out` could not be, or None; checked before any work, so that a long
+    run does not end on it. A path not made yet is judged by its nearest existing parent, an existing file by its
+    folder (it is replaced there), an existing folder by itself (written into)."""
+    out = Path(out)
+    place = out if out.is_dir() else out.parent
+    while not place.exists():
+        place = place.parent
+    if not place.is_dir():
+        return f"{place} is a file, not a folder"
+    if not os.access(place, os.W_OK | os.X_OK):
+        return f"no permission to write in {place}"
+    return None

@@ -3,7 +3,10 @@ status 2 and one line naming the file."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -187,3 +190,90 @@ def test_demo_avatar_normals_are_its_surface(synth_capture, tmp_path):
     assert report["frames"] >= 2
     assert m["normal_median_deg"] <= 15.0 and m["normal_deg"] <= 20.0, m
     assert m["psnr"] > 20.0  # it is the head of the capture, in its place
+
+
+@pytest.fixture(scope="module")
+def tiny_avatar(capture, tmp_path_factory) -> tuple[Path, str, str]:
+    """An avatar of `capture` after 3 steps, a progress record each (PROGRESS_SECONDS 0: as a capture's slow steps
+    get one every 5 s), and what `train` printed (stdout, stderr)."""
+    import app.avatar_commands
+    import models.training.trainer
+
+    out = tmp_path_factory.mktemp("tiny") / "avatar"
+    with pytest.MonkeyPatch.context() as mp:
+        for module in (app.avatar_commands, models.training.trainer):
+            mp.setattr(module, "PROGRESS_SECONDS", 0.0)
+        stdout, stderr = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+            assert main(["train", str(capture), "--out", str(out), "--effects", "none", "--steps", "3",
+                         "--rays-per-step", "64"]) == 0
+    return out, stdout.getvalue(), stderr.getvalue()
+
+
+def test_train_shows_the_photometric_error_and_what_next(tiny_avatar, capture):
+    """A record (and in a log, a line) at every step here: time-based, not only every 50 steps; each line has the
+    photometric error apart from the weighted total. The last line says what to run next. The folder holds no
+    lock, and the weights have the user's permissions (they were 0600)."""
+    avatar, out, err = tiny_avatar
+    records = [json.loads(line) for line in (avatar / "progress.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in records] == [1, 2, 3]
+    lines = [line for line in err.splitlines() if line.startswith("step ")]
+    assert len(lines) == 3
+    for line, r in zip(lines, records, strict=True):
+        assert f"photometric {r['photometric']:.5f}  total {r['loss']:.5f}" in line, (line, r)
+    assert r["loss"] != r["photometric"]  # the total weighs in other terms
+    assert out.splitlines()[-1] == (f"next: avatar-studio studio {avatar}  (or: avatar-studio turntable {avatar}; "
+                                    f"avatar-studio eval {avatar} {capture})")
+    assert ".writer.lock" not in [p.name for p in avatar.iterdir()]
+    umask = os.umask(0o022)
+    os.umask(umask)
+    assert {oct(p.stat().st_mode & 0o777) for p in avatar.glob("*.safetensors")} == {oct(0o666 & ~umask)}
+
+
+def test_an_avatar_and_a_capture_given_for_each_other_are_named(tiny_avatar, capture, tmp_path, capsys):
+    """An avatar where a capture belongs, and a capture where an avatar belongs: exit 2 and one line saying which
+    is which (they said 'transforms_train.json: no such file' and 'not an avatar folder'). The failed train leaves
+    no folder behind (it left one holding only .writer.lock)."""
+    avatar = tiny_avatar[0]
+    is_avatar = (f"{avatar}: is an avatar (it holds avatar.json), not a capture dataset; it was trained on the "
+                 f"capture {capture}")
+    for argv in (["train", str(avatar), "--out", str(tmp_path / "made" / "av")],
+                 ["eval", str(avatar), str(avatar), "--out", str(tmp_path / "ev")], ["dataset", str(avatar)]):
+        assert main(argv) == 2
+        assert capsys.readouterr().err.splitlines() == [f"avatar-studio {argv[0]}: error: {is_avatar}"]
+    assert not (tmp_path / "made").exists()
+    is_capture = f"{capture}: is a capture dataset, not an avatar (train one with: avatar-studio train {capture})"
+    for argv in (["render", str(capture), "--out", str(tmp_path / "x.png")],
+                 ["eval", str(capture), str(capture), "--out", str(tmp_path / "ev")],
+                 ["turntable", str(capture), "--out", str(tmp_path / "t.mp4")]):
+        assert main(argv) == 2
+        assert capsys.readouterr().err.splitlines() == [f"avatar-studio {argv[0]}: error: {is_capture}"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_eval_says_where_it_wrote_and_warns_of_another_head(tiny_avatar, capture, tmp_path, capsys):
+    """eval's last line names metrics.json, the images and the PSNR in it (synth's, what to run next). Against a
+    capture of another person (synth --identity 3: its shape moves the built-in head 22 mm) or tracked with another
+    head model, one warning line, and the eval still runs."""
+    import shutil
+
+    avatar = tiny_avatar[0]
+    assert main(["eval", str(avatar), str(capture), "--out", str(tmp_path / "ev")]) == 0
+    out, err = capsys.readouterr()
+    psnr = json.loads((tmp_path / "ev" / "metrics.json").read_text())["metrics"]["psnr"]
+    assert out.splitlines()[-1].startswith(f"wrote {tmp_path / 'ev' / 'metrics.json'} and 1 side-by-side image (")
+    assert f"; PSNR {psnr:.2f} dB, SSIM" in out.splitlines()[-1] and err == ""
+    other = tmp_path / "other"
+    assert main(["synth", "--identity", "3", "--frames", "10", "--size", "24", "--out", str(other)]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == f"next: avatar-studio train {other} --out {other}_avatar"
+    flame = tmp_path / "flame_tracked"
+    shutil.copytree(capture, flame)
+    test = json.loads((flame / "transforms_test.json").read_text())
+    (flame / "transforms_test.json").write_text(json.dumps({**test, "head_model": "flame:/elsewhere/flame.npz"}))
+    for dataset, why in ((other, "of another person than the avatar's (their identity shapes move the head up to 22 "
+                                 "mm apart)"),
+                         (flame, "tracked with the head model flame:/elsewhere/flame.npz, the avatar with builtin")):
+        assert main(["eval", str(avatar), str(dataset), "--out", str(tmp_path / f"ev_{dataset.name}")]) == 0
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and err[0].startswith(f"avatar-studio eval: warning: {dataset}: {why}"), err
+        assert (tmp_path / f"ev_{dataset.name}" / "metrics.json").is_file()

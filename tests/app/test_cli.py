@@ -104,3 +104,33 @@ def test_model_choices_are_the_registrys_models():
     from models.avatars.registry import AVATARS
 
     assert typing.get_args(ModelName) == tuple(AVATARS)
+
+
+@pytest.mark.parametrize("argv", [["render", "resources/demo_avatar", "--out", "{place}/x.png"],
+                                  ["turntable", "resources/demo_avatar", "--out", "{place}/t.mp4"],
+                                  ["export-mesh", "resources/demo_avatar", "--out", "{place}/a.ply"],
+                                  ["preview", "--out", "{place}/p.png"],
+                                  ["synth", "--out", "{place}/capture"],
+                                  ["track", "{video}", "--out", "{place}/dataset"],
+                                  ["train", "{video}", "--out", "{place}/avatar"]], ids=lambda a: a[0])
+def test_an_out_that_cannot_be_written_is_named_before_any_work(argv, tmp_path, capsys):
+    """Exit 2 and one line with the user's --out, at once (track found out after its minutes of fitting), never the
+    program's temporary (render said '/ro/.x.png.l3j_u2l6.tmp: Permission denied'). As root, whom a read-only
+    folder does not stop, the place is under a regular file."""
+    import os
+
+    if os.geteuid() != 0:
+        place = tmp_path / "ro"
+        place.mkdir(mode=0o555)
+        why = f"no permission to write in {place}"
+    else:
+        place = tmp_path / "plain_file"
+        place.write_text("not a folder")
+        why = f"{place} is a file, not a folder"
+    argv = [a.format(place=place, video=REPO / "README.md") for a in argv]
+    t0 = time.perf_counter()
+    assert main(argv) == 2
+    out = Path(argv[argv.index("--out") + 1])
+    assert capsys.readouterr().err.splitlines() == [f"avatar-studio {argv[0]}: error: {out}: cannot be written "
+                                                    f"there: {why}"]
+    assert time.perf_counter() - t0 < 5.0  # no avatar loaded, no video read

@@ -11,7 +11,15 @@ import textwrap
 
 import pytest
 
-from models.files import FolderBusy, WriterLock, atomic_write_bytes, clean_partials, partial_folder
+from models.files import (
+    FolderBusy,
+    WriterLock,
+    atomic_write,
+    atomic_write_bytes,
+    clean_partials,
+    partial_folder,
+    unwritable,
+)
 
 
 def test_atomic_write_gives_ordinary_permissions(tmp_path):
@@ -66,3 +74,62 @@ def test_one_writer_per_folder(tmp_path):
         holder.wait()
     with WriterLock(folder, "me"):  # the OS freed the killed holder's lock
         pass
+
+
+def _unwritable_place(tmp_path):
+    """A folder path nothing can be written under: read-only (0o555) for a user; as root, whom modes do not stop,
+    a path under a regular file."""
+    if os.geteuid() != 0:
+        ro = tmp_path / "ro"
+        ro.mkdir(mode=0o555)
+        return ro
+    (tmp_path / "plain_file").write_text("not a folder")
+    return tmp_path / "plain_file"
+
+
+def test_weights_get_the_users_permissions(tmp_path):
+    """safetensors replaces the temporary it is given with a file of its own, mode 0600 (what `train` wrote its
+    weights with): the mode is set after the rename."""
+    import numpy as np
+    from safetensors.numpy import save_file
+
+    umask = os.umask(0o022)
+    os.umask(umask)
+    target = tmp_path / "weights-000001.safetensors"
+    atomic_write(target, lambda tmp: save_file({"w": np.zeros(3, np.float32)}, tmp))
+    assert stat.S_IMODE(target.stat().st_mode) == 0o666 & ~umask  # 0644 under the usual 022, not 0600
+
+
+def test_an_unwritable_place_is_named_as_the_user_gave_it(tmp_path):
+    """The error names the user's path, never the program's temporary (.NAME.XXXX.tmp, .NAME.partial-PID-XXXX)."""
+    place = _unwritable_place(tmp_path)
+    with pytest.raises(OSError, match=r"a\.json") as e:
+        atomic_write_bytes(place / "a.json", b"{}")
+    assert e.value.filename == str(place / "a.json"), e.value
+    with pytest.raises(OSError, match=place.name) as e, partial_folder(place / "dataset"):
+        pass
+    assert ".partial" not in e.value.filename and ".tmp" not in e.value.filename, e.value
+    assert unwritable(place / "deeper" / "out.png") is not None and place.name in unwritable(place / "x")
+    assert unwritable(tmp_path / "new" / "deeper" / "out.png") is None  # made on the way: its parent is writable
+
+
+def test_a_writer_leaves_no_lock_and_no_empty_folder(tmp_path):
+    """The lock file goes when the writer does; the folders it made go too where nothing was written (a failed
+    run), and stay where something was."""
+    failed = tmp_path / "made" / "avatar"
+
+    def fail() -> None:
+        with WriterLock(failed, "a trainer"):
+            assert (failed / WriterLock.NAME).is_file()
+            raise RuntimeError("the capture was not a capture")
+
+    with pytest.raises(RuntimeError):
+        fail()
+    assert list(tmp_path.iterdir()) == []
+    done = tmp_path / "avatar"
+    with WriterLock(done, "a trainer"):
+        (done / "avatar.json").write_text("{}")
+    assert [p.name for p in done.iterdir()] == ["avatar.json"]
+    with WriterLock(done, "a trainer"):  # taken again: its own lock file, removed again
+        pass
+    assert [p.name for p in done.iterdir()] == ["avatar.json"]
