@@ -20,7 +20,8 @@ from models.head.controls import Controls
 from models.head.head import Head
 from models.tracking.fit import FitConfig, FitResult, Intrinsics, fit, project
 
-SWEEP = settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+SWEEP = settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                        HealthCheck.function_scoped_fixture])
 K = Intrinsics(300.0, 300.0, 64.0, 64.0)  # a 128 x 128 image
 FAST = FitConfig(iterations=6, shape_components=2)
@@ -81,7 +82,7 @@ def test_degenerate_landmarks_give_finite_fits(face, kind, where, angle):
     assert outputs_finite(r)
 
 
-@settings(SWEEP, max_examples=3)
+@settings(SWEEP, max_examples=4)
 @given(shift=st.tuples(st.sampled_from([-64.0, -30.0, 0.0, 40.0, 64.0, 100.0, 200.0]),
                        st.sampled_from([-64.0, 0.0, 64.0, 150.0])))
 def test_a_face_at_the_edge_or_outside_the_image_is_fitted(face, shift):
