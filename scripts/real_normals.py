@@ -32,6 +32,10 @@ from render.gl.raster import Rasterizer
 from render.normals import mesh_normal_image
 
 
+def to_bytes(rgb: np.ndarray) -> np.ndarray:
+    return (np.clip(rgb, 0.0, 1.0) * 255).round().astype(np.uint8)
+
+
 def training_views(avatar, folder: Path, raster: Rasterizer) -> SimpleNamespace:
     """What note_views reads of the trainer's frames, from a capture's training split (no images kept)."""
     split = load_split(folder, "train")
@@ -67,7 +71,7 @@ def main() -> None:
         if f in shown:
             rows.append(np.concatenate([load_rgb(f.image_path, avatar.background.numpy()), out["rgb"],
                                         out["normals"] * 0.5 + 0.5, truth_n * 0.5 + 0.5], 1))
-    save_png(args.out / "normals.png", np.concatenate(rows, 0))
+    save_png(args.out / "normals.png", to_bytes(np.concatenate(rows, 0)))
     every = np.concatenate(angles)
     report = {"avatar": str(args.avatar), "frames": len(angles), "skin_pixels": int(every.size),
               "median_deg_to_mesh": float(np.median(every)), "mean_deg_to_mesh": float(every.mean())}
@@ -81,7 +85,7 @@ def main() -> None:
                                  margin=1.4)
             row.append(avatar.render_image(avatar.at_rest(Controls()), cam, raster, buffers=())["rgb"])
         edges.append(np.concatenate(row, 1))
-    save_png(args.out / "edges.png", np.concatenate(edges, 0))
+    save_png(args.out / "edges.png", to_bytes(np.concatenate(edges, 0)))
     (args.out / "normals.json").write_text(json.dumps(report, indent=1))
     print(json.dumps(report))
 
