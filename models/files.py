@@ -55,51 +55,57 @@ class FolderBusy(RuntimeError):
 
 
 class WriterLock:
-    """One writer per folder: an OS file lock (flock) on FOLDER/.writer.lock, held while the owner runs and freed
-    by the OS when it ends however it ends (a kill leaves no stale lock). The file says who holds it. On leaving,
-    the lock file is removed, and so are the folders entering made (FOLDER, and parents it had to make) where
-    they hold nothing: a run that failed leaves no trace."""
+    """One writer per folder: filelock's lock on FOLDER/.writer.lock (flock on Unix, LockFileEx on Windows), held
+    while the owner runs and freed by the OS when it ends however it ends (a kill leaves no stale lock). The file
+    says who holds it. On leaving, the lock file is removed, and so are the folders entering made (FOLDER, and
+    parents it had to make) where they hold nothing: a run that failed leaves no trace."""
 
     NAME = ".writer.lock"
+    WAIT_S = 0.2
+    """How long a second writer waits before it is refused: long enough to outlast a holder that is just letting go
+    (filelock then tries the file the next holder made), too short for anyone to notice."""
 
     def __init__(self, folder: str | Path, what: str):
         self.folder, self.what = Path(folder), what
-        self._fd: int | None = None
+        self._lock = None
         self._made: list[Path] = []
 
+    def _sign(self, fd: int) -> None:
+        """Write who holds the lock into its file (filelock calls this with the locked descriptor)."""
+        os.ftruncate(fd, 0)
+        os.lseek(fd, 0, os.SEEK_SET)
+        os.write(fd, f"{self.what} (pid {os.getpid()})\n".encode())
+
     def __enter__(self) -> WriterLock:
-        import fcntl
+        from filelock import FileLock, Timeout
 
         self._made = [p for p in (self.folder, *self.folder.parents) if not p.exists()]
         self.folder.mkdir(parents=True, exist_ok=True)
         path = self.folder / self.NAME
-        while True:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666 & ~_UMASK)
+        # no mode: filelock creates the file as any new file is made (the user's umask)
+        lock = FileLock(path, timeout=self.WAIT_S, on_acquired=self._sign)
+        try:
+            lock.acquire()
+        except Timeout:
             try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another process"
-                os.close(fd)
-                raise FolderBusy(f"{self.folder}: in use by {holder}; wait for it to finish (or stop it) or choose "
-                                 "another folder") from None
-            # The holder before us removes the file before it lets go: locked, it is ours only if still in place.
-            try:
-                if os.stat(path).st_ino == os.fstat(fd).st_ino:
-                    break
-            except FileNotFoundError:
-                pass
-            os.close(fd)
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{self.what} (pid {os.getpid()})\n".encode(), 0)
-        self._fd = fd
+                holder = path.read_text(errors="replace")[:200].strip()
+            except OSError:  # gone meanwhile, or locked against reading (Windows)
+                holder = ""
+            raise FolderBusy(f"{self.folder}: in use by {holder or 'another process'}; wait for it to finish (or stop "
+                             "it) or choose another folder") from None
+        self._lock = lock
         return self
 
     def __exit__(self, *exc) -> None:
-        if self._fd is None:
+        if self._lock is None:
             return
-        (self.folder / self.NAME).unlink(missing_ok=True)  # while still held: no one else has it yet
-        os.close(self._fd)  # closing the descriptor frees the lock
-        self._fd = None
+        # While still held, no one else has it yet; one who opened this file before and locks it after finds it
+        # unlinked, and filelock has it try the path again. Windows cannot remove an open file: filelock removes it
+        # there on release.
+        with contextlib.suppress(OSError):
+            (self.folder / self.NAME).unlink(missing_ok=True)
+        self._lock.release()
+        self._lock = None
         for made in self._made:  # deepest first
             try:
                 made.rmdir()
