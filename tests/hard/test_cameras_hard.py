@@ -140,14 +140,14 @@ def test_near_and_far_around_a_head_with_the_camera_inside(eye, ahead, points, f
     leave it as it was."""
     cam = Camera(look_at(eye, eye + ahead), 30.0, 8, 8, near_m=0.5, far_m=0.6)
     p = np.asarray(points, np.float64)
-    if far is not None:
-        p = np.vstack([p, eye + far * ahead])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # inf - inf in the depth of a point at inf
+    with warnings.catch_warnings(), np.errstate(invalid="ignore"):  # inf * 0, inf - inf: a point at inf
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if far is not None:
+            p = np.vstack([p, eye + far * ahead])
         c = clipping_around(cam, p)
+        depth = -(p @ cam.view[:3, :3].T + cam.view[:3, 3])[:, 2]
     assert math.isfinite(c.near_m) and math.isfinite(c.far_m)
     assert 1e-3 <= c.near_m < c.far_m
-    depth = -(p @ cam.view[:3, :3].T + cam.view[:3, 3])[:, 2]
     if not (depth[np.isfinite(depth)] > 0).any():
         assert c is cam
 
