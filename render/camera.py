@@ -9,13 +9,18 @@ import numpy as np
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] = (0.0, 1.0, 0.0)) -> np.ndarray:
-    """World-to-camera 4x4 for a camera at `eye` looking at `target`, +y of the image towards `up`."""
+    """World-to-camera 4x4 for a camera at `eye` looking at `target`, +y of the image towards `up`. An `up` along
+    the view falls back to +z, or to +y where the view is along z too: a unit view cannot lie along both."""
     eye, target, up = (np.asarray(a, np.float64) for a in (eye, target, up))
     f = target - eye
-    f /= np.linalg.norm(f)
-    s = np.cross(f, up)
-    if np.linalg.norm(s) < 1e-9:  # looking straight up or down: pick another up
-        s = np.cross(f, np.array([0.0, 0.0, 1.0]))
+    distance = np.linalg.norm(f)
+    if distance == 0:
+        raise ValueError(f"look_at: eye and target coincide at {eye.tolist()}: no direction to look in")
+    f /= distance
+    for candidate in (up, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])):
+        s = np.cross(f, candidate)
+        if np.linalg.norm(s) >= 1e-9:
+            break
     s /= np.linalg.norm(s)
     u = np.cross(s, f)
     m = np.eye(4)
