@@ -211,7 +211,7 @@ class CopyFrameToSliders(SliderChange):
     """The timeline's frame becomes the sliders' controls."""
 
     def change(self, s: Session) -> None:
-        if s.capture is None or not 0 <= s.timeline_frame < len(s.capture.frames):
+        if not s.on_capture_frame:
             return
         s.sliders = Sliders.of(s.capture.frames[s.timeline_frame].controls, s.avatar.head_model.num_expression)
         controls_moved(s)

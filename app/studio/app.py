@@ -29,6 +29,7 @@ from app.studio.context import PanelContext
 from app.studio.exporting import Exporter
 from app.studio.neural import NeuralWorker, Request
 from app.studio.script import Script
+from app.studio.script_fields import ScriptError
 from app.studio.session import AvatarFiles, Session, read_avatar_folder, remember_recent
 from render.gl.context import GLContext
 
@@ -79,6 +80,8 @@ class Studio:
 
     def __init__(self, cfg: StudioConfig):
         self.cfg = cfg
+        self.script = Script.load(cfg.script) if cfg.script else None
+        """Read and checked first: a wrong script ends the command before a renderer starts or a window opens."""
         self.session = Session()
         self.opening: Opening | None = None
         self.loading_s: list[float] = []
@@ -91,6 +94,9 @@ class Studio:
         self.last_submit_id = 0
         self.last_submit_time = 0.0
         self.latency_ms: float | None = None
+        self.latency_from = "slider"
+        """What latency_ms is counted from: a change ("slider"), or an avatar's opening (no pixels of it yet: the
+        renderer reads it first, seconds on a first launch, which the header must not pass off as a slider's)."""
         self.pass_latency_ms: dict[str, float] = {}
         """Since the last request: ms from its submission to each of its passes' pixels on screen (draft, preview,
         final): stamped when the frame that draws them has been presented (`presented`)."""
@@ -102,7 +108,6 @@ class Studio:
         self.frame_count = 0
         self.gl: GLContext | None = None
         self.viewport = viewport.Viewport()
-        self.script = Script.load(cfg.script) if cfg.script else None
         self.confirm_close = False
         self.keep_jobs = False
         """The user chose to keep training after the window closes (otherwise closing stops the jobs)."""
@@ -238,11 +243,13 @@ class Studio:
         self.last_submit_id = self.worker.submit(Request(s.controls(), cam, passes, frame, inspect=inspect,
                                                          buffers=buffers))
         self.last_submit_time = time.perf_counter()
+        self.latency_from = "slider" if self.worker.result is not None else "opening"
         s.dirty = False
 
     def context(self) -> PanelContext:
         return PanelContext(self.session, self.act, self.worker, self.jobs, self.exporter, self.clock.fps(),
-                            float(np.median(self.gui_ms)) if self.gui_ms else None, self.latency_ms)
+                            float(np.median(self.gui_ms)) if self.gui_ms else None, self.latency_ms,
+                            self.latency_from)
 
     def gui(self) -> None:
         t0 = time.perf_counter()
@@ -276,6 +283,8 @@ class Studio:
         self.clock.tick(state)
         if self.script is not None:
             self.script.step(self)
+            if self.script.over:
+                hello_imgui.get_runner_params().app_shall_exit = True
         result = self.worker.result
         if result is not None and result.request_id == self.last_submit_id and \
                 result.pass_name not in self.pass_render_ms:
@@ -376,6 +385,8 @@ class Studio:
                 "last_pass": None if r is None else {"pass": r.pass_name, "ms": round(r.ms, 1)},
                 "presets": {"ms": self.worker.figures.ms, "psnr_vs_final": self.worker.figures.psnr_vs_final},
                 "errors": list(self.session.errors),
+                "viewport": {"space": self.viewport.space, "rect": self.viewport.rect,
+                             "images": dict(self.viewport.images)},
                 "steps_run": None if self.script is None else self.script.ran,
                 "latencies": None if self.script is None else self.script.latencies,
                 "sliders_log": None if self.script is None else self.script.sliders_log}
@@ -496,8 +507,7 @@ def run_studio(cfg: StudioConfig) -> int:
         print(f"wrote {cfg.screenshot}")
     if studio.script is not None and studio.script.report:
         studio.script.report.write_text(json.dumps(studio.figures(), indent=1))
-    if studio.script is not None and studio.script.failed:
-        print(f"studio script failed: {studio.script.failed}")
-        return 1
+    if studio.script is not None and studio.script.failed:  # one line, exit status 2 (app/cli.py)
+        raise ScriptError(f"{cfg.script}: {studio.script.failed}")
     return 0
 

@@ -98,7 +98,8 @@ def draw(ctx: PanelContext) -> None:
     if s.opening is not None:
         imgui.text(f"opening {s.opening.name}...")
     if s.avatar is None:
-        imgui.text("No avatar open.")
+        if s.opening is None:
+            imgui.text("No avatar open.")
     else:
         m = s.files.meta
         prov = m.get("provenance", {})

@@ -27,3 +27,5 @@ class PanelContext:
     """Median time of the window's own Python code a frame."""
     latency_ms: float | None = None
     """Slider to first neural pixels, for the latest request."""
+    latency_from: str = "slider"
+    """What latency_ms counts from: "slider" (a change), or "opening" (the avatar's first pixels)."""

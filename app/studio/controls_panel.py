@@ -69,7 +69,7 @@ def _angles(label: str, values: np.ndarray, names: tuple[str, ...], limit: float
 def draw(ctx: PanelContext) -> None:
     s, act = ctx.session, ctx.act
     if s.avatar is None:
-        imgui.text("Open an avatar to drive it.")
+        imgui.text_disabled(s.absent("Open an avatar to drive it."))
         return
     sl = s.sliders
     head = s.avatar.head_model

@@ -16,7 +16,7 @@ def draw(ctx: PanelContext) -> None:
     fig = ctx.worker.figures
     avatar = ctx.session.avatar
     if avatar is None:
-        imgui.text("No avatar open.")
+        imgui.text_disabled(ctx.session.absent("No avatar open."))
         return
     presets = avatar.presets
     imgui.text("refine to:")

@@ -200,25 +200,48 @@ class Session:
     def name(self) -> str:
         return self.folder.name if self.folder else "(none)"
 
+    @property
+    def on_capture_frame(self) -> bool:
+        """A capture frame is shown (the timeline), with its own camera and controls."""
+        return self.capture is not None and 0 <= self.timeline_frame < len(self.capture.frames)
+
     def render_camera(self, size: int) -> Camera:
         """The neural render's camera: on the timeline the capture frame's own (its intrinsics scaled to `size`
         across: the render lines up with the captured image), else the orbit camera."""
         cap = self.capture
-        if cap is not None and 0 <= self.timeline_frame < len(cap.frames):
+        if self.on_capture_frame:
             height = max(8, round(size * cap.height / cap.width))
             return frame_camera(cap, cap.frames[self.timeline_frame]).resized(size, height)
         return self.view.camera(self.avatar.rest_vertices(), size, size)
 
     def controls(self) -> Controls:
         """What the avatar is shown with: a capture frame's controls on the timeline, else the sliders'."""
-        if self.capture is not None and 0 <= self.timeline_frame < len(self.capture.frames):
+        if self.on_capture_frame:
             return self.capture.frames[self.timeline_frame].controls
         return self.avatar.at_rest(self.sliders.controls()) if self.avatar is not None else self.sliders.controls()
+
+    def absent(self, how_to_open: str) -> str:
+        """What a panel says while it has no avatar to show: the one being read (the first launch reads the demo for
+        seconds: not an error), else `how_to_open`."""
+        return f"Opening {self.opening.name}..." if self.opening is not None else how_to_open
 
     def report(self, message: str) -> None:
         """A message in the window (the last 8 are kept)."""
         self.errors.append(message)
         del self.errors[:-8]
+
+
+def views_warning(s: Session) -> str:
+    """The viewport's warning where the camera looks from farther round the head than the capture did ("" where it
+    does not): the orbit camera's yaw about the head (the camera's less the head's) against the avatar's captured
+    views. A capture frame on the timeline is shown from its own camera with its own pose, one of the views the
+    capture saw, whatever the orbit camera and the sliders hold: never a warning."""
+    if s.avatar is None or s.on_capture_frame:
+        return ""
+    if not s.avatar.views_beyond(s.view.yaw_deg - float(s.sliders.head[0])):
+        return ""
+    lo, hi = s.avatar.view_range["yaw_deg"]
+    return f"beyond the captured views (yaw {lo:.0f} to {hi:.0f} degrees): the avatar never saw this side of the head"
 
 
 def recent_folders() -> list[str]:

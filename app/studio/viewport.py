@@ -13,7 +13,7 @@ from app.display import INSPECT, PLAIN, buffer_image, guide_frame
 from app.studio import actions as a
 from app.studio.context import PanelContext
 from app.studio.neural import Result
-from app.studio.session import Session
+from app.studio.session import Session, views_warning
 from models.avatars.base import Avatar
 from models.head.head import posed_mesh
 from render.gl.context import GLContext
@@ -62,6 +62,10 @@ class Viewport:
         self._capture_key: tuple = ()
         self.rect: tuple[int, int, int, int] | None = None
         """Where the guide and the render were drawn in the window last frame: x, y, width, height (pixels)."""
+        self.images: dict[str, tuple[int, int, int, int]] = {}
+        """Each image drawn last frame (guide, neural, capture): x, y, width, height in the window (pixels)."""
+        self.space: tuple[int, int, int, int] | None = None
+        """The space the viewport gives its images (below its toolbar): x, y, width, height (pixels)."""
         self._guide_key: tuple = ()
 
     def init(self, gl: GLContext) -> None:
@@ -144,13 +148,13 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         imgui.text(f"| neural {r.pass_name} pass {r.ms:.0f} ms")
         imgui.same_line()
     if ctx.latency_ms is not None:
-        imgui.text(f"| slider to first pixels {ctx.latency_ms:.0f} ms")
+        imgui.text(f"| {ctx.latency_from} to first pixels {ctx.latency_ms:.0f} ms")
         imgui.same_line()
     imgui.text("| rendering..." if worker.busy else "| at rest")
     if worker.error:
         imgui.text_colored(imgui.ImVec4(1, 0.4, 0.3, 1), worker.error)
     if s.avatar is None:
-        imgui.text("No avatar open: open one in the Avatar panel.")
+        imgui.text_disabled(s.absent("No avatar open: open one in the Avatar panel."))
         return
     # What to show.
     available = [b for b in BUFFERS if buffer_available(b, s.avatar)]
@@ -185,53 +189,121 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         imgui.same_line()
     imgui.text_disabled(f"render {d.neural_size} px shown at {d.shown_px} px"
                         + (" (linear filter)" if d.shown_px != d.neural_size else ""))
-    relative_yaw = s.view.yaw_deg - float(s.sliders.head[0])  # the camera about the head, as the capture saw it
-    if s.avatar.views_beyond(relative_yaw):
-        lo, hi = s.avatar.view_range["yaw_deg"]
-        imgui.text_colored(imgui.ImVec4(1.0, 0.75, 0.3, 1.0), f"beyond the captured views (yaw {lo:.0f} to {hi:.0f} "
-                           "degrees): the avatar never saw this side of the head")
+    if warning := views_warning(s):
+        imgui.text_colored(imgui.ImVec4(1.0, 0.75, 0.3, 1.0), warning)
 
     avail = imgui.get_content_region_avail()
+    top_left = imgui.get_cursor_screen_pos()
     captured = vp.update_capture(s) and d.layout == "beside"  # the timeline's frame as the camera saw it
     n = (3 if captured else 2) if d.layout == "beside" else 1
-    size = int(max(64, min((avail.x - 8 * (n - 1)) / n, avail.y - 4)))
+    cols, size = grid_cell(n, avail.x, avail.y - 4)
     if size != d.shown_px:
         act(a.ShowAtSize(size))
     vp.draw_guide(s, size)
     vp.update_neural(r, d.buffer)
-    origin = imgui.get_cursor_screen_pos()
+    vp.space = (int(top_left.x), int(top_left.y), int(avail.x), int(avail.y))
+    cells = grid_cells(n, cols, size, avail.x, avail.y - 4)
     guide_ref = imgui.ImTextureRef(vp.guide_tex.glo)
     flip = (imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))  # GL framebuffers run bottom-up
+    neural = None if vp.neural_tex is None else imgui.ImTextureRef(vp.neural_tex.glo)
     if d.layout == "beside":
-        imgui.image(guide_ref, imgui.ImVec2(size, size), *flip)
-        _mouse(act, size)
-        imgui.same_line()
-        if vp.neural_tex is not None:
-            imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
-            _mouse(act, size)
+        shown = [("guide", guide_ref, vp.guide_tex.size, flip), ("neural", neural, _size(vp.neural_tex), ())]
         if captured:
-            imgui.same_line()
-            imgui.image(imgui.ImTextureRef(vp.capture_tex.glo), imgui.ImVec2(size, size))
+            shown.append(("capture", imgui.ImTextureRef(vp.capture_tex.glo), vp.capture_tex.size, ()))
+    else:
+        shown = [("neural", neural, _size(vp.neural_tex), ())]
+    vp.images = {}
+    for (name, ref, tex_size, uv), (x, y) in zip(shown, cells, strict=True):
+        ix, iy, w, h = fit(tex_size, size)
+        at = (round(top_left.x + x + ix), round(top_left.y + y + iy))  # whole pixels: no blur from the placement
+        imgui.set_cursor_screen_pos(imgui.ImVec2(*at))
+        if ref is None:
+            imgui.dummy(imgui.ImVec2(w, h))
+        else:
+            imgui.image(ref, imgui.ImVec2(w, h), *uv)
+        vp.images[name] = (*at, w, h)
+        if name == "capture":
             if imgui.is_item_hovered():
                 imgui.set_tooltip(f"capture frame {s.timeline_frame}, as the camera saw it")
-    elif d.layout == "render":
-        if vp.neural_tex is not None:
-            imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
-        else:
-            imgui.dummy(imgui.ImVec2(size, size))
+            continue
+        if d.layout == "over":  # the guide over the render, at the slider's opacity
+            lo = imgui.get_item_rect_min()
+            hi = imgui.get_item_rect_max()
+            imgui.get_window_draw_list().add_image(guide_ref, lo, hi, flip[0], flip[1],
+                                                   imgui.IM_COL32(255, 255, 255, int(255 * d.overlay_alpha)))
         _mouse(act, size)
-    else:
-        if vp.neural_tex is not None:
-            imgui.image(imgui.ImTextureRef(vp.neural_tex.glo), imgui.ImVec2(size, size))
-        draw_list = imgui.get_window_draw_list()
-        alpha = int(255 * d.overlay_alpha)
-        draw_list.add_image(guide_ref, origin, imgui.ImVec2(origin.x + size, origin.y + size), flip[0], flip[1],
-                            imgui.IM_COL32(255, 255, 255, alpha))
-        if vp.neural_tex is None:
-            imgui.dummy(imgui.ImVec2(size, size))
-        _mouse(act, size)
-    end = imgui.get_item_rect_max()
-    vp.rect = (int(origin.x), int(origin.y), int(end.x - origin.x), int(end.y - origin.y))
+    vp.rect = bounds(list(vp.images.values()))
+
+
+GAP_PX = 8
+"""Between the viewport's images."""
+
+
+def grid_cell(n: int, width: float, height: float, gap: float = GAP_PX) -> tuple[int, int]:
+    """The columns and the square cell's side (pixels, at least 64) for n images in a grid that fits width x height
+    with `gap` between them: of every column count, the one that shows them largest (a row in a wide viewport, a
+    column in a tall one).
+
+    >>> grid_cell(2, 690, 780)   # a row: (690 - 8) / 2 = 341 across; a column: (780 - 8) / 2 = 386 high
+    (1, 386)
+    >>> grid_cell(2, 1170, 970)  # a row: 581; a column: 481
+    (2, 581)
+    >>> grid_cell(3, 690, 780)   # a row: 224; two columns, two rows: min(341, 386) = 341; a column: 254
+    (2, 341)
+    """
+    best = (1, 0)
+    for cols in range(1, n + 1):
+        rows = -(-n // cols)
+        side = int(min((width - gap * (cols - 1)) / cols, (height - gap * (rows - 1)) / rows))
+        if side > best[1]:
+            best = (cols, side)
+    return best[0], max(64, best[1])
+
+
+def grid_cells(n: int, cols: int, side: int, width: float, height: float, gap: float = GAP_PX
+               ) -> list[tuple[float, float]]:
+    """The top-left corners of n square cells of `side` in `cols` columns, the grid centred in width x height and a
+    last row of fewer cells centred under the others (pixels from the space's top-left).
+
+    >>> grid_cells(3, 2, 100, 300, 250)  # grid 208 x 208: 46 px each side, 21 above and below
+    [(46.0, 21.0), (154.0, 21.0), (100.0, 129.0)]
+    """
+    rows = -(-n // cols)
+    x0 = max(0.0, (width - cols * side - gap * (cols - 1)) / 2)
+    y0 = max(0.0, (height - rows * side - gap * (rows - 1)) / 2)
+    cells = []
+    for i in range(n):
+        row, col = divmod(i, cols)
+        in_row = min(cols, n - row * cols)
+        shift = (cols - in_row) * (side + gap) / 2
+        cells.append((x0 + shift + col * (side + gap), y0 + row * (side + gap)))
+    return cells
+
+
+def fit(image_size: tuple[int, int], side: int) -> tuple[int, int, int, int]:
+    """An image of (width, height) pixels in a square cell of `side`, its aspect kept, centred: x, y, width, height.
+
+    >>> fit((256, 256), 300), fit((320, 240), 300)
+    ((0, 0, 300, 300), (0, 37, 300, 225))
+    """
+    w, h = image_size
+    scale = side / max(w, h, 1)
+    sw, sh = max(1, round(w * scale)), max(1, round(h * scale))
+    return (side - sw) // 2, (side - sh) // 2, sw, sh
+
+
+def bounds(boxes: list[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
+    """The box (x, y, width, height) around boxes.
+
+    >>> bounds([(10, 20, 100, 100), (118, 20, 100, 100), (64, 128, 100, 100)])
+    (10, 20, 208, 208)
+    """
+    x0, y0 = min(b[0] for b in boxes), min(b[1] for b in boxes)
+    return x0, y0, max(b[0] + b[2] for b in boxes) - x0, max(b[1] + b[3] for b in boxes) - y0
+
+
+def _size(tex: moderngl.Texture | None) -> tuple[int, int]:
+    return (1, 1) if tex is None else tex.size
 
 
 def _mouse(act, size: int) -> None:

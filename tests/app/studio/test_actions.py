@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from app.studio import actions as a
-from app.studio.session import AvatarFiles, Session, read_avatar_folder
+from app.studio.session import AvatarFiles, Session, read_avatar_folder, views_warning
 from models.capture.dataset import load_split
 
 REPO = Path(__file__).resolve().parents[3]
@@ -175,6 +175,31 @@ def test_timeline_shows_a_capture_frame_and_moves_the_sliders_to_it(session, fil
     assert session.timeline_frame == -1
     orbit = session.view.camera(session.avatar.head_model.template, 64, 64)
     np.testing.assert_allclose(session.render_camera(64).view, orbit.view)
+
+
+def test_a_capture_frame_never_warns_that_it_is_beyond_the_captured_views(session, files, monkeypatch):
+    """The warning weighs the orbit camera's yaw about the head (the camera's less the head's) against the captured
+    yaws and a 10 degree margin; a capture frame is shown from its own camera, whatever the orbit camera holds."""
+    monkeypatch.setattr(files.avatar, "view_range", {"yaw_deg": [-5.0, 5.0], "pitch_deg": [-5.0, 5.0]})
+    a.SetView(yaw_deg=14.0).apply(session)  # 14 - 0 = 14 <= 5 + 10
+    assert views_warning(session) == ""
+    a.SetView(yaw_deg=40.0).apply(session)  # 40 > 15
+    assert views_warning(session).startswith("beyond the captured views (yaw -5 to 5 degrees)")
+    a.SetAngles("head", (30.0, 0.0, 0.0)).apply(session)  # 40 - 30 = 10: the head turned with the camera
+    assert views_warning(session) == ""
+    a.SetAngles("head", (-30.0, 0.0, 0.0)).apply(session)  # 40 + 30 = 70
+    assert views_warning(session) != ""
+    weighed_as_before = 0  # frames the orbit camera and the frame's sliders put beyond the views (what warned)
+    for k in range(len(files.capture.frames)):  # the sliders move to each frame's head, the camera stays at 40
+        a.ShowFrame(k).apply(session)
+        assert views_warning(session) == "", k
+        weighed_as_before += files.avatar.views_beyond(session.view.yaw_deg - float(session.sliders.head[0]))
+    assert weighed_as_before >= len(files.capture.frames) // 2  # 6 of these 7 frames warned before
+    a.ShowFrame(-1).apply(session)
+    a.SetAngles("head", (0.0, 0.0, 0.0)).apply(session)  # the sliders again: the orbit camera is weighed again
+    assert views_warning(session) != ""
+    monkeypatch.setattr(files.avatar, "view_range", None)  # an older avatar: its views unknown, no warning
+    assert views_warning(session) == ""
 
 
 def test_camera_actions(session):

@@ -22,7 +22,7 @@ pytestmark = pytest.mark.gl
 
 @pytest.fixture(scope="module")
 def display():
-    with xvfb(":88", "1600x1000x24") as disp:
+    with xvfb(":88", "1920x1200x24") as disp:  # room for a 1920x1080 window
         yield disp
 
 
@@ -50,12 +50,30 @@ def studio(display: str, home: Path, *args: str, timeout: float = 600) -> subpro
     return r
 
 
-def run_script(display: str, tmp_path: Path, avatar: Path, steps: list[dict]) -> dict:
+def run_script(display: str, tmp_path: Path, avatar: Path, steps: list[dict], size: str = "1280x800") -> dict:
     script = tmp_path / "script.json"
     report = tmp_path / "report.json"
     script.write_text(json.dumps({"report": str(report), "steps": steps}))
-    studio(display, tmp_path, str(avatar), "--script", str(script), "--width", "1280", "--height", "800")
+    width, height = size.split("x")
+    studio(display, tmp_path, str(avatar), "--script", str(script), "--width", width, "--height", height)
     return json.loads(report.read_text())
+
+
+def failed_run(display: str, home: Path, avatar: Path, steps: list[dict]) -> tuple[int, list[str]]:
+    """A scripted run that should fail: its exit status and its stderr's lines."""
+    script = home / "script.json"
+    script.write_text(json.dumps({"steps": steps}))
+    env = {**os.environ, "DISPLAY": display, "HOME": str(home)}
+    r = subprocess.run([sys.executable, "-m", "app.cli", "studio", str(avatar), "--script", str(script)], cwd=REPO,
+                       env=env, capture_output=True, text=True, timeout=600)
+    return r.returncode, r.stderr.splitlines()
+
+
+def viewport_images(report: dict, shot: np.ndarray) -> dict[str, np.ndarray]:
+    """The images of a "save_viewport" picture, cut where the report says the viewport drew them."""
+    x0, y0 = report["viewport"]["rect"][:2]
+    return {name: shot[y - y0:y - y0 + h, x - x0:x - x0 + w] for name, (x, y, w, h) in
+            report["viewport"]["images"].items()}
 
 
 def test_expression_slider_changes_the_face(display, avatar, tmp_path):
@@ -84,12 +102,17 @@ def test_expression_slider_changes_the_face(display, avatar, tmp_path):
     moved = report["latencies"][0]  # the move's passes: the first pixels no later than the preview's
     assert 0 < moved["first"] <= moved["preview"] and moved.get("draft", moved["preview"]) <= moved["preview"], moved
     assert 0 < moved["preview render"] < moved["preview"], moved  # the render is part of the wait for its pixels
-    # "Screenshot viewport": the guide and the render beside it, as the window shows them (not the render alone).
+    # "Screenshot viewport": the guide and the render, as the window shows them (not the render alone): at 1280x800
+    # the viewport is taller than wide, so one above the other (a column shows them larger than a row).
     view = np.asarray(Image.open(shot), np.int16)
-    h, w = view.shape[:2]
-    assert h > 160 and 1.9 * h < w < 2.2 * h, view.shape
-    guide, neural = view[:, : w // 2 - 8], view[:, w // 2 + 8:]
-    assert guide.std() > 5 and neural.std() > 5
+    images = viewport_images(report, view)
+    assert set(images) == {"guide", "neural"}
+    assert view.shape[0] > 2 * images["guide"].shape[0] > 320, view.shape
+    assert images["guide"].shape == images["neural"].shape and images["guide"].shape[0] == images["guide"].shape[1]
+    assert images["guide"].std() > 5 and images["neural"].std() > 5
+    small = [np.asarray(Image.fromarray(im.astype(np.uint8)).resize((32, 32)), np.float64)
+             for im in (images["neural"], nb)]
+    assert np.abs(small[0] - small[1]).mean() < 6  # the render saved is the one shown (scaled up, linear filter)
 
 
 def test_shadow_buffers_in_the_viewport(display, avatar, capture, tmp_path):
@@ -109,15 +132,82 @@ def test_shadow_buffers_in_the_viewport(display, avatar, capture, tmp_path):
     assert rgb.shape == without.shape == light.shape and 200 <= rgb.shape[0] <= 256
     assert (without >= rgb - 1).all()  # uint8 rounding
     assert (light[0, 0] == 255).all() and light.min() < 255
-    view = np.asarray(Image.open(timeline), np.float64)
-    h, w = view.shape[:2]
-    assert 2.8 * h < w < 3.3 * h, view.shape  # guide, render, captured image
+    images = viewport_images(report, np.asarray(Image.open(timeline)))
+    assert set(images) == {"guide", "neural", "capture"}  # guide, render, captured image
     from models.capture.dataset import load_split
 
     frame = load_split(capture, "train").frames[2]
     truth = np.asarray(Image.open(frame.image_path).convert("RGB").resize((24, 24)), np.float64)
-    shown = np.asarray(Image.fromarray(view[:, w - h:].astype(np.uint8)).resize((24, 24)), np.float64)
+    shown = np.asarray(Image.fromarray(images["capture"]).resize((24, 24)), np.float64)
     assert np.abs(shown - truth).mean() < 12  # the capture's own frame, as the window shows it
+
+
+def test_script_mistakes_end_on_one_line_with_status_2(display, avatar, tmp_path):
+    """A wrong step is one line naming it (steps[INDEX] (ACTION)) and exit status 2, before the window opens:
+    "wait_render": true once ended in a ValueError's traceback, a gaze of three numbers in a broadcast error."""
+    for steps, line in [
+        ([{"wait_frames": 1}, {"wait_render": True}],
+         "steps[1] (wait_render): one of draft, preview or final, not true"),
+        ([{"gaze": [10, 0, 0]}], "steps[0] (gaze): a list of 2 numbers (yaw, pitch in degrees), not [10, 0, 0]"),
+    ]:
+        status, stderr = failed_run(display, tmp_path, avatar, steps)
+        assert status == 2 and stderr == [f"avatar-studio studio: error: {tmp_path / 'script.json'}: {line}"], stderr
+
+
+def non_background(image: np.ndarray, colour, tolerance: int = 12) -> np.ndarray:
+    """(H,W) bool: the pixels that differ from a flat colour by more than `tolerance` in some channel."""
+    return (np.abs(image.astype(np.int16) - np.asarray(colour, np.int16)).max(-1) > tolerance)
+
+
+@pytest.mark.parametrize("size", ["1280x800", "1920x1080"])
+def test_the_viewport_images_fill_the_space_the_window_gives_them(display, avatar, tmp_path, size):
+    """At two window sizes the guide and the render, square, take the viewport's space below its toolbar: what
+    they draw (the pixels that are not the window's background, read back from a screenshot) spans at least 90% of
+    its width or of its height, centred. And a save_neural right after the avatar opens waits for a render: the
+    picture written holds the head, not only the background."""
+    first, shot = tmp_path / "first.png", tmp_path / "window.png"
+    report = run_script(display, tmp_path, avatar, [
+        {"save_neural": str(first)}, {"refine_to": "preview"}, {"wait_render": "preview"}, {"wait_frames": 2},
+        {"screenshot": str(shot)}], size=size)
+    assert report["errors"] == [], report["errors"]
+    background = np.asarray(json.loads((avatar / "avatar.json").read_text())["background"], np.float64)
+    neural = np.asarray(Image.open(first))
+    assert neural.shape[0] == neural.shape[1] >= 64
+    assert 0.05 < non_background(neural, np.round(255 * background)).mean() < 0.95  # the head on its background
+    window = np.asarray(Image.open(shot))
+    assert window.shape == (int(size.split("x")[1]), int(size.split("x")[0]), 3)
+    x, y, w, h = report["viewport"]["space"]
+    assert 500 < w and 600 < h  # below the toolbar, between the side panels
+    clear = window[y + h - 2, x + 2]  # a corner the images leave: the window's own background
+    drawn = non_background(window[y:y + h, x:x + w], clear, tolerance=3)
+    rows, cols = np.nonzero(drawn.any(1))[0], np.nonzero(drawn.any(0))[0]
+    spans = ((rows[-1] - rows[0] + 1) / h, (cols[-1] - cols[0] + 1) / w)
+    print(size, "viewport space", (w, h), "drawn spans (height, width)", spans, report["viewport"]["images"])
+    assert max(spans) >= 0.9, spans
+    centre = ((rows[0] + rows[-1]) / 2 - h / 2, (cols[0] + cols[-1]) / 2 - w / 2)
+    assert abs(centre[0]) <= 0.03 * h and abs(centre[1]) <= 0.03 * w, centre  # centred
+    for _, _, iw, ih in report["viewport"]["images"].values():
+        assert iw == ih  # the square renders keep their aspect
+
+
+def test_timeline_frames_never_warn_about_views(display, avatar, tmp_path):
+    """An avatar whose capture saw the head only from the front (yaw -1 to 1 degrees here): the orbit camera at 40
+    degrees warns, but each capture frame on the timeline, shown from its own camera, never does (the frames'
+    heads turn, and the warning once weighed the orbit camera against them)."""
+    import shutil
+
+    front = tmp_path / "front_avatar"
+    shutil.copytree(avatar, front)
+    meta = json.loads((front / "avatar.json").read_text())
+    meta["view_range"] = {"yaw_deg": [-1.0, 1.0], "pitch_deg": [-1.0, 1.0]}
+    (front / "avatar.json").write_text(json.dumps(meta))
+    steps = [{"view": {"yaw_deg": 40.0}}, {"expect_warning": "beyond the captured views (yaw -1 to 1 degrees)"}]
+    for k in (0, 5, 11):
+        steps += [{"timeline": k}, {"expect_warning": None}]
+    steps += [{"wait_render": "draft"}, {"expect_warning": None}, {"timeline": -1}, {"reset": "head"},
+              {"expect_warning": "beyond the captured views"}]
+    report = run_script(display, tmp_path, front, steps)
+    assert report["steps_run"] == len(steps) and report["errors"] == []
 
 
 def test_errors_training_job_and_turntable(display, avatar, capture, tmp_path):
@@ -154,17 +244,17 @@ def test_errors_training_job_and_turntable(display, avatar, capture, tmp_path):
 
 def test_jobs_end_with_the_window(display, avatar, capture, tmp_path):
     """A job the window started does not outlive it unless the user chose so: here the script fails (an error
-    that never comes) while a 10-minute job runs, the studio exits 1, and no trainer of that job is left."""
+    that never comes) while a 10-minute job runs, the studio exits 2 with one line naming the step, and no trainer
+    of that job is left."""
     job_out = tmp_path / "long_job"
-    script = tmp_path / "script.json"
-    script.write_text(json.dumps({"steps": [
+    status, stderr = failed_run(display, tmp_path, avatar, [
         {"train": {"dataset": str(capture), "out": str(job_out), "minutes": 10, "effects": "none"}},
         {"wait_frames": 30},
-        {"expect_error": "an error nobody reports"}]}))
-    env = {**os.environ, "DISPLAY": display, "HOME": str(tmp_path)}
-    r = subprocess.run([sys.executable, "-m", "app.cli", "studio", str(avatar), "--script", str(script)], cwd=REPO,
-                       env=env, capture_output=True, text=True, timeout=600)
-    assert r.returncode == 1 and "studio script failed" in r.stdout, r.stdout + r.stderr
+        {"expect_error": "an error nobody reports"}])
+    assert status == 2 and stderr[-1].startswith(
+        f"avatar-studio studio: error: {tmp_path / 'script.json'}: steps[2] (expect_error): no message containing "
+        "'an error nobody reports'"), stderr
+    assert not any("Traceback" in line for line in stderr), stderr
     left = subprocess.run(["pgrep", "-f", f"train .*{job_out}"], capture_output=True, text=True)
     assert left.stdout.strip() == "", f"trainer still running: {left.stdout}"
 
