@@ -45,8 +45,9 @@ from models.head.sources import load_head
 from models.tracking.blendshapes import expression_from_scores, gaze_from_scores, jaw_from_scores
 from models.tracking.canonical import canonical_face_mesh
 from models.tracking.correspond import correspond, skin_vertices
+from models.tracking.finder import FaceFinder
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
-from models.tracking.landmarker import Face, Landmarker, packaged_bundle
+from models.tracking.landmarker import Face, packaged_bundle
 from models.tracking.masks import background_plate, foreground_mask
 from models.tracking.splits import frame_splits
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames, video_info
@@ -103,7 +104,7 @@ def detect_faces(cfg: TrackConfig, bundle: Path, info, progress) -> tuple[list[d
     if expected and cfg.seconds:
         expected = min(expected, max(1, round(cfg.seconds * info.fps * share)))
     kept, dropped, several, read = [], [], 0, 0
-    with Landmarker(bundle, max_faces=2) as landmarker:
+    with FaceFinder(bundle, max_faces=2) as landmarker:
         for index, t, rgb in sampled_frames(cfg.video, cfg.fps):
             if cfg.seconds and t >= cfg.seconds:
                 break
@@ -118,7 +119,7 @@ def detect_faces(cfg: TrackConfig, bundle: Path, info, progress) -> tuple[list[d
                     several += 1
                 # The full frame is not kept (a minute of 1080p is 11 GB): its crop is read again once the crop
                 # that serves every frame is known.
-                kept.append({"source_frame": index, "time_s": t, "face": face,
+                kept.append({"source_frame": index, "time_s": t, "face": face, "found_by": landmarker.found_by,
                              "sharpness": sharpness(rgb, face.landmarks_px)})
             progress(read, expected)
     if read == 0:
@@ -242,6 +243,9 @@ def run_track(cfg: TrackConfig) -> int:
             "split_by": cfg.split,
             "landmarks_used": len(tr.mp_ids), "image_px": cfg.size, "intrinsics": [k.fx, k.fy, k.cx, k.cy],
             "face_width_px": face_width_px(faces, framing),
+            "source_face_px": round(float(np.median([np.ptp(f.landmarks_px[:468, 0]) for f in faces])), 1),
+            "faces_found_by": {by: sum(f["found_by"] == by for f in kept) for by in ("frame", "following", "search")},
+            "upsampled": round(max(cfg.size / framing.side, 1.0), 3),
             "crop": {"x0": round(framing.x0, 1), "y0": round(framing.y0, 1), "side": round(framing.side, 1),
                      "whole_frame": framing.side >= min(tr.info.width, tr.info.height) - 0.5,
                      "following": framing.following, "canvas_px": [framing.width, framing.height]},
@@ -260,8 +264,37 @@ def run_track(cfg: TrackConfig) -> int:
           f"95th percentile {le['p95']:.2f} px ({cfg.size} px images, the face {report['face_width_px']['median']:.0f} "
           f"px wide); {total:.1f} s ({report['seconds_per_frame']:.3f} s a frame)"
           + (f"; overlay {cfg.out / 'tracking' / 'overlay.mp4'}" if cfg.overlay else ""))
+    small = small_face_note(report, tr.info.width)
+    if small:
+        print(small)
     print(next_train(cfg.out))
     return 0
+
+
+def small_face_note(report: dict, width: int) -> str:
+    """One line where the face is small in the video: how small, how it was found, and what it costs (the crop's
+    pixels upsampled to the dataset's size); empty where it is not.
+
+    >>> small_face_note({"source_face_px": 112.0, "faces_found_by": {"frame": 0, "following": 58, "search": 2},
+    ...                  "upsampled": 1.0}, 1920)
+    'the face is small in the video (112 px across, 6% of its 1920 px width): found in windows of the frame (60 frames)'
+    >>> small_face_note({"source_face_px": 60.0, "faces_found_by": {"frame": 5}, "upsampled": 1.42}, 640)
+    'the face is small in the video (60 px across, 9% of its 640 px width): the crop is upsampled 1.42x (less detail)'
+    >>> small_face_note({"source_face_px": 280.0, "faces_found_by": {"frame": 50}, "upsampled": 1.0}, 512)
+    ''
+    """
+    found = report["faces_found_by"]
+    windows = sum(n for by, n in found.items() if by != "frame")
+    parts = []
+    if windows:
+        parts.append(f"found in windows of the frame ({windows} frames)")
+    if report["upsampled"] > 1.0:
+        parts.append(f"the crop is upsampled {report['upsampled']:.2f}x (less detail)")
+    if not parts:
+        return ""
+    face = report["source_face_px"]
+    return (f"the face is small in the video ({face:.0f} px across, {face / width:.0%} of its {width} px width): "
+            + "; ".join(parts))
 
 
 def check_config(cfg: TrackConfig) -> None:

@@ -63,9 +63,10 @@ class Face:
 
 
 class Landmarker:
-    """A face landmarker in video mode (frames in time order). Use as a context manager: it closes itself."""
+    """A face landmarker in video mode (frames in time order: it follows the face from frame to frame), or in image
+    mode (each image on its own: windows of a frame). Use as a context manager: it closes itself."""
 
-    def __init__(self, bundle: str | Path, max_faces: int = 2):
+    def __init__(self, bundle: str | Path, max_faces: int = 2, video: bool = True):
         try:
             import mediapipe as mp
             from mediapipe.tasks.python import BaseOptions, vision
@@ -75,8 +76,10 @@ class Landmarker:
         if not bundle.is_file():
             raise BundleError(f"{bundle}: no such landmarker bundle (MediaPipe's face_landmarker*.task)")
         self._mp = mp
+        self._video = video
         options = vision.FaceLandmarkerOptions(
-            base_options=BaseOptions(model_asset_path=str(bundle)), running_mode=vision.RunningMode.VIDEO,
+            base_options=BaseOptions(model_asset_path=str(bundle)),
+            running_mode=vision.RunningMode.VIDEO if video else vision.RunningMode.IMAGE,
             num_faces=max_faces, output_face_blendshapes=True, output_facial_transformation_matrixes=True)
         try:
             with quiet_stderr():  # the graph's threads log as it starts, all before it returns
@@ -85,10 +88,11 @@ class Landmarker:
             raise BundleError(f"{bundle}: MediaPipe cannot load it as a face landmarker ({e})") from None
 
     def detect(self, rgb: np.ndarray, time_ms: int) -> list[Face]:
-        """The faces in one (H,W,3) uint8 RGB frame; time_ms must increase from call to call."""
+        """The faces in one (H,W,3) uint8 RGB frame; in video mode time_ms must increase from call to call."""
         h, w = rgb.shape[:2]
         image = self._mp.Image(image_format=self._mp.ImageFormat.SRGB, data=np.ascontiguousarray(rgb))
-        result = self._landmarker.detect_for_video(image, int(time_ms))
+        result = self._landmarker.detect_for_video(image, int(time_ms)) if self._video else \
+            self._landmarker.detect(image)
         faces = []
         for k, lms in enumerate(result.face_landmarks):
             xyz = np.array([(p.x, p.y, p.z) for p in lms], np.float32)
