@@ -108,8 +108,10 @@ def _camera_to_world(path: Path, where: str, value: object) -> np.ndarray:
         m = np.vstack([m, [0, 0, 0, 1]])
     if m.shape != (4, 4):
         raise _fail(path, where, f"must be a 4x4 matrix, got shape {m.shape}")
-    if abs(np.linalg.det(m[:3, :3]) - 1) > 1e-3 or np.abs(m[3] - [0, 0, 0, 1]).max() > 1e-6:
-        raise _fail(path, where, "must be a rigid camera-to-world transform (rotation with det 1)")
+    r = m[:3, :3]
+    if (abs(np.linalg.det(r) - 1) > 1e-3 or np.abs(r.T @ r - np.eye(3)).max() > 1e-3
+            or np.abs(m[3] - [0, 0, 0, 1]).max() > 1e-6):  # det 1 alone lets a shear or a scaling 2, 1/2, 1 pass
+        raise _fail(path, where, "must be a rigid camera-to-world transform (a rotation: R^T R = I, det 1)")
     return m
 
 
@@ -207,7 +209,7 @@ def _load_ours(folder: Path, split: str, path: Path, data: dict) -> CaptureSplit
     w, h = data["width"], data["height"]
     if not all(isinstance(v, int) and v > 0 for v in (w, h)):
         raise _fail(path, "", "fields 'width' and 'height' must be positive integers")
-    intr = _numbers(path, "field 'intrinsics' ", data["intrinsics"], (4,))
+    intr = _intrinsics(path, "field 'intrinsics' ", data["intrinsics"])
     head_model = data["head_model"]
     if not isinstance(head_model, str) or head_model.split(":")[0] not in ("builtin", "ict", "flame"):
         raise _fail(path, "", f"field 'head_model' must be builtin, ict:PATH or flame:PATH, got {head_model!r}")
@@ -217,7 +219,7 @@ def _load_ours(folder: Path, split: str, path: Path, data: dict) -> CaptureSplit
         bg: np.ndarray | Path = _resolve(folder, background, path, "field 'background' ")
     else:
         bg = _numbers(path, "field 'background' ", background, (3,))
-    bg_intr = _intrinsics(path, "field 'background_intrinsics' ", data.get("background_intrinsics"))
+    bg_intr = _optional_intrinsics(path, "field 'background_intrinsics' ", data.get("background_intrinsics"))
     if bg_intr is not None and not isinstance(bg, Path):
         raise _fail(path, "", "field 'background_intrinsics' needs a background image (field 'background')")
     frames = []
@@ -242,17 +244,20 @@ def _load_ours(folder: Path, split: str, path: Path, data: dict) -> CaptureSplit
             controls=controls,
             bbox=_bbox(path, where, f.get("bbox")),
             extra=extra,
-            intrinsics=_intrinsics(path, f"{where}field 'intrinsics' ", f.get("intrinsics")),
+            intrinsics=_optional_intrinsics(path, f"{where}field 'intrinsics' ", f.get("intrinsics")),
         ))
-    return CaptureSplit(folder, split, "avatar-studio", w, h, tuple(intr), head_model, shape, bg,
+    return CaptureSplit(folder, split, "avatar-studio", w, h, intr, head_model, shape, bg,
                         data.get("lighting"), frames, float(data.get("depth_scale_m", 1e-4)),
                         isinstance(data.get("source"), dict) and "video" in data["source"], bg_intr)
 
 
-def _intrinsics(path: Path, where: str, value: object) -> tuple[float, float, float, float] | None:
-    """Optional fx, fy, cx, cy (pixels), focal lengths positive."""
-    if value is None:
-        return None
+def _optional_intrinsics(path: Path, where: str, value: object) -> tuple[float, float, float, float] | None:
+    """A frame's or a background plate's own fx, fy, cx, cy (pixels), None where it has none."""
+    return None if value is None else _intrinsics(path, where, value)
+
+
+def _intrinsics(path: Path, where: str, value: object) -> tuple[float, float, float, float]:
+    """fx, fy, cx, cy (pixels), focal lengths positive (the rays divide by them)."""
     k = _numbers(path, where, value, (4,))
     if k[0] <= 0 or k[1] <= 0:
         raise _fail(path, where, f"must be [fx, fy, cx, cy] with positive focal lengths, got {k.tolist()}")
@@ -285,13 +290,23 @@ def _load_nerface(folder: Path, split: str, path: Path, data: dict) -> CaptureSp
                             expr, None, _bbox(path, where, f.get("bbox"))))
     w, h = _image_size(frames[0].image_path)
     if "intrinsics" in data:
-        intr = tuple(_numbers(path, "field 'intrinsics' ", data["intrinsics"], (4,)))
+        intr = _intrinsics(path, "field 'intrinsics' ", data["intrinsics"])
     elif "camera_angle_x" in data:
-        fx = 0.5 * w / math.tan(0.5 * float(_numbers(path, "field 'camera_angle_x' ", data["camera_angle_x"])))
+        fx = 0.5 * w / math.tan(0.5 * _angle_x(path, data["camera_angle_x"]))
         intr = (fx, fx, w / 2, h / 2)
     else:
         raise _fail(path, "", "needs 'intrinsics' or 'camera_angle_x'")
     return CaptureSplit(folder, split, "nerface", w, h, intr, None, np.zeros(0), np.ones(3), None, frames)
+
+
+def _angle_x(path: Path, value: object) -> float:
+    """NerFACE's camera_angle_x: the horizontal field of view (radians), 0 < angle < pi (at 0 the focal length is
+    infinite, at pi and beyond zero or negative)."""
+    where = "field 'camera_angle_x' "
+    angle = _numbers(path, where, value)
+    if angle.shape != () or not 0 < angle < math.pi:
+        raise _fail(path, where, f"must be one angle in radians between 0 and pi, got {value!r}")
+    return float(angle)
 
 
 def load_imavatar(folder: Path, split: str = "train", test_fraction: float = 0.1) -> CaptureSplit:

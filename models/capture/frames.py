@@ -34,23 +34,58 @@ def pinhole_camera(intrinsics, width: int, height: int, c2w: np.ndarray) -> Came
     return Camera.from_intrinsics(view, fx, fy, cx, cy, width, height, near_m=0.05, far_m=10.0)
 
 
+#: PIL's modes of a 16-bit grey PNG: its values are 0..65535 (converting to "L" or "RGB" clips them at 255).
+_GREY16_MODES = ("I;16", "I;16B", "I;16L", "I;16N")
+
+
+def _image_has_alpha(im: Image.Image) -> bool:
+    """An alpha channel (RGBA, LA, PA), or a tRNS chunk: a palette's transparent entries, or one colour (or grey
+    level) transparent."""
+    return im.mode in ("RGBA", "LA", "PA") or "transparency" in im.info
+
+
+def _grey16(im: Image.Image) -> tuple[np.ndarray, np.ndarray | None]:
+    """A 16-bit grey image's levels (H,W) in [0,1] (value / 65535), and its alpha (H,W) where a tRNS chunk makes one
+    grey level transparent (PIL's convert to RGBA ignores it), else None."""
+    raw = np.asarray(im).astype(np.int64)
+    t = im.info.get("transparency")
+    alpha = None if t is None else (raw != int(t)).astype(np.float32)
+    return (raw / 65535.0).astype(np.float32), alpha
+
+
+def _rgb_or_rgba(im: Image.Image) -> Image.Image:
+    """An 8-bit image as RGB, or RGBA where it has alpha (a tRNS chunk's transparent pixels at alpha 0)."""
+    return im.convert("RGBA" if _image_has_alpha(im) else "RGB")
+
+
+def _pixels(im: Image.Image) -> np.ndarray:
+    """(H,W,3) or, with alpha (see _image_has_alpha), (H,W,4) float32 in [0,1], as the file holds them."""
+    if im.mode in _GREY16_MODES:
+        grey, alpha = _grey16(im)
+        return np.stack([grey] * 3 + ([] if alpha is None else [alpha]), -1)
+    return np.asarray(_rgb_or_rgba(im), np.float32) / 255.0
+
+
 def has_alpha(path) -> bool:
-    """Whether an image file has an alpha channel, as load_rgb and load_rgb8 read it (its header alone is read)."""
+    """Whether an image file has alpha, as load_rgb and load_rgb8 read it (its header alone is read)."""
     with Image.open(path) as im:
-        return im.mode in ("RGBA", "LA")
+        return _image_has_alpha(im)
 
 
 def load_rgb8(path) -> np.ndarray:
-    """(H,W,3) uint8 as the file holds it, or (H,W,4) where it has an alpha channel."""
+    """(H,W,3) uint8 as the file holds it, or (H,W,4) where it has alpha (a tRNS chunk's transparency among it); a
+    16-bit grey image rounded to 8 bits (value / 257)."""
     with Image.open(path) as im:
-        return np.asarray(im.convert("RGBA" if im.mode in ("RGBA", "LA") else "RGB"))
+        if im.mode in _GREY16_MODES:
+            return np.round(_pixels(im) * 255.0).astype(np.uint8)
+        return np.asarray(_rgb_or_rgba(im))
 
 
 def load_rgb(path, background: np.ndarray | None = None) -> np.ndarray:
-    """(H,W,3) float32 in [0,1]: the file's colours, composited over `background` where it has alpha (white where
-    none is given)."""
+    """(H,W,3) float32 in [0,1]: the file's colours (a 16-bit grey image's value / 65535), composited over
+    `background` where it has alpha or a tRNS chunk's transparency (white where none is given)."""
     with Image.open(path) as im:
-        a = np.asarray(im.convert("RGBA" if im.mode in ("RGBA", "LA") else "RGB"), np.float32) / 255.0
+        a = _pixels(im)
     if a.shape[-1] == 4:
         bg = np.ones(3, np.float32) if background is None else background
         a = a[..., :3] * a[..., 3:] + bg * (1 - a[..., 3:])
@@ -81,8 +116,11 @@ def background_plate(split: CaptureSplit) -> tuple[np.ndarray, Camera] | None:
 
 
 def load_mask(path) -> np.ndarray:
-    """(H,W) coverage in [0,1]."""
-    return np.asarray(Image.open(path).convert("L"), np.float32) / 255.0
+    """(H,W) coverage in [0,1]: 8-bit levels / 255, 16-bit grey ones / 65535."""
+    with Image.open(path) as im:
+        if im.mode in _GREY16_MODES:
+            return _grey16(im)[0]
+        return np.asarray(im.convert("L"), np.float32) / 255.0
 
 
 def foreground_reach_m(hit: np.ndarray, depth: np.ndarray, mask: np.ndarray, focal_px: float) -> np.ndarray:

@@ -160,8 +160,6 @@ def test_a_transform_that_scales_or_mirrors_is_refused(capture, q, scales):
     refused(capture, "frame 0", "'transform_matrix'", "rigid")
 
 
-@pytest.mark.xfail(strict=True, reason="bug: _camera_to_world checks only det(R) = 1 and the last row, so a shear "
-                                       "or a scaling of determinant 1 passes as a camera's pose")
 @pytest.mark.parametrize("name", ["shear", "scale 2, 1/2, 1"])
 def test_a_non_rigid_transform_of_determinant_one_is_refused(capture, name):
     m = np.eye(4)
@@ -194,9 +192,6 @@ def test_extreme_intrinsics_are_read_and_give_unit_rays(capture, fx, fy, cx, cy,
     np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0, atol=1e-12, rtol=0)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: the split's field 'intrinsics' is checked for shape and finiteness "
-                                       "only (a frame's own go through _intrinsics): zero or negative focal lengths "
-                                       "pass, and the frames' rays divide by them")
 @pytest.mark.parametrize("k", [[0.0, 0.0, 3.0, 2.0], [-10.0, 10.0, 3.0, 2.0], [10.0, 0.0, 3.0, 2.0]])
 def test_zero_or_negative_focal_lengths_of_the_split_are_refused(capture, k):
     write(capture, header(intrinsics=k), [frame()])
@@ -214,10 +209,6 @@ def test_a_nerface_field_of_view_is_read_as_a_focal_length(capture, angle):
     assert load_split(capture).intrinsics == pytest.approx((fx, fx, W / 2, H / 2), rel=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: NerFACE's camera_angle_x is not checked: 0 divides by zero "
-                                       "(ZeroDivisionError), a list fails in float() (TypeError), a negative angle "
-                                       "or one of pi or more gives a negative or vanishing focal length; and its "
-                                       "'intrinsics' take zero focal lengths")
 @pytest.mark.parametrize("head", [{"camera_angle_x": 0.0}, {"camera_angle_x": [0.5, 0.5]},
                                   {"camera_angle_x": -0.5}, {"camera_angle_x": 4.0},
                                   {"intrinsics": [0.0, 0.0, 3.0, 2.0]}], ids=lambda h: repr(h))
@@ -307,9 +298,6 @@ def test_16_bit_colour_images_read_within_a_level(tmp_path, px, alpha):
     np.testing.assert_allclose(load_rgb(path), expect, atol=2 / 255, rtol=0)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: a 16-bit grey PNG (PIL mode I;16) is converted to RGB and L by "
-                                       "clipping its values to 0..255, not scaling: 1000/65535 reads as 1.0 in "
-                                       "load_rgb and load_mask")
 @pytest.mark.parametrize("reader", ["load_rgb", "load_mask"])
 def test_16_bit_grey_images_read_within_a_level(tmp_path, reader):
     v = np.array([[0, 1000, 32768], [40000, 65000, 65535]], np.uint16)
@@ -318,9 +306,6 @@ def test_16_bit_grey_images_read_within_a_level(tmp_path, reader):
     np.testing.assert_allclose(got, v / 65535.0, atol=1 / 255, rtol=0)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: has_alpha/load_rgb look at the mode alone (RGBA, LA): a palette or RGB "
-                                       "PNG with a tRNS chunk (transparency) is read opaque, its transparent pixels "
-                                       "in their own colour instead of the background")
 @pytest.mark.parametrize("mode", ["P", "RGB"])
 def test_transparency_of_a_palette_or_colour_key_is_alpha(tmp_path, mode):
     a = np.zeros((2, 2, 3), np.uint8)
