@@ -9,6 +9,7 @@ from models.head.controls import ControlsError
 from models.head.model import HeadModelError
 from models.ranges import OptionError
 from models.tracking.canonical import BundleError
+from models.tracking.fit import FitError
 from models.tracking.video import VideoError
 
 
@@ -18,4 +19,4 @@ class UserInputError(ValueError):
 
 #: Exceptions that are the user's input being wrong, not the program failing.
 INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError, CheckpointError, DeviceError,
-                BundleError, VideoError, OptionError)
+                BundleError, VideoError, OptionError, FitError)

@@ -20,6 +20,14 @@ from models.head.controls import Controls
 from models.head.lbs import blend_shapes, lbs
 from models.head.model import HeadModel
 
+#: The fewest landmarks PnP (EPnP) starts a frame's pose from.
+MIN_LANDMARKS = 4
+
+
+class FitError(ValueError):
+    """Landmarks that cannot be fitted (no frames, fewer landmarks than PnP needs, none finite); the message says
+    what is missing."""
+
 
 @dataclass(frozen=True)
 class Intrinsics:
@@ -60,8 +68,9 @@ class FitConfig:
 class FitResult:
     shape: np.ndarray  # (S,) identity coefficients (the model's full length)
     controls: list[Controls]  # per frame
-    error_px: np.ndarray  # (N,K) reprojection error of each landmark, pixels
+    error_px: np.ndarray  # (N,K) reprojection error of each landmark, pixels; 0 where it was not fitted
     seconds: float
+    fitted: np.ndarray  # (N,K) bool: the landmark's target was finite and in the fit
 
 
 def expression_bounds(model: HeadModel) -> tuple[float, float]:
@@ -106,16 +115,42 @@ class LandmarkHead:
         return verts + translation[:, None]
 
 
-def initial_pose(head: LandmarkHead, targets: np.ndarray, k: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
-    """Root rotation (N,3) and translation (N,3) per frame from PnP on the neutral head's landmark vertices."""
+def usable_landmarks(vertex_ids: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(N,K) bool: which of targets (N,K,2) are finite (a landmarker writes NaN where it found no face). FitError
+    where nothing can be fitted: no frames, fewer than MIN_LANDMARKS landmarks, or no frame with that many finite."""
+    targets = np.asarray(targets)
+    K = len(vertex_ids)
+    if targets.ndim != 3 or targets.shape[1:] != (K, 2):
+        raise FitError(f"landmark targets must be (frames, {K} landmarks, 2) pixels, got shape {targets.shape}")
+    if len(targets) == 0:
+        raise FitError("no frames to fit landmarks to")
+    if K < MIN_LANDMARKS:
+        raise FitError(f"fitting a head needs at least {MIN_LANDMARKS} landmarks (PnP), got {K}")
+    finite = np.isfinite(targets).all(-1)
+    if not (finite.sum(1) >= MIN_LANDMARKS).any():
+        raise FitError(f"no frame of {len(targets)} has {MIN_LANDMARKS} finite landmarks (of {K}): no face to fit")
+    return finite
+
+
+def initial_pose(head: LandmarkHead, targets: np.ndarray, k: Intrinsics,
+                 finite: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Root rotation (N,3) and translation (N,3) per frame from PnP on the neutral head's landmark vertices, on
+    each frame's finite landmarks (finite (N,K), usable_landmarks). A frame with fewer than MIN_LANDMARKS of them
+    starts from its neighbours' poses, interpolated linearly (the nearest one's beyond the first or last)."""
     obj = head.template.numpy().astype(np.float64)
     root_joint = head.joint_template[0].numpy().astype(np.float64)
     flip = np.diag([1.0, -1.0, -1.0])  # OpenCV camera axes -> OpenGL
-    rots, trans = [], []
-    for pts in targets:
-        ok, rvec, tvec = cv2.solvePnP(obj, pts.astype(np.float64), k.matrix(), None, flags=cv2.SOLVEPNP_EPNP)
+    rots, trans, posed = [], [], []
+    for pts, use in zip(targets, finite, strict=True):
+        if use.sum() < MIN_LANDMARKS:
+            rots.append(np.zeros(3))
+            trans.append(np.zeros(3))
+            continue
+        posed.append(len(rots))
+        o, pts = obj[use], pts[use].astype(np.float64)
+        ok, rvec, tvec = cv2.solvePnP(o, pts, k.matrix(), None, flags=cv2.SOLVEPNP_EPNP)
         if ok:
-            ok, rvec, tvec = cv2.solvePnP(obj, pts.astype(np.float64), k.matrix(), None, rvec, tvec, True)
+            ok, rvec, tvec = cv2.solvePnP(o, pts, k.matrix(), None, rvec, tvec, True)
         R = flip @ cv2.Rodrigues(rvec)[0] if ok else np.eye(3)
         t = flip @ tvec.ravel() if ok else np.array([0.0, 0.0, -0.6])
         if t[2] > -0.05:  # behind or at the camera: PnP failed; start in front of it
@@ -123,7 +158,19 @@ def initial_pose(head: LandmarkHead, targets: np.ndarray, k: Intrinsics) -> tupl
         rots.append(cv2.Rodrigues(R)[0].ravel())
         # LBS turns the head about its root joint: x = R (v - J0) + J0 + translation.
         trans.append(t + R @ root_joint - root_joint)
-    return np.asarray(rots, np.float32), np.asarray(trans, np.float32)
+    rots, trans = np.asarray(rots, np.float32), np.asarray(trans, np.float32)
+    if len(posed) < len(rots):
+        frames = np.arange(len(rots))
+        for a in (rots, trans):
+            for c in range(3):
+                a[:, c] = np.interp(frames, posed, a[posed, c])
+    return rots, trans
+
+
+def _zero_if_not_finite(a: np.ndarray) -> np.ndarray:
+    """A frame without a face has no blendshape scores either: its start (expression, jaw, gaze) is neutral."""
+    a = np.asarray(a)
+    return np.where(np.isfinite(a), a, np.zeros((), a.dtype))
 
 
 def fit(model: HeadModel, vertex_ids: np.ndarray, targets: np.ndarray, k: Intrinsics,
@@ -133,25 +180,34 @@ def fit(model: HeadModel, vertex_ids: np.ndarray, targets: np.ndarray, k: Intrin
     """Fit identity, pose, jaw and expression to targets (N,K,2): the pixels of the landmarks that sit on
     vertex_ids (K,). init_expression (N,E) and init_jaw (N,3) start the expression (from the landmarker's
     blendshape scores); gaze (N,2,3), eye rotations, is kept as given. on_iteration(done): after each of
-    cfg.iterations (a minute's video takes minutes)."""
+    cfg.iterations (a minute's video takes minutes).
+
+    Targets that are not finite (NaN where a landmarker found no face) are left out of the reprojection term; a
+    frame with none left is posed by the temporal smoothness alone, between its neighbours. FitError where
+    nothing can be fitted (see usable_landmarks)."""
     import time
 
     t0 = time.perf_counter()
+    finite = usable_landmarks(vertex_ids, targets)
     head = LandmarkHead(model, vertex_ids, cfg.shape_components)
     N, E = len(targets), model.num_expression
     lo, hi = expression_bounds(model)
-    rot0, trans0 = initial_pose(head, targets, k)
-    target = torch.as_tensor(targets, dtype=torch.float32)
+    rot0, trans0 = initial_pose(head, targets, k, finite)
+    # Zeros where a target is not finite: left out of the loss below, but a NaN there would still reach every
+    # gradient through the norm's backward (0 * NaN).
+    target = torch.as_tensor(np.where(finite[..., None], targets, 0.0), dtype=torch.float32)
+    used = torch.as_tensor(finite)
     shape = torch.zeros(head.S, requires_grad=True)
     rot_pnp = torch.as_tensor(rot0)
     rot = rot_pnp.clone().requires_grad_(True)
     trans = torch.as_tensor(trans0).clone().requires_grad_(True)
-    expr0 = np.zeros((N, E), np.float32) if init_expression is None else np.clip(init_expression, lo, hi)
+    expr0 = (np.zeros((N, E), np.float32) if init_expression is None
+             else np.clip(_zero_if_not_finite(init_expression), lo, hi))
     expr_start = torch.as_tensor(expr0, dtype=torch.float32)
     expr = expr_start.clone().requires_grad_(True)
-    jaw0 = np.zeros((N, 3), np.float32) if init_jaw is None or head.jaw is None else init_jaw
+    jaw0 = np.zeros((N, 3), np.float32) if init_jaw is None or head.jaw is None else _zero_if_not_finite(init_jaw)
     jaw = torch.as_tensor(jaw0, dtype=torch.float32).clone().requires_grad_(head.jaw is not None)
-    eyes = torch.zeros(N, 2, 3) if gaze is None else torch.as_tensor(gaze, dtype=torch.float32)
+    eyes = torch.zeros(N, 2, 3) if gaze is None else torch.as_tensor(_zero_if_not_finite(gaze), dtype=torch.float32)
     params = [shape, rot, trans, expr] + ([jaw] if head.jaw is not None else [])
     opt = torch.optim.Adam(params, lr=cfg.lr)
 
@@ -174,7 +230,7 @@ def fit(model: HeadModel, vertex_ids: np.ndarray, targets: np.ndarray, k: Intrin
         pose_only = it < cfg.iterations // 5
         opt.zero_grad()
         pixels = project(head(shape, expr, full_pose(), trans), k)
-        err = (pixels - target).norm(dim=-1)
+        err = (pixels - target).norm(dim=-1)[used]
         loss = torch.nn.functional.huber_loss(err, torch.zeros_like(err), delta=cfg.huber_px)
         loss = loss + cfg.smooth_rotation * smooth(rot) + cfg.smooth_translation * smooth(trans)
         loss = loss + cfg.pose_prior * ((rot - rot_pnp) ** 2).sum(-1).mean()
@@ -195,7 +251,7 @@ def fit(model: HeadModel, vertex_ids: np.ndarray, targets: np.ndarray, k: Intrin
             on_iteration(it + 1)
     with torch.no_grad():
         pixels = project(head(shape, expr, full_pose(), trans), k)
-        error = (pixels - target).norm(dim=-1).numpy()
+        error = np.where(finite, (pixels - target).norm(dim=-1).numpy(), 0.0).astype(np.float32)
     full_shape = np.zeros(model.num_shape, np.float32)
     full_shape[: head.S] = shape.detach().numpy()
     e = expr.detach().numpy()
@@ -205,4 +261,4 @@ def fit(model: HeadModel, vertex_ids: np.ndarray, targets: np.ndarray, k: Intrin
                          gaze_left=g[i, 0] if head.eyes[0] is not None else np.zeros(3, np.float32),
                          gaze_right=g[i, 1] if head.eyes[1] is not None else np.zeros(3, np.float32))
                 for i in range(N)]
-    return FitResult(full_shape, controls, error, time.perf_counter() - t0)
+    return FitResult(full_shape, controls, error, time.perf_counter() - t0, finite)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 import warnings
 
-import cv2
 import numpy as np
 import pytest
 import torch
@@ -109,9 +108,6 @@ def finite_or_refused(model, ids, targets, frame: int) -> None:
     assert f"frame {frame}" in message, message
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="bug: fit() takes a NaN or infinite landmark into the loss and returns NaN for every "
-                          "frame's controls and the shape (no check of its targets)")
 @pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf")])
 def test_a_non_finite_landmark_is_refused_or_left_out(face, value):
     model, ids, targets = face
@@ -120,9 +116,6 @@ def test_a_non_finite_landmark_is_refused_or_left_out(face, value):
     finite_or_refused(model, ids, t, 1)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="bug: fit() given a frame without a face (its landmarks NaN) among frames with faces "
-                          "returns NaN controls for all frames, not an error")
 def test_a_frame_without_a_face_is_refused_or_left_out(face):
     model, ids, targets = face
     t = targets.copy()
@@ -130,9 +123,6 @@ def test_a_frame_without_a_face_is_refused_or_left_out(face):
     finite_or_refused(model, ids, t, 1)
 
 
-@pytest.mark.xfail(strict=True, raises=(cv2.error, RuntimeError),
-                   reason="bug: fit() with fewer than 4 landmarks fails inside cv2.solvePnP (cv2.error, an "
-                          "assertion on npoints), and with no frames in torch.cat (RuntimeError): no clear error")
 @pytest.mark.parametrize("cut", ["3 landmarks", "no frames"])
 def test_too_little_to_fit_is_a_clear_error(face, cut):
     model, ids, targets = face

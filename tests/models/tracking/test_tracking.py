@@ -18,7 +18,7 @@ from models.head.sources import load_head
 from models.tracking.blendshapes import arkit_names, expression_from_scores, gaze_from_scores
 from models.tracking.canonical import BundleError, canonical_face_mesh, message_fields
 from models.tracking.correspond import ANCHORS, correspond, head_landmarks, umeyama
-from models.tracking.fit import FitConfig, Intrinsics, fit, project
+from models.tracking.fit import FitConfig, FitError, Intrinsics, fit, project
 from tests.models.head.flame_files import write_flame_from_head
 
 
@@ -174,3 +174,47 @@ def test_fit_recovers_known_pose_jaw_and_expression(which, builtin_model, flame_
         deformed = [head.pose([Controls(expression=c.expression, jaw=c.jaw) for c in cs])[0].numpy()
                     for cs in (r.controls, truth)]
     assert np.percentile(np.linalg.norm(deformed[0] - deformed[1], axis=-1), 99) < 0.001
+
+
+def test_a_frame_without_a_face_is_posed_between_its_neighbours(builtin_model):
+    """A head turning at a steady 0.1 rad a frame (5 frames); frame 2's landmarks are all NaN (no face found) and
+    one of frame 3's is infinite. Those are left out of the fit (error 0, not fitted), and frame 2, with no data
+    of its own, starts from PnP's poses interpolated between frames 1 and 3 and is kept there by the smoothness:
+    its yaw is 0.2 rad within 0.02 (1.1 degrees), its translation the others' within 5 mm."""
+    ids = np.random.default_rng(0).choice(len(builtin_model.template), 40, replace=False)
+    k = Intrinsics(500.0, 500.0, 128.0, 128.0)
+    truth = [Controls(root=np.array([0.0, 0.1 * i, 0.0], np.float32),
+                      translation=np.array([0.0, 0.0, -0.6], np.float32)) for i in range(5)]
+    targets = synthetic_targets(builtin_model, truth, ids, k)
+    targets[2] = np.nan
+    targets[3, 7, 1] = np.inf
+    r = fit(builtin_model, ids, targets, k, cfg=FitConfig(iterations=60, shape_components=0))
+    assert not r.fitted[2].any() and not r.fitted[3, 7] and r.fitted.sum() == 5 * 40 - 40 - 1
+    assert (r.error_px[~r.fitted] == 0).all() and np.isfinite(r.error_px).all()
+    assert np.median(r.error_px[r.fitted]) < 1.0, np.median(r.error_px[r.fitted])
+    yaw = Rotation.from_rotvec(r.controls[2].root).as_euler("YXZ")[0]
+    assert abs(yaw - 0.2) < 0.02, yaw
+    np.testing.assert_allclose(r.controls[2].translation, truth[2].translation, atol=0.005, rtol=0)
+
+
+@pytest.mark.parametrize(("cut", "message"), [("all NaN", "no frame of 2 has 4 finite landmarks"),
+                                              ("3 per frame", "no frame of 2 has 4 finite"),
+                                              ("3 landmarks", "at least 4 landmarks"),
+                                              ("no frames", "no frames"), ("wrong shape", "must be")])
+def test_landmarks_that_cannot_be_fitted_are_a_fit_error(builtin_model, cut, message):
+    """FitError (a ValueError: the CLI's one-line input error) says what is missing, never a NaN fit or an error
+    from inside OpenCV or torch."""
+    ids = np.arange(10)
+    targets = np.full((2, 10, 2), 64.0, np.float32)
+    if cut == "all NaN":
+        targets[:] = np.nan
+    elif cut == "3 per frame":
+        targets[:, 3:] = np.nan
+    elif cut == "3 landmarks":
+        ids, targets = ids[:3], targets[:, :3]
+    elif cut == "no frames":
+        targets = targets[:0]
+    else:
+        targets = targets[..., :1]
+    with pytest.raises(FitError, match=message):
+        fit(builtin_model, ids, targets, Intrinsics(100.0, 100.0, 64.0, 64.0), cfg=FitConfig(iterations=2))
