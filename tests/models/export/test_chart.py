@@ -1,0 +1,79 @@
+"""Texture charts: the head model's own UVs (turned to glTF's v down, UDIM tiles packed), xatlas where a head model
+has none, and the vertices split along the seams."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from models.export.bake import texel_surface
+from models.export.chart import head_chart, model_corner_uv, split_seams
+from models.head.model import HeadModel
+
+
+def test_the_builtin_heads_chart_is_its_own_uvs_turned_over(builtin_model):
+    chart = head_chart(builtin_model, 256)
+    assert chart.source == "head model"
+    V = builtin_model.num_vertices
+    np.testing.assert_array_equal(chart.vertex_of[:V], np.arange(V))
+    np.testing.assert_array_equal(chart.vertex_of[chart.triangles], builtin_model.triangles)
+    # Each corner's texture coordinate is the head model's, v turned over (OBJ's v up to glTF's v down).
+    own = builtin_model.uv[builtin_model.triangles_uv]
+    np.testing.assert_array_equal(chart.uv[chart.triangles], np.stack([own[..., 0], 1 - own[..., 1]], -1))
+    # 237 vertices lie on a seam (the skin's wrap-around at the back, the eyeballs' and the crown's): one copy each,
+    # and nothing is copied that need not be.
+    assert chart.seam_copies == 237
+    pairs = np.unique(np.column_stack([builtin_model.triangles.ravel(), builtin_model.triangles_uv.ravel()]), axis=0)
+    assert len(pairs) == V + chart.seam_copies
+
+
+def test_udim_tiles_are_packed_into_one_square_texture():
+    """Five tiles along u (as ICT's run to 7) go on a 3 x 3 grid: tile (k, 0) to cell (k % 3, k // 3), scaled 1/3;
+    then v is turned over."""
+    tris = np.arange(15).reshape(5, 3)
+    corner = np.array([[0.1, 0.2], [0.9, 0.2], [0.5, 0.8]])
+    uv = np.concatenate([corner + [k, 0] for k in range(5)])
+    head = _tiny_head(np.zeros((15, 3)), tris, uv=uv, triangles_uv=tris)
+    got = model_corner_uv(head)
+    # tile 4 -> cell (1, 1): u = (1 + 0.1) / 3, v = 1 - (1 + 0.2) / 3
+    np.testing.assert_allclose(got[4, 0], [1.1 / 3, 1 - 1.2 / 3], atol=1e-6)
+    np.testing.assert_allclose(got[2, 2], [2.5 / 3, 1 - 0.8 / 3], atol=1e-6)
+    assert got.min() >= 0 and got.max() <= 1
+
+
+def test_ict_uvs_make_one_texture(ict_model):
+    chart = head_chart(ict_model, 256)
+    assert chart.source == "head model" and 0 <= chart.uv.min() and chart.uv.max() <= 1
+    np.testing.assert_array_equal(chart.vertex_of[chart.triangles], ict_model.triangles)
+
+
+def test_a_head_model_without_uvs_gets_an_xatlas_atlas_whose_charts_do_not_overlap():
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.1)
+    head = _tiny_head(np.asarray(sphere.vertices, np.float32), np.asarray(sphere.faces))
+    chart = head_chart(head, 128)
+    assert chart.source == "xatlas" and chart.seam_copies > 0
+    np.testing.assert_array_equal(chart.vertex_of[chart.triangles], head.triangles)
+    assert 0 <= chart.uv.min() and chart.uv.max() <= 1
+    # No two triangles share a texel: each texel's centre lies inside one triangle at most.
+    covered = texel_surface(chart.uv, chart.triangles, 128, reach_px=0.0).covered
+    a, b, c = chart.uv[chart.triangles].transpose(1, 0, 2)
+    area = 0.5 * np.abs((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]).sum()
+    assert covered.mean() == pytest.approx(area, rel=0.05)  # texels covered ~ the charts' area: none counted twice
+
+
+def test_a_vertex_on_no_triangle_keeps_its_place():
+    chart = split_seams(np.array([[0, 2, 3]]), np.zeros((1, 3, 2), np.float32), 5, "test")
+    np.testing.assert_array_equal(chart.vertex_of, np.arange(5))
+    np.testing.assert_array_equal(chart.triangles, [[0, 2, 3]])
+
+
+def _tiny_head(template: np.ndarray, triangles: np.ndarray, **uv) -> HeadModel:
+    V = len(template)
+    return HeadModel(name="tiny", template=np.asarray(template, np.float32), triangles=np.asarray(triangles, np.int32),
+                     shape_basis=np.zeros((V, 3, 0), np.float32), expr_basis=np.zeros((V, 3, 1), np.float32),
+                     J_regressor=np.full((1, V), 1.0 / V, np.float32), weights=np.ones((V, 1), np.float32),
+                     parents=np.array([-1]), joint_names=("root",), pose_basis=np.zeros((V, 3, 0), np.float32),
+                     **uv)
+
