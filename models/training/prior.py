@@ -34,7 +34,14 @@ from models.device import DeviceError, device_of
 from models.head.sources import load_head
 from models.training.configs import PriorTrainConfig
 from models.training.data import FrameSet, build_frames
-from models.training.trainer import _adam_state_tensors, _load_adam_state, log_progress, optimiser_step, trim_progress
+from models.training.trainer import (
+    _adam_state_tensors,
+    _load_adam_state,
+    finite_terms,
+    log_progress,
+    optimiser_step,
+    trim_progress,
+)
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
@@ -128,6 +135,8 @@ class PriorTrainer:
         self.opt = torch.optim.Adam(avatar.parameters(), lr=cfg.lr)
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.step = 0
+        self.skipped_steps = 0
+        """Steps whose loss or gradient was not finite, left out (optimiser_step)."""
         self.elapsed = 0.0
 
     def samples(self) -> list[TrainingBatch]:
@@ -152,7 +161,9 @@ class PriorTrainer:
             group["lr"] = self.cfg.lr * 0.1 ** min(max(progress, 0.0), 1.0)
         total, terms = self.module(self.samples())
         self.step += 1
-        return optimiser_step(self.opt, self.avatar, total, terms, self.cfg.grad_clip)
+        numbers, stepped = optimiser_step(self.opt, self.avatar, total, terms, self.cfg.grad_clip)
+        self.skipped_steps += not stepped
+        return numbers
 
     # ---- state -----------------------------------------------------------------------------------------
     def meta(self) -> dict:
@@ -160,7 +171,8 @@ class PriorTrainer:
         return {**self.avatar.meta(), "head_model": split.head_model, "frames": len(self.avatar.latent.weight),
                 "image_px": [split.width, split.height], "background": self.avatar.background.tolist(),
                 "corpus": {"folder": str(self.cfg.corpus), "identities": [i.name for i in self.identities]},
-                "provenance": {"steps": self.step, "seconds": round(self.elapsed, 1), "processes": self.world,
+                "provenance": {"steps": self.step, "skipped_steps": self.skipped_steps,
+                               "seconds": round(self.elapsed, 1), "processes": self.world,
                                "config": {k: str(v) for k, v in asdict(self.cfg).items()}}}
 
     def save(self) -> None:
@@ -178,6 +190,7 @@ class PriorTrainer:
         self.generator.set_state(ck.train_state["generator"])
         self.elapsed = float(ck.train_state["elapsed"])
         self.step = ck.step
+        self.skipped_steps = int(ck.meta.get("provenance", {}).get("skipped_steps", 0))
 
     def run(self, on_progress: Callable[[dict], None] | None = None) -> dict:
         cfg = self.cfg
@@ -200,8 +213,9 @@ class PriorTrainer:
                 self.elapsed = float(clock)
             finished = self.step >= budget_steps or self.elapsed >= budget_s
             if self.rank == 0 and (self.step % 50 == 0 or self.step == 1 or finished):
-                record = {"step": self.step, **{k: round(v, 6) for k, v in terms.items()},
-                          "elapsed_s": round(self.elapsed, 1)}
+                record = {"step": self.step, **finite_terms(terms), "elapsed_s": round(self.elapsed, 1)}
+                if self.skipped_steps:
+                    record["skipped_steps"] = self.skipped_steps
                 log_progress(log, record, on_progress)
             if time.perf_counter() - last_ck > cfg.checkpoint_seconds:
                 self.save()

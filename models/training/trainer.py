@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import torch
+import torch.distributed as dist
 
 from models.avatars.base import Avatar, TrainingBatch
 from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
@@ -143,6 +144,8 @@ class Trainer:
         self.opt = torch.optim.Adam(self.avatar.parameter_groups(), lr=cfg.lr)
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.step = 0
+        self.skipped_steps = 0
+        """Steps whose loss or gradient was not finite: the weights were left as they were (optimiser_step)."""
         self.elapsed = 0.0
         self.stop_requested = False
         """Set (from a signal handler) to end the run after the current step, with a checkpoint."""
@@ -159,6 +162,7 @@ class Trainer:
                 "background": self.avatar.background.tolist(),
                 "provenance": {"dataset": str(self.cfg.dataset),
                                "dataset_resolved": str(Path(self.cfg.dataset).resolve()), "steps": self.step,
+                               "skipped_steps": self.skipped_steps,
                                "seconds": round(self.elapsed, 1), "config": {k: str(v) for k, v in
                                                                             asdict(self.cfg).items()}}}
 
@@ -175,6 +179,7 @@ class Trainer:
         self.generator.set_state(ck.train_state["generator"])
         self.elapsed = float(ck.train_state["elapsed"])
         self.step = ck.step
+        self.skipped_steps = int(ck.meta.get("provenance", {}).get("skipped_steps", 0))
 
     # ---- one step --------------------------------------------------------------------------------------
     def lr_at(self, progress: float) -> float:
@@ -193,14 +198,22 @@ class Trainer:
                 if len(fs.active_index[fid]) == 0:
                     continue
                 pick = self.avatar.draw_training_pixels(fs.active_index[fid], fs.pixel_count, per_frame, g).long()
+                target = fs.target(fid, pick)
+                known = torch.isfinite(target).all(-1)
+                if not bool(known.all()):  # a colour that is no number teaches nothing, and makes the loss NaN
+                    pick, target = pick[known], target[known]
+                    if len(pick) == 0:
+                        continue
                 rays = fs.rays(fid, pick).to(self.device)
-                target = fs.target(fid, pick).to(self.device)
+                target = target.to(self.device)
                 parts = self.avatar.loss_terms(TrainingBatch(fid, rays, target, fs.geometry[fid], progress, g))
                 for k, v in parts.items():
                     terms[k] = terms.get(k, 0.0) + v.detach() / len(frame_ids)
                     total = total + v / len(frame_ids)
         self.step += 1
-        return optimiser_step(self.opt, self.avatar, total, terms, self.cfg.grad_clip)
+        numbers, stepped = optimiser_step(self.opt, self.avatar, total, terms, self.cfg.grad_clip)
+        self.skipped_steps += not stepped
+        return numbers
 
     # ---- validation ------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -236,8 +249,10 @@ class Trainer:
                 rate = self.step / max(self.elapsed, 1e-9)
                 eta = max(0.0, min((budget_steps - self.step) / max(rate, 1e-9) if budget_steps != math.inf
                                    else math.inf, budget_s - self.elapsed))
-                record = {"step": self.step, **{k: round(v, 6) for k, v in terms.items()},
+                record = {"step": self.step, **finite_terms(terms),
                           "elapsed_s": round(self.elapsed, 1), "eta_s": round(eta, 1)}
+                if self.skipped_steps:
+                    record["skipped_steps"] = self.skipped_steps
                 if self.validation is not None and (self.step % 250 == 0 or finished):
                     record["val_psnr"] = round(self.validation_psnr(gl), 2)
                 log_progress(log, record, on_progress)
@@ -249,14 +264,32 @@ class Trainer:
 
 
 def optimiser_step(opt: torch.optim.Optimizer, model: torch.nn.Module, total: torch.Tensor, terms: dict,
-                   grad_clip: float) -> dict[str, float]:
+                   grad_clip: float) -> tuple[dict[str, float], bool]:
     """Backward, the gradient clipped to grad_clip (second derivatives, density-gradient normals, can spike; a
-    bounded step keeps the field alive), Adam's step; the step's loss terms as numbers."""
+    bounded step keeps the field alive), Adam's step; the step's loss terms as numbers, and whether it stepped.
+
+    A step whose loss or gradient norm is not finite (a NaN term, a NaN target) is skipped: its gradient dropped,
+    the weights and Adam's moments left as they were. Taken, clip_grad_norm_ would scale every gradient by NaN and
+    Adam write NaN into every weight and moment. Under torch.distributed every process skips if any must (their
+    weights stay the same). The finite path's arithmetic is the plain backward, clip and step."""
     opt.zero_grad(set_to_none=True)
     total.backward()
-    torch.nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
-    opt.step()
-    return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}
+    norm = torch.nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
+    finite = (torch.isfinite(total.detach()) & torch.isfinite(norm)).to(torch.int32)
+    if dist.is_available() and dist.is_initialized():
+        dist.all_reduce(finite, op=dist.ReduceOp.MIN)
+    stepped = bool(finite)
+    if stepped:
+        opt.step()
+    else:
+        opt.zero_grad(set_to_none=True)
+    return {k: float(v) for k, v in terms.items()} | {"loss": float(total.detach())}, stepped
+
+
+def finite_terms(terms: dict[str, float]) -> dict[str, float]:
+    """A step's loss terms for the progress log, rounded; a skipped step's NaN or infinite ones left out (JSON has
+    no NaN)."""
+    return {k: round(v, 6) for k, v in terms.items() if math.isfinite(v)}
 
 
 def log_progress(log: Path, record: dict, on_progress: Callable[[dict], None] | None) -> None:
