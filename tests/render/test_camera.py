@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from render.camera import framing_camera, linear_depth_from_ndc, look_at, orbit_camera, perspective
 
@@ -11,6 +12,22 @@ def test_look_at_moves_eye_to_origin_and_looks_down_minus_z():
     view = look_at(np.array([0.0, 0.0, 2.0]), np.zeros(3))
     np.testing.assert_allclose(view @ [0, 0, 2, 1], [0, 0, 0, 1], atol=1e-12)
     np.testing.assert_allclose(view @ [0, 0, 0, 1], [0, 0, -2, 1], atol=1e-12)
+
+
+def test_look_at_with_up_along_a_view_along_z_falls_back_to_y():
+    # f = (0, 0, 1); up = +z and the +z fallback are along it, so up = +y: s = f x y = (-1, 0, 0),
+    # u = s x f = (0, 1, 0); rows s, u, -f.
+    view = look_at(np.zeros(3), np.array([0.0, 0.0, 1.0]), up=(0.0, 0.0, 1.0))
+    np.testing.assert_array_equal(view[:3, :3], [[-1, 0, 0], [0, 1, 0], [0, 0, -1]])
+    # Looking straight down (f = (0, -1, 0)) with the default up +y: the +z fallback, as before.
+    # s = f x z = (-1, 0, 0), u = s x f = (0, 0, 1).
+    down = look_at(np.array([0.0, 1.0, 0.0]), np.zeros(3))
+    np.testing.assert_array_equal(down[:3, :3], [[-1, 0, 0], [0, 0, 1], [0, 1, 0]])
+
+
+def test_look_at_its_own_eye_is_refused():
+    with pytest.raises(ValueError, match="eye and target coincide"):
+        look_at(np.ones(3), np.ones(3))
 
 
 def test_perspective_hand_worked():
