@@ -5,8 +5,8 @@ edge cuts the surface) becomes two or more glTF vertices. The first V glTF verti
 order; the seam copies follow, each naming the vertex it copies (`vertex_of`).
 
 Coordinates are glTF's: u right, v down from the image's top-left corner, the whole texture in [0,1]. A head model's
-own UVs (ICT's, the built-in head's) are OBJ's, v up, and may spread over UDIM tiles (ICT's u runs to 7): they are
-turned over and the tiles laid out in a square grid of one texture.
+own UVs (ICT's, the built-in head's) are OBJ's, v up, and may spread over UDIM tiles (ICT's triangles lie on two):
+they are turned over and the tiles laid out on a grid over one texture.
 """
 
 from __future__ import annotations
@@ -62,14 +62,16 @@ def split_seams(triangles: np.ndarray, corner_uv: np.ndarray, n_vertices: int, s
 
 def model_corner_uv(head: HeadModel) -> np.ndarray:
     """(F,3,2) the head model's own UVs at each triangle corner, in glTF's convention on one texture: v turned over
-    (OBJ's v is up), and UDIM tiles (the unit squares the triangles' centres fall in) laid out on a k x k grid,
-    k = ceil(sqrt(tiles)), in the order of their (u, v) corners."""
+    (OBJ's v is up), and UDIM tiles (the unit squares the triangles' centres fall in) laid out on a grid of
+    c = ceil(sqrt(n)) columns and ceil(n / c) rows, in the order of their (u, v) corners (ICT's two tiles side by
+    side, each half the texture's width)."""
     uv = np.asarray(head.uv, np.float64)[head.triangles_uv]
     tile = np.floor(uv.mean(1))  # (F,2)
     tiles, which = np.unique(tile, axis=0, return_inverse=True)
-    k = math.ceil(math.sqrt(len(tiles)))
-    cell = np.stack([np.arange(len(tiles)) % k, np.arange(len(tiles)) // k], 1)[which.ravel()]  # (F,2)
-    packed = (uv - tile[:, None] + cell[:, None]) / k
+    cols = math.ceil(math.sqrt(len(tiles)))
+    rows = math.ceil(len(tiles) / cols)
+    cell = np.stack([np.arange(len(tiles)) % cols, np.arange(len(tiles)) // cols], 1)[which.ravel()]  # (F,2)
+    packed = (uv - tile[:, None] + cell[:, None]) / [cols, rows]
     return np.stack([packed[..., 0], 1.0 - packed[..., 1]], -1).astype(np.float32)
 
 

@@ -28,22 +28,25 @@ def test_the_builtin_heads_chart_is_its_own_uvs_turned_over(builtin_model):
 
 
 def test_udim_tiles_are_packed_into_one_square_texture():
-    """Five tiles along u (as ICT's run to 7) go on a 3 x 3 grid: tile (k, 0) to cell (k % 3, k // 3), scaled 1/3;
-    then v is turned over."""
+    """Five tiles along u go on a grid of 3 columns and 2 rows: tile (k, 0) to cell (k % 3, k // 3), u scaled 1/3 and
+    v 1/2; then v is turned over."""
     tris = np.arange(15).reshape(5, 3)
     corner = np.array([[0.1, 0.2], [0.9, 0.2], [0.5, 0.8]])
     uv = np.concatenate([corner + [k, 0] for k in range(5)])
     head = _tiny_head(np.zeros((15, 3)), tris, uv=uv, triangles_uv=tris)
     got = model_corner_uv(head)
-    # tile 4 -> cell (1, 1): u = (1 + 0.1) / 3, v = 1 - (1 + 0.2) / 3
-    np.testing.assert_allclose(got[4, 0], [1.1 / 3, 1 - 1.2 / 3], atol=1e-6)
-    np.testing.assert_allclose(got[2, 2], [2.5 / 3, 1 - 0.8 / 3], atol=1e-6)
+    # tile 4 -> cell (1, 1): u = (1 + 0.1) / 3, v = 1 - (1 + 0.2) / 2; tile 2 -> cell (2, 0)
+    np.testing.assert_allclose(got[4, 0], [1.1 / 3, 1 - 1.2 / 2], atol=1e-6)
+    np.testing.assert_allclose(got[2, 2], [2.5 / 3, 1 - 0.8 / 2], atol=1e-6)
     assert got.min() >= 0 and got.max() <= 1
 
 
 def test_ict_uvs_make_one_texture(ict_model):
+    """ICT's triangles lie on two UDIM tiles (u in [0, 2)): side by side, each half the texture's width."""
     chart = head_chart(ict_model, 256)
     assert chart.source == "head model" and 0 <= chart.uv.min() and chart.uv.max() <= 1
+    own = ict_model.uv[ict_model.triangles_uv]
+    np.testing.assert_allclose(chart.uv[chart.triangles], np.stack([own[..., 0] / 2, 1 - own[..., 1]], -1), atol=1e-6)
     np.testing.assert_array_equal(chart.vertex_of[chart.triangles], ict_model.triangles)
 
 

@@ -169,7 +169,7 @@ def test_a_head_model_with_a_root_alone_has_no_skin():
 
 
 def test_an_ict_head_writes_a_valid_file_with_its_eyes_as_a_skeleton(ict_model, tmp_path):
-    """ICT-FaceKit: its own UVs over seven UDIM tiles packed on one texture, 53 expressions, and a root with two eye
+    """ICT-FaceKit: its own UVs over two UDIM tiles packed on one texture, 53 expressions, and a root with two eye
     joints (no jaw: its mouth opens through jawOpen)."""
     from models.export.avatar_gltf import head_mesh
     from models.export.chart import head_chart
