@@ -67,7 +67,7 @@ class BakedTexture:
 
 
 def texel_surface(uv: np.ndarray, triangles: np.ndarray, size: int, reach_px: float = REACH_PX,
-                  chunk_pairs: int = 1 << 22) -> TexelSurface:
+                  chunk_pairs: int = 1 << 20) -> TexelSurface:
     """The triangle under each texel's centre and its barycentric weights there (clamped onto the triangle for
     centres up to reach_px outside it), on a size x size texture. uv: (N,2) in [0,1], glTF's (texel (row r,
     column c) has its centre at ((c + 0.5) / size, (r + 0.5) / size)); triangles: (F,3).
