@@ -16,6 +16,7 @@ from app.configs import (
     CorpusConfig,
     DatasetConfig,
     EvalConfig,
+    ExportConfig,
     ExportMeshConfig,
     MeshConfig,
     PersonalizeConfig,
@@ -84,6 +85,9 @@ COMMANDS = (
     Command("export-mesh", "Write an avatar as a coloured mesh (PLY or OBJ with vertex colours) for "
             "Blender and game engines.", ExportMeshConfig, "app.avatar_commands:run_export_mesh",
             positional=("avatar",)),
+    Command("export", "Write an avatar as a glTF 2.0 binary (.glb) for Blender, Unity and the web: the guide mesh "
+            "with the expressions as morph targets, jaw and eyes as a skeleton, a texture baked from the avatar, an "
+            "animation.", ExportConfig, "app.export:run_export", positional=("avatar",)),
     Command("bench", "Measure what accuracy costs in time: render settings, effect sets, training curves, the "
             "dense NerFACE renderer; charts, and presets chosen from the Pareto front.", BenchConfig,
             "app.bench:run_bench", research=True),

@@ -90,8 +90,8 @@ class TrackConfig:
     head: str = "builtin"
     """HEAD: builtin, ict:PATH or flame:PATH."""
     landmarker: Path | None = None
-    """MediaPipe's face landmarker bundle (face_landmarker_v2_with_blendshapes.task, from MediaPipe's model
-    page); default: $AVATAR_STUDIO_LANDMARKER."""
+    """MediaPipe's face landmarker bundle (face_landmarker.task, from MediaPipe's model page), remembered once it
+    works; default: $AVATAR_STUDIO_LANDMARKER, else the one remembered, else the one the set-up installs."""
     fps: Annotated[float, Range(0, 1000, above=True)] | None = None
     """Frames a second taken from the video (default: every frame; fewer frames track and train faster)."""
     seconds: Annotated[float, Range(0, 1e6, above=True)] | None = None
@@ -226,6 +226,31 @@ class ExportMeshConfig:
 
 
 @dataclass(frozen=True)
+class ExportConfig:
+    avatar: Path
+    """Avatar folder."""
+    format: Literal["glb"] = "glb"
+    """The file's format: glb, a glTF 2.0 binary (Blender, Unity with glTFast, three.js): the guide mesh with the
+    expressions as morph targets, the jaw and eyes as a skeleton, a texture baked from the avatar, the animation."""
+    out: Path = Path("out/avatar.glb")
+    """The file to write."""
+    animation: Path | None = None
+    """An animation file (JSON, as `animate` reads) to include: expressions as morph weights, head, neck, jaw and
+    gaze as joint rotations (camera channels are left out)."""
+    texture_size: Annotated[int, Range(64, 8192)] = 1024
+    """Width and height of the baked colour texture, pixels."""
+    render_size: Annotated[int, Range(32, 4096)] = 256
+    """Width and height of the renders the texture is baked from, pixels (time grows with its square; half the
+    texture's size gives every texel of the face its own pixel)."""
+    views: Annotated[int, Range(1, 64)] = 7
+    """Cameras the texture is baked from across the yaws the avatar can show, at the head's height (and about as
+    many again from above and below)."""
+    preset: PresetName = "preview"
+    """Render quality of the bake's renders: the samples and passes of the avatar's draft, preview or final setting
+    (its image scale is left out: the renders are --render-size)."""
+
+
+@dataclass(frozen=True)
 class TurntableConfig:
     avatar: Path
     """Avatar folder."""
@@ -265,7 +290,7 @@ class ReenactConfig:
     out: Path = Path("out/reenact.mp4")
     """The mp4 to write (H.264); the animation goes beside it (OUT.json)."""
     landmarker: Path | None = None
-    """MediaPipe's face landmarker bundle; default: $AVATAR_STUDIO_LANDMARKER."""
+    """MediaPipe's face landmarker bundle, as track's --landmarker (remembered; default: as track finds one)."""
     driver_head: str = ""
     """The head model the driver is tracked with (builtin, ict:PATH, flame:PATH); default: the avatar's own,
     which carries every expression."""
