@@ -501,6 +501,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     def note_reach(self, frames) -> None:
         """seen_fade (S,S), in the chart's (and the slabs') layout: 1 on every texel that lay inside some training
         frame (and off the head, where the chart has no texel), falling to 0 EDGE_SHARE of the frame beyond."""
+        if getattr(frames, "split", None) is None:  # views without their cameras' images: nothing to measure
+            return
         S = self.cfg.grid * self.cfg.voxels
         if self.chart is None:
             self.chart = chart_sampler(self.head_model, S, self.cfg.front)
