@@ -237,7 +237,7 @@ def test_errors_training_job_and_turntable(display, avatar, capture, tmp_path):
         if not ok:
             break
         frames.append(f)
-    assert len(frames) == 12 and frames[0].shape == (32, 32, 3)  # draft: half of 64
+    assert len(frames) == 12 and frames[0].shape == (64, 64, 3)  # the size asked for, whatever the preset renders
     assert fourcc in ("h264", "avc1")
     assert len(list((tmp_path / "turn").glob("frame_*.png"))) == 12
 
