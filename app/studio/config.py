@@ -22,7 +22,9 @@ class StudioConfig:
     script: Path | None = None
     """A JSON list of scripted steps to run (tests, pictures); the window exits when they are done."""
     width: int = 1440
+    """The window's width, pixels (the viewport's images grow to fill what the panels leave)."""
     height: int = 900
+    """The window's height, pixels."""
     fps_cap: float = 60.0
     """The interface's frame rate cap (no display sync here): what is left of the CPU goes to rendering."""
     rendering_fps_cap: float = 20.0

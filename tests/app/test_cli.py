@@ -80,12 +80,7 @@ def test_research_commands_are_listed_apart(capsys):
     assert not listed(everyday) & listed(research)
 
 
-STUDIO_GAP = pytest.mark.xfail(strict=True, reason="app/studio/config.py's --width and --height have no docstrings "
-                               "(another engineer's file): remove this mark once they do")
-
-
-@pytest.mark.parametrize("name", [pytest.param(c.name, marks=STUDIO_GAP) if c.name == "studio" else c.name
-                                  for c in COMMANDS])
+@pytest.mark.parametrize("name", [c.name for c in COMMANDS])
 def test_every_option_says_what_it_is(name):
     """Each option's help is its field's docstring: none may be empty or only the default, nor show an empty
     default."""
