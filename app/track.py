@@ -48,7 +48,7 @@ from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.finder import FaceFinder
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
 from models.tracking.landmarker import Face, packaged_bundle
-from models.tracking.masks import background_plate, foreground_mask
+from models.tracking.masks import background_plate, foreground_masks
 from models.tracking.splits import frame_splits
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames, video_info
 from render.video import write_video
@@ -222,11 +222,11 @@ def run_track(cfg: TrackConfig) -> int:
 
     with partial_folder(cfg.out) as partial:
         (partial / "tracking").mkdir(parents=True)
-        print("cutting masks...", flush=True)
         t_masks = time.perf_counter()
         crops = [f["image"] for f in kept]
-        masks = [foreground_mask(img, framing.points(face.landmarks_px[:468]) - framing.offsets[j])
-                 for j, (img, face) in enumerate(zip(crops, faces, strict=True))]
+        bar = Progress("cutting masks", len(crops), unit="frames")
+        masks = foreground_masks(crops, [framing.points(face.landmarks_px[:468]) - framing.offsets[j]
+                                         for j, face in enumerate(faces)], progress=lambda done, _: bar.update(done))
         t_masks = time.perf_counter() - t_masks
         splits, per_frame, plate_report = write_frames(cfg, partial, kept, crops, masks, framing, k, result, errors,
                                                        tr.info.fps)

@@ -8,7 +8,10 @@ is another download; this needs nothing but the landmarks.)
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 import warnings
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -17,6 +20,33 @@ GRABCUT_SAMPLES = 10
 """Background and foreground pixels GrabCut needs at least (each colour model has five components); a frame that
 the person fills (a crop close about a large head), or one the face has left (a fixed crop the frame bounds), keeps
 the seeds as they are."""
+
+
+def foreground_masks(frames: list[np.ndarray], landmarks_px: list[np.ndarray], workers: int | None = None,
+                     progress: Callable[[int, int], None] | None = None) -> list[np.ndarray]:
+    """foreground_mask of every frame (with its landmarks), in as many processes as the machine has cores (GrabCut
+    runs on one): the same masks as one by one, in the frames' order. progress(done, total) as they come."""
+    workers = min(workers or os.cpu_count() or 1, len(frames))
+    jobs = list(zip(frames, landmarks_px, strict=True))
+    if workers <= 1 or len(jobs) < 2 * workers:
+        masks = []
+        for k, job in enumerate(jobs):
+            masks.append(_mask_of(job))
+            if progress:
+                progress(k + 1, len(jobs))
+        return masks
+    # spawn, not fork: the caller's threads (torch, MediaPipe) must not be copied mid-flight into the workers
+    with multiprocessing.get_context("spawn").Pool(workers) as pool:
+        masks = []
+        for mask in pool.imap(_mask_of, jobs, chunksize=4):
+            masks.append(mask)
+            if progress:
+                progress(len(masks), len(jobs))
+    return masks
+
+
+def _mask_of(job: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    return foreground_mask(*job)
 
 
 def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int = 3) -> np.ndarray:
@@ -53,6 +83,7 @@ def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int =
     if room < GRABCUT_SAMPLES or mask.size - room < GRABCUT_SAMPLES:  # the person fills the frame, or left it
         return ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.float32)  # the seeds, as they are
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+    cv2.setRNGSeed(0)  # GrabCut's k-means draws from OpenCV's global generator: each frame's mask its own, in any order
     cv2.grabCut(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), mask, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
     fg = ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.uint8)
     # Keep the piece holding the face; fill its holes (eyes, mouth are foreground).

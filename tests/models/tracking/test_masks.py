@@ -1,0 +1,45 @@
+"""Foreground masks: GrabCut seeded by the face, one by one or in worker processes, the same masks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from models.tracking.masks import foreground_mask, foreground_masks
+
+
+def portrait(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A 96 px frame: a noisy blue-grey room and a skin-coloured head (an ellipse) over a dark torso, and 40 points
+    round the face as its landmarks."""
+    rng = np.random.default_rng(seed)
+    h = w = 96
+    yy, xx = np.mgrid[:h, :w]
+    img = (np.array([90, 110, 130]) + rng.normal(0, 8, (h, w, 3))).clip(0, 255)
+    cx, cy = 48 + rng.integers(-4, 5), 40
+    head = ((xx - cx) / 18.0) ** 2 + ((yy - cy) / 24.0) ** 2 < 1
+    img[head] = np.array([200, 150, 120]) + rng.normal(0, 6, (head.sum(), 3))
+    img[(yy > 66) & (np.abs(xx - cx) < 30 + (yy - 66))] = [40, 40, 50]
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    landmarks = np.stack([cx + 14 * np.cos(t), cy + 4 + 18 * np.sin(t)], 1)
+    return img.astype(np.uint8), landmarks
+
+
+def test_masks_in_workers_are_the_masks_one_by_one():
+    """Two worker processes give every frame the mask a call of its own gives, in order (GrabCut's generator is
+    seeded per frame, so a mask does not depend on the frames cut before it), and the mask is the head: most of the
+    ellipse, little of the room above the shoulders."""
+    frames = [portrait(k) for k in range(6)]
+    alone = [foreground_mask(img, lm) for img, lm in reversed(frames)][::-1]
+    pooled = foreground_masks([f[0] for f in frames], [f[1] for f in frames], workers=2)
+    seen = []
+    one_by_one = foreground_masks([f[0] for f in frames], [f[1] for f in frames], workers=1,
+                                  progress=lambda done, total: seen.append((done, total)))
+    for a, b, c in zip(alone, pooled, one_by_one, strict=True):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a, c)
+    assert seen == [(k, 6) for k in range(1, 7)]
+    lm = frames[0][1]
+    yy, xx = np.mgrid[:96, :96]
+    cx = lm[:, 0].mean()
+    head = ((xx - cx) / 18.0) ** 2 + ((yy - 40) / 24.0) ** 2 < 0.8
+    corner = (yy < 20) & ((xx < 15) | (xx > 80))
+    assert alone[0][head].mean() > 0.95 and alone[0][corner].mean() < 0.05
