@@ -433,8 +433,9 @@ class Avatar(nn.Module, ABC):
                         ) -> np.ndarray:
         """(H,W,3) the normals of the surface a depth image (distance along each pixel's ray, inf where nothing is
         drawn) shows, joined to the posed guide mesh's where it lies on the mesh (render/normals.py); the depth's
-        alone without a rasterizer. The depth is smoothed over 2 px at 256 px, alike at other sizes (on the demo's test
-        frames the depth's own normals are 16-18 degrees from the truth at 2 px, 19-22 at 1 px, 14 at 4 px)."""
+        alone without a rasterizer. The depth's normals are smoothed over 2 px at 256 px, alike at other sizes (on
+        three of the demo's test frames they are 15.5-17.9 degrees from the truth in the median at 2 px, 18.0-21.5 at
+        1 px, 13.2-14.7 at 4 px)."""
         origin, directions = pixel_rays(camera)
         from_depth = depth_normal_image(origin, directions, depth, sigma_px=max(camera.height_px, camera.width_px)
                                         / 128.0)
@@ -458,7 +459,8 @@ class Avatar(nn.Module, ABC):
             self.should_stop, self.display_buffers = before
 
     def default_buffers(self) -> tuple[str, ...]:
-        """The buffers render_rays gives besides rgb, opacity and depth."""
+        """The buffers render_image makes besides rgb, opacity and depth (render_rays gives them, but for the normals
+        of a model whose normals_from_surface is set)."""
         return ()
 
     @property

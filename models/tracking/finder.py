@@ -16,6 +16,8 @@ from models.tracking.landmarker import Face, Landmarker
 
 FOLLOW_SIDE = 3.0
 """A window that follows the face is this many face widths across: the face fills a third of it, as in a selfie."""
+MIN_WINDOW_PX = 64
+"""The least side of a following window (a face of degenerate landmarks must not give an empty one)."""
 SEARCH_SPLITS = (2, 3, 4)
 """The search looks at squares of the frame's shorter side over 2, 3 and 4, each overlapping its neighbours by half
 (a face of 1/12 of a 1080p frame's height, 90 px, is then a third of a 270 px square)."""
@@ -71,7 +73,7 @@ def follow_window(face: Face, width: int, height: int, side_faces: float = FOLLO
     Window(x0=60, y0=65, side=120)
     """
     lo, hi = face.landmarks_px.min(0), face.landmarks_px.max(0)
-    side = int(min(round(side_faces * float(hi[0] - lo[0])), width, height))
+    side = int(min(max(round(side_faces * float(hi[0] - lo[0])), MIN_WINDOW_PX), width, height))
     cx, cy = (lo + hi) / 2
     x0 = int(np.clip(round(cx - side / 2), 0, width - side))
     y0 = int(np.clip(round(cy - side / 2), 0, height - side))

@@ -26,7 +26,7 @@ def foreground_masks(frames: list[np.ndarray], landmarks_px: list[np.ndarray], w
                      progress: Callable[[int, int], None] | None = None) -> list[np.ndarray]:
     """foreground_mask of every frame (with its landmarks), in as many processes as the machine has cores (GrabCut
     runs on one): the same masks as one by one, in the frames' order. progress(done, total) as they come."""
-    workers = min(workers or os.cpu_count() or 1, len(frames))
+    workers = min(workers or len(os.sched_getaffinity(0)), len(frames))  # the cores this process may use
     jobs = list(zip(frames, landmarks_px, strict=True))
     if workers <= 1 or len(jobs) < 2 * workers:
         masks = []

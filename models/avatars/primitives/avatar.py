@@ -520,9 +520,11 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
         """Weights that carry seen_fade (avatars trained since it came) give the avatar the buffer to load into;
-        older ones fade nothing."""
+        older ones fade nothing, resumed too (`train --resume` notes the views, and so makes one, before it loads)."""
         if prefix + "seen_fade" in state_dict:
             self.register_buffer("seen_fade", torch.empty_like(state_dict[prefix + "seen_fade"]))
+        elif "seen_fade" in self._buffers:
+            del self._buffers["seen_fade"]
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def slab_fade(self) -> torch.Tensor | None:

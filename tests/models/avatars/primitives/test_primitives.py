@@ -273,3 +273,25 @@ def test_opacity_fades_where_the_capture_never_looked(synth_capture, tmp_path, g
     lower, upper = slice(34, 38), slice(0, 24)
     assert whole["opacity"][lower].max(1).min() > 0.9 and faded["opacity"][lower].max() < 0.05
     np.testing.assert_allclose(faded["rgb"][upper], whole["rgb"][upper], atol=2e-3)
+
+
+def test_an_avatar_from_before_the_fade_resumes_and_fades_nothing(synth_capture, tmp_path):
+    """A checkpoint without seen_fade (trained before it came: made here by taking the key out of a fresh one's
+    weights) resumes: the trainer notes the views, which makes the buffer, and the load then drops it, as a plain
+    load of that checkpoint has none."""
+    from safetensors.torch import load_file, save_file
+
+    from app.cli import main
+
+    capture = synth_capture("ambient", 12, 24)
+    out = tmp_path / "av"
+    assert main(["train", str(capture), "--out", str(out), "--model", "primitives", "--steps", "2",
+                 "--rays-per-step", "64"]) == 0
+    (weights,) = out.glob("weights-*.safetensors")
+    tensors = load_file(weights)
+    assert "seen_fade" in tensors
+    del tensors["seen_fade"]
+    save_file(tensors, weights)
+    assert "seen_fade" not in load_avatar(out)[0].state_dict()
+    assert main(["train", str(capture), "--out", str(out), "--steps", "3", "--resume", "--rays-per-step", "64"]) == 0
+    assert "seen_fade" not in load_avatar(out)[0].state_dict()
