@@ -211,3 +211,13 @@ def turntable_camera(vertices: np.ndarray, yaw_deg: float, pitch_deg: float = 0.
     reach = float(np.linalg.norm(v - center, axis=1).max())
     return Camera(cam.view, fov_y_deg, width_px, height_px, near_m=max(0.01, distance - 2 * reach),
                   far_m=distance + 2 * reach)
+
+
+def project(camera: Camera, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World points (M,3) on a camera's image: pixel x, y (continuous, pixel centres at k + 0.5) and depth along
+    the view axis (metres; <= 0 behind the camera): x = cx + fx X / -Z, y = cy - fy Y / -Z."""
+    cam = np.asarray(points, np.float64) @ camera.view[:3, :3].T + camera.view[:3, 3]
+    depth = -cam[:, 2]
+    fx, fy, cx, cy = camera.intrinsics
+    safe = np.where(depth > 1e-9, depth, 1e-9)
+    return cx + fx * cam[:, 0] / safe, cy - fy * cam[:, 1] / safe, depth

@@ -246,9 +246,14 @@ class Avatar(nn.Module, ABC):
         query = torch.as_tensor(control_key(controls, self.head_model.num_expression), device=keys.device)
         return nearest_code_weights(keys, query / self.code_key_scale)
 
+    optional_buffers: ClassVar[tuple[str, ...]] = ("plate", "plate_camera", "code_keys", "code_key_scale",
+                                                   "view_axis", "view_cos", "capture_eye")
+    """Buffers an avatar has only where its capture gave them (registered when noted, saved with the weights)."""
+
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
-        """Weights with a plate or code keys give the avatar those buffers (of their size) before they are read."""
-        for name in ("plate", "plate_camera", "code_keys", "code_key_scale", "view_axis", "view_cos", "capture_eye"):
+        """Weights with optional buffers (a plate, code keys...) give the avatar them (of their size) before they are
+        read."""
+        for name in self.optional_buffers:
             if prefix + name in state_dict:
                 self.register_buffer(name, torch.empty_like(state_dict[prefix + name]))
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)

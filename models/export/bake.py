@@ -17,7 +17,7 @@ import numpy as np
 from models.avatars.base import Avatar
 from models.export.chart import Chart
 from models.head.controls import Controls
-from render.camera import Camera, turntable_camera
+from render.camera import Camera, project, turntable_camera
 from render.gl.raster import Rasterizer
 from render.mesh import vertex_normals
 from render.rays import Raster
@@ -176,16 +176,6 @@ def sample_bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarr
     top = img[ya, xa] * (1 - fx) + img[ya, xb] * fx
     bottom = img[yb, xa] * (1 - fx) + img[yb, xb] * fx
     return (top * (1 - fy) + bottom * fy).astype(np.float32)
-
-
-def project(camera: Camera, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """World points (M,3) on a camera's image: pixel x, y (continuous, pixel centres at k + 0.5) and depth along
-    the view axis (metres; <= 0 behind the camera): x = cx + fx X / -Z, y = cy - fy Y / -Z."""
-    cam = np.asarray(points, np.float64) @ camera.view[:3, :3].T + camera.view[:3, 3]
-    depth = -cam[:, 2]
-    fx, fy, cx, cy = camera.intrinsics
-    safe = np.where(depth > 1e-9, depth, 1e-9)
-    return cx + fx * cam[:, 0] / safe, cy - fy * cam[:, 1] / safe, depth
 
 
 def bake_views(avatar: Avatar, n_yaws: int) -> list[tuple[float, float]]:

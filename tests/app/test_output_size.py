@@ -4,33 +4,19 @@ read back (PNG with PIL, mp4 with OpenCV)."""
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import pytest
 from PIL import Image
 
 from app.animation import Animation, save_animation
 from app.cli import main
+from tests.app.videos import mp4_frames, psnr
 from tests.conftest import DEMO
 
 pytestmark = pytest.mark.gl
 
 SIZE = 40
 """Asked for: the demo's preview renders 16 px of it (40 x 0.375 = 15, made even), its draft 10."""
-
-
-def mp4_frames(path) -> list[np.ndarray]:
-    cap = cv2.VideoCapture(str(path))
-    frames = []
-    while True:
-        ok, bgr = cap.read()
-        if not ok:
-            return frames
-        frames.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    return float(10 * np.log10(255.0**2 / np.mean((a.astype(float) - b.astype(float)) ** 2)))
 
 
 @pytest.fixture(scope="module")

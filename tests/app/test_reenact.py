@@ -11,13 +11,13 @@ import subprocess
 import sys
 from dataclasses import replace
 
-import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from app.reenact import calmest_frame, expression_map, resized, retarget
 from models.head.controls import Controls
+from tests.app.videos import mp4_frames, psnr
 from tests.conftest import DEMO, REPO
 
 
@@ -82,20 +82,6 @@ def test_across_head_models_by_name(builtin_model):
     assert anim.value("jaw.open", 0.0) == pytest.approx(math.degrees(0.2), abs=1e-4)  # jaw, gaze, head still go
 
 
-def decoded(mp4) -> list[np.ndarray]:
-    cap = cv2.VideoCapture(str(mp4))
-    out = []
-    while True:
-        ok, bgr = cap.read()
-        if not ok:
-            return out
-        out.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    return float(10 * np.log10(255.0**2 / np.mean((a.astype(float) - b.astype(float)) ** 2)))
-
-
 def test_reenact_a_real_video(tmp_path, face_video, landmarker, capsys, gl):
     """The first 1.5 s of a real video at 10 frames a second drive the demo avatar: the mp4's left half is the
     video's crop, its right half the avatar's render of the saved animation, frame for frame."""
@@ -114,7 +100,7 @@ def test_reenact_a_real_video(tmp_path, face_video, landmarker, capsys, gl):
     anim = load_animation(tmp_path / "perf.json")
     avatar = load_avatar(DEMO)[0]
     check_channels(anim, avatar.head_model, "perf.json")
-    video = decoded(out)
+    video = mp4_frames(out)
     assert len(video) == anim.frames == report["frames_written"] == 15 and video[0].shape == (64, 128, 3)
     source = {k: rgb for k, _, rgb in sampled_frames(face_video, 10) if k in report["source_frames"]}
     crop = Crop(report["crop"]["x0"], report["crop"]["y0"], report["crop"]["side"], 64)
@@ -129,7 +115,7 @@ def test_reenact_a_real_video(tmp_path, face_video, landmarker, capsys, gl):
     alone = tmp_path / "alone.mp4"
     assert main(["reenact", str(DEMO), str(face_video), "--out", str(alone), "--landmarker", str(landmarker),
                  "--seconds", "1.0", "--fps", "10", "--size", "32", "--no-side-by-side", "--meshes", "obj"]) == 0
-    assert decoded(alone)[0].shape == (32, 32, 3)
+    assert mp4_frames(alone)[0].shape == (32, 32, 3)
     objs = sorted((tmp_path / "alone_meshes").iterdir())  # the guide mesh of every frame, for other tools
     assert len(objs) == 10 and objs[0].name == "frame_0000.obj"
     import trimesh
@@ -194,7 +180,7 @@ def test_drive_an_avatar_from_another_persons_frames(tmp_path, synth_capture, ca
             want = float(np.clip(f.controls.expression[index[name]] - split.frames[n].controls.expression[index[name]],
                                  -1.0, 1.5))
             assert anim.value(f"expression.{name}", k / 10) == pytest.approx(want, abs=1e-5)
-    video = decoded(out)
+    video = mp4_frames(out)
     assert len(video) == len(split.frames) == anim.frames
     truth = (np.clip(load_rgb(split.frames[3].image_path, np.asarray(split.background, np.float32)), 0, 1) * 255)
     assert psnr(video[3][:, :32], truth.round().astype(np.uint8)) > 25

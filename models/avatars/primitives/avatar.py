@@ -46,6 +46,7 @@ from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
 from models.avatars.primitives.seen import edge_fade, inside_share
 from models.avatars.quality import Quality
+from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from models.head.lbs import rotation_matrix_from_axis_angle
 from models.head.model import HeadModel
@@ -196,6 +197,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     config_class: ClassVar[type] = PrimitivesConfig
     config_key: ClassVar[str] = "primitives"
     """avatar.json's entry for the sizes."""
+    optional_buffers: ClassVar[tuple[str, ...]] = (*Avatar.optional_buffers, "seen_fade")
     normals_from_surface: ClassVar[bool] = True
     """The opacity grids' gradients, voxel by voxel, are noise (41 degrees from the truth on the demo's capture):
     the normals buffer is the rendered surface's (base.py)."""
@@ -506,24 +508,17 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         S = self.cfg.grid * self.cfg.voxels
         if self.chart is None:
             self.chart = chart_sampler(self.head_model, S, self.cfg.front)
-        height, width = frames.images.shape[1:3]
-        reach = torch.full((S * S,), -torch.inf)
-        for k, geo in enumerate(frames.geometry):
-            to_world = torch.eye(4, dtype=torch.float64)
-            to_world[:3, :3], to_world[:3, 3] = frames.rotations[k].double(), frames.origins[k].double()
-            intrinsics = torch.tensor(frames.split.frame_intrinsics(frames.split.frames[k]), dtype=torch.float64)
-            points = texel_points(self.chart, self.triangles.to(geo.posed.device), geo.posed).double().cpu()
-            reach = torch.maximum(reach, inside_share(points, torch.linalg.inv(to_world), intrinsics, width,
-                                                      height).float())
-        reach[~torch.as_tensor(self.chart.valid)] = torch.inf
+        reach = np.full(S * S, -np.inf)
+        for frame, geo in zip(frames.split.frames, frames.geometry, strict=True):
+            points = texel_points(self.chart, self.triangles.to(geo.posed.device), geo.posed).double().cpu().numpy()
+            reach = np.maximum(reach, inside_share(points, frame_camera(frames.split, frame)))
+        reach = torch.as_tensor(np.where(self.chart.valid, reach, np.inf), dtype=torch.float32)
         self.register_buffer("seen_fade", edge_fade(reach).reshape(S, S).to(self.background.device))
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
-        """Weights that carry seen_fade (avatars trained since it came) give the avatar the buffer to load into;
-        older ones fade nothing, resumed too (`train --resume` notes the views, and so makes one, before it loads)."""
-        if prefix + "seen_fade" in state_dict:
-            self.register_buffer("seen_fade", torch.empty_like(state_dict[prefix + "seen_fade"]))
-        elif "seen_fade" in self._buffers:
+        """An avatar trained before seen_fade came fades nothing, resumed too: `train --resume` notes the views, and
+        so makes the buffer, before it loads weights that have none."""
+        if prefix + "seen_fade" not in state_dict and "seen_fade" in self._buffers:
             del self._buffers["seen_fade"]
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
