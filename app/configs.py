@@ -18,7 +18,8 @@ PresetName = Literal["draft", "preview", "final"]
 @dataclass(frozen=True)
 class HeadPoseConfig:
     head: str = "builtin"
-    """HEAD: builtin, ict:PATH (the ICT npz or a FaceXModel/ folder) or flame:PATH (a FLAME .pkl)."""
+    """HEAD: builtin, demo (the demo avatar's person, an ICT-FaceKit identity), ict:PATH (the ICT npz or a
+    FaceXModel/ folder) or flame:PATH (a FLAME .pkl)."""
     controls: Path | None = None
     """JSON file of controls: shape, expression (list or {name: weight}), pose, gaze, translation."""
     expression: tuple[str, ...] = ()
@@ -69,7 +70,7 @@ class CorpusConfig:
     first: Annotated[int, Range(1, HELD_OUT_FROM - 1)] = 1
     """The first person's identity seed."""
     head: str = "builtin"
-    """HEAD: builtin, ict:PATH or flame:PATH (ICT's 100 identity components give the widest spread of faces)."""
+    """HEAD: builtin, demo, ict:PATH or flame:PATH (ICT's 100 identity components give the widest spread of faces)."""
     scenes: str = "ambient"
     """Lighting scenes, a comma list; the K-th person is captured under the (K mod n)-th."""
     frames: Annotated[int, Range(10, 100000)] = 60
@@ -88,7 +89,7 @@ class TrackConfig:
     out: Path
     """Dataset folder to create (must not exist)."""
     head: str = "builtin"
-    """HEAD: builtin, ict:PATH or flame:PATH."""
+    """HEAD: builtin, demo, ict:PATH or flame:PATH."""
     landmarker: Path | None = None
     """MediaPipe's face landmarker bundle (face_landmarker.task, from MediaPipe's model page), remembered once it
     works; default: $AVATAR_STUDIO_LANDMARKER, else the one remembered, else the one the set-up installs."""

@@ -15,7 +15,7 @@ SceneName = Literal["ambient", "studio", "sun"]
 @dataclass(frozen=True)
 class SynthConfig:
     head: str = "builtin"
-    """HEAD: builtin, ict:PATH or flame:PATH."""
+    """HEAD: builtin, demo, ict:PATH or flame:PATH."""
     scene: SceneName = "sun"
     """ambient: spherical-harmonics light only; studio: plus a soft key light (diffuse shading);
     sun: a hard key light with diffuse shading, specular highlights and cast shadows."""

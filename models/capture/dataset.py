@@ -16,6 +16,7 @@ from PIL import Image
 
 from models.files import atomic_write
 from models.head.controls import Controls, ControlsError, controls_from_dict
+from models.head.sources import HEAD_KINDS, HEAD_SPECS
 
 SPLITS = ("train", "val", "test")
 #: Optional per-frame paths of synthetic captures.
@@ -211,8 +212,8 @@ def _load_ours(folder: Path, split: str, path: Path, data: dict) -> CaptureSplit
         raise _fail(path, "", "fields 'width' and 'height' must be positive integers")
     intr = _intrinsics(path, "field 'intrinsics' ", data["intrinsics"])
     head_model = data["head_model"]
-    if not isinstance(head_model, str) or head_model.split(":")[0] not in ("builtin", "ict", "flame"):
-        raise _fail(path, "", f"field 'head_model' must be builtin, ict:PATH or flame:PATH, got {head_model!r}")
+    if not isinstance(head_model, str) or head_model.split(":")[0] not in HEAD_KINDS:
+        raise _fail(path, "", f"field 'head_model' must be {HEAD_SPECS}, got {head_model!r}")
     shape = _numbers(path, "field 'shape' ", data.get("shape", []))
     background = data.get("background", [0.0, 0.0, 0.0])
     if isinstance(background, str):

@@ -1,4 +1,4 @@
-"""HEAD specs of the command line: `builtin`, `ict:PATH` (npz or FaceXModel/ folder), `flame:PATH`."""
+"""HEAD specs of the command line: `builtin`, `demo`, `ict:PATH` (npz or FaceXModel/ folder), `flame:PATH`."""
 
 from __future__ import annotations
 
@@ -9,6 +9,11 @@ from models.head.flame import load_flame
 from models.head.ict import load_ict_folder, load_ict_npz
 from models.head.meshio import read_npz
 from models.head.model import HeadModel, HeadModelError
+
+DEMO_HEAD_PATH = SHIPPED_PATH.parent / "demo_head" / "head.npz"
+"""The demo's person: one ICT-FaceKit identity (MIT, LICENSE beside it), rebuilt by scripts/make_demo_head.py."""
+HEAD_KINDS = ("builtin", "demo", "ict", "flame")
+HEAD_SPECS = "builtin, demo, ict:PATH or flame:PATH"
 
 _BUILTIN_KEYS = ("template", "triangles", "shape_basis", "expr_basis", "expr_names", "J_regressor",
                  "weights", "parents", "joint_names", "landmarks", "uv", "triangles_uv")
@@ -29,6 +34,8 @@ def load_head(spec: str) -> HeadModel:
     kind, _, arg = spec.partition(":")
     if kind == "builtin":
         return load_builtin(arg) if arg else load_builtin()
+    if kind == "demo":
+        return load_ict_npz(DEMO_HEAD_PATH)
     if kind == "ict":
         if not arg:
             raise HeadModelError("ict: needs a path, as in ict:ict_head.npz or ict:FaceXModel/")
@@ -38,4 +45,4 @@ def load_head(spec: str) -> HeadModel:
         if not arg:
             raise HeadModelError("flame: needs a path, as in flame:generic_model.pkl")
         return load_flame(arg)
-    raise HeadModelError(f"head '{spec}': expected builtin, ict:PATH or flame:PATH")
+    raise HeadModelError(f"head '{spec}': expected {HEAD_SPECS}")

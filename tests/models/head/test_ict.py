@@ -99,3 +99,24 @@ def test_expressions_by_name(ict_model):
 def test_no_neck_or_jaw_joint(ict_model):
     with pytest.raises(ControlsError, match="no 'jaw' joint"):
         Head(ict_model).pose(Controls(jaw=np.array([0.2, 0, 0])))
+
+
+def test_demo_head_is_one_ict_identity(ict_model):
+    """`--head demo` is ICT's neutral head with the identity `synth --identity K` draws added in (K kept in the
+    npz), the same 53 expression blend shapes, no identity components, and ICT-FaceKit's licence beside it."""
+    from models.capture.synthetic import identity_coefficients
+    from models.head.sources import DEMO_HEAD_PATH, load_head
+
+    demo = load_head("demo")
+    seed = int(np.load(DEMO_HEAD_PATH)["identity_seed"])
+    shape = identity_coefficients(ict_model, seed)
+    assert seed > 0 and np.abs(shape).max() > 0.1  # a person, not ICT's mean head
+    want = ict_model.template + np.einsum("vcs,s->vc", ict_model.shape_basis, shape)
+    np.testing.assert_allclose(demo.template, want, atol=1e-6)
+    assert demo.num_shape == 0 and demo.expr_names == ict_model.expr_names
+    np.testing.assert_array_equal(demo.expr_basis, ict_model.expr_basis)
+    np.testing.assert_array_equal(demo.triangles, ict_model.triangles)
+    jaw = ict_model.expr_names.index("jawOpen")
+    posed = Head(demo).pose(Controls(expression=np.eye(53, dtype=np.float32)[jaw]))[0][0].numpy()
+    np.testing.assert_allclose(posed - demo.template, ict_model.expr_basis[:, :, jaw], atol=1e-6)
+    assert "MIT License" in (DEMO_HEAD_PATH.parent / "LICENSE").read_text()
