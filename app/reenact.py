@@ -1,18 +1,13 @@
 """`avatar-studio reenact`: a performance video drives an avatar.
 
 The driving video is tracked with the project's tracker (app/track.py: landmarks, one crop, the head model
-fitted to every frame); what the driver does is taken relative to the driver's own neutral frame (the calmest
-one unless named), so that their resting face, whatever it is, becomes the avatar's rest: expressions and jaw
-as differences, head rotation as the rotation from the neutral frame, gaze as the change of the eyes'
-direction. Head translation is not carried: the avatar stays where its camera frames it.
+fitted to every frame); what the driver does is carried onto the avatar relative to the driver's own neutral frame
+(the calmest one unless named) by models/tracking/retarget.py, which live driving in the studio uses too.
 
 The result is an animation (app/animation.py, one key a tracked frame, linear) saved beside the mp4, which
 the studio opens on its timeline and `animate` renders again; the mp4 shows the driver's frames and the
-avatar side by side, or the avatar alone.
-
-Across head models (a FLAME-tracked driver onto an ICT or built-in avatar) expressions are carried by name:
-the names both models have; FLAME's expression components have no names, so from or onto FLAME only the jaw,
-gaze and head rotation are carried, and the command says so.
+avatar side by side, or the avatar alone. Where expressions cannot be carried across head models, the command
+says so.
 """
 
 from __future__ import annotations
@@ -21,11 +16,10 @@ import json
 import signal
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from app.animation import SLIDER_RANGES, Animation, AnimationError, animation_frames, load_animation, save_animation
 from app.configs import ReenactConfig
@@ -37,45 +31,11 @@ from models.files import atomic_write_bytes
 from models.head.controls import Controls
 from models.head.model import HeadModel
 from models.head.sources import load_head
+from models.tracking.retarget import Retarget, calmest_frame, retarget_frames
+from models.tracking.retarget import expression_map as expression_map  # the command's tests name it here
 
-EXPRESSION_RANGE, JAW_RANGE_DEG = SLIDER_RANGES["expression"], SLIDER_RANGES["jaw.open"]
-GAZE_RANGE_DEG = SLIDER_RANGES["gaze"]
+LIMITS = {key: SLIDER_RANGES[key] for key in ("expression", "jaw.open", "gaze")}
 """Carried values are kept inside the Controls panel's slider ranges."""
-
-
-@dataclass
-class Retarget:
-    """How the driver's channels reach the avatar."""
-
-    neutral: int
-    carried: list[str] = field(default_factory=list)
-    """The avatar's expressions that are driven."""
-    missing: list[str] = field(default_factory=list)
-    """The driver's expressions the avatar has no counterpart for."""
-    note: str = ""
-
-
-def expression_map(driver: HeadModel, avatar: HeadModel) -> tuple[dict[int, int], list[str], str]:
-    """Driver expression index -> avatar expression index: every index for the same model, by name across
-    models; the driver's names left over; a note where nothing can be carried."""
-    if driver is avatar or (driver.name == avatar.name and driver.num_expression == avatar.num_expression
-                            and driver.expr_names == avatar.expr_names):
-        return {i: i for i in range(driver.num_expression)}, [], ""
-    if not driver.expr_names or not avatar.expr_names:
-        which = driver.name if not driver.expr_names else avatar.name
-        return {}, [], (f"expressions not carried: head model '{which}' has unnamed expression components (as "
-                        "FLAME's), which match no other model's; jaw, gaze and head rotation are carried")
-    mapping = {i: avatar.expr_names.index(n) for i, n in enumerate(driver.expr_names) if n in avatar.expr_names}
-    missing = [n for n in driver.expr_names if n not in avatar.expr_names]
-    note = "" if mapping else (f"no expression names in common between '{driver.name}' and '{avatar.name}'; jaw, "
-                               "gaze and head rotation are carried")
-    return mapping, missing, note
-
-
-def calmest_frame(controls: list[Controls]) -> int:
-    """The frame with the least expression and jaw: the driver's neutral unless one is named."""
-    activity = [float(np.abs(c.expression).sum() + 10.0 * abs(float(c.jaw[0]))) for c in controls]
-    return int(np.argmin(activity))
 
 
 def retarget(controls: list[Controls], times: list[float], driver: HeadModel, avatar: HeadModel,
@@ -85,40 +45,17 @@ def retarget(controls: list[Controls], times: list[float], driver: HeadModel, av
     n = calmest_frame(controls) if neutral is None else neutral
     if not 0 <= n < len(controls):
         raise UserInputError(f"--neutral-frame {neutral}: the video gave {len(controls)} tracked frames")
-    mapping, missing, note = expression_map(driver, avatar)
-    rest = controls[n]
-    r_rest = Rotation.from_rotvec(np.asarray(rest.root, np.float64))
-    eyes_rest = [Rotation.from_rotvec(np.asarray(g, np.float64)) for g in (rest.gaze_left, rest.gaze_right)]
+    per_frame, how = retarget_frames(controls, driver, avatar, n, LIMITS)
     tracks: dict[str, list[tuple[float, float]]] = {}
-
-    def key(channel: str, t: float, v: float) -> None:
-        tracks.setdefault(channel, []).append((round(t, 6), round(float(v), 6)))
-
-    names = [avatar.expr_names[j] if j < len(avatar.expr_names) else str(j) for j in range(avatar.num_expression)]
-    for c, t in zip(controls, times, strict=True):
-        for i, j in mapping.items():
-            key(f"expression.{names[j]}", t, np.clip(c.expression[i] - rest.expression[i], *EXPRESSION_RANGE))
-        if "jaw" in avatar.joint_names:
-            key("jaw.open", t, np.clip(np.degrees(float(c.jaw[0]) - float(rest.jaw[0])), *JAW_RANGE_DEG))
-        # The head's turn since the neutral frame, in the camera's axes (the avatar's world axes from the front).
-        yaw, pitch, roll = (Rotation.from_rotvec(np.asarray(c.root, np.float64)) * r_rest.inv()).as_euler(
-            "YXZ", degrees=True)
-        for axis, v in zip(("yaw", "pitch", "roll"), (yaw, pitch, roll), strict=True):
-            key(f"head.{axis}", t, v)
-        if {"eye_l", "eye_r"} <= set(avatar.joint_names):
-            # Both eyes' turn since the neutral frame, averaged (the sliders' linked gaze).
-            turns = [(Rotation.from_rotvec(np.asarray(g, np.float64)) * e.inv()).as_euler("YXZ", degrees=True)
-                     for g, e in zip((c.gaze_left, c.gaze_right), eyes_rest, strict=True)]
-            gaze = np.clip(np.mean(turns, axis=0), *GAZE_RANGE_DEG)
-            key("gaze.yaw", t, gaze[0])
-            key("gaze.pitch", t, gaze[1])
+    for channels, t in zip(per_frame, times, strict=True):
+        for channel, v in channels.items():
+            tracks.setdefault(channel, []).append((round(t, 6), round(v, 6)))
     # Seen from the front, as the driver's camera saw the driver.
     tracks["camera.yaw"], tracks["camera.pitch"] = [(0.0, 0.0)], [(0.0, 0.0)]
     fps = float(np.clip(fps, 1, 240))
     anim = Animation(fps=fps, duration_s=times[-1] + 1.0 / fps,
                      interpolation="linear", tracks={c: tuple(k) for c, k in tracks.items()})
-    carried = [names[j] for j in sorted(set(mapping.values()))]
-    return anim, Retarget(n, carried, missing, note)
+    return anim, how
 
 
 @dataclass
