@@ -28,6 +28,7 @@ import numpy as np
 
 from app.display import buffer_image, resized
 from app.sliders import Sliders, View
+from models.avatars.rendering import RenderOptions, render_image
 from models.files import atomic_write_bytes
 from models.head.model import HeadModel
 from models.ranges import Range
@@ -240,7 +241,7 @@ def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, o
         controls = avatar.at_rest(sliders.controls())
         if on_pose:
             on_pose(k, controls)
-        yield resized(buffer_image(avatar.render_image(controls, cam, raster, should_stop=should_stop, buffers=()),
-                                   "rgb"), size)
+        options = RenderOptions(should_stop=should_stop, buffers=())
+        yield resized(buffer_image(render_image(avatar, cam, controls, options, raster), "rgb"), size)
         if on_frame:
             on_frame(k)

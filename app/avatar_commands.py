@@ -20,6 +20,7 @@ from app.progress import Progress, progress_callback
 from app.turntable import TurntableConfig, turntable_frames
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import check_images, is_capture, load_split
 from models.capture.frames import background_plate, frame_camera, load_rgb
 from models.capture.synthetic import read_png16
@@ -130,7 +131,7 @@ def shadow_metrics(avatar, frame, split, raster, truth: np.ndarray, on: np.ndarr
     share of the key light blocked; and where the capture has the frame without cast shadows, PSNR over the
     head of the render without them against it (unshadowed_psnr) and, for scale, of the render itself
     (unshadowed_psnr_render: what doing nothing scores). Returns the panels: without shadows, the shadows x4."""
-    out = avatar.render_image(frame.controls, frame_camera(split, frame), raster, inspect=True)
+    out = render_image(avatar, frame_camera(split, frame), frame.controls, RenderOptions(inspect=True), raster)
     taken = luminance(out["rgb_no_shadows"]) - luminance(out["rgb"])
     gt = load_rgb(frame.extra["shadow_path"])[..., 0]
     if on.any():
@@ -163,7 +164,7 @@ def run_eval(cfg: EvalConfig) -> int:
     for f in frames:
         truth = load_rgb(f.image_path, avatar.background.numpy())
         t0 = time.perf_counter()
-        out = avatar.render_image(f.controls, frame_camera(split, f), raster)
+        out = render_image(avatar, frame_camera(split, f), f.controls, rasterizer=raster)
         times.append(time.perf_counter() - t0)
         face = face_mask_of(f, truth.shape)
         row = {"frame": f.index, "psnr": psnr(out["rgb"], truth), "ssim": ssim(out["rgb"], truth),
@@ -238,7 +239,7 @@ def run_render(cfg: RenderCommandConfig) -> int:
     gl = GLContext.headless()
     t0 = time.perf_counter()
     buffers, inspect = render_needs(cfg.buffer)
-    out = avatar.render_image(controls, cam, Rasterizer(gl), inspect=inspect, buffers=buffers)
+    out = render_image(avatar, cam, controls, RenderOptions(inspect=inspect, buffers=buffers), Rasterizer(gl))
     ms = 1e3 * (time.perf_counter() - t0)
     if cfg.buffer not in out and cfg.buffer not in INSPECT:
         raise UserInputError(f"--buffer {cfg.buffer}: this avatar's effect set has no normals network")

@@ -31,6 +31,7 @@ from models.avatars.base import Avatar
 from models.avatars.effects import effects_name
 from models.avatars.quality import PRESET_NAMES, Preset, Quality, pareto, save_presets
 from models.avatars.registry import BASELINE_MODEL, DEFAULT_MODEL, load_avatar, untrained_avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera, load_rgb
 from models.files import atomic_write_bytes, foreign_files
@@ -140,9 +141,9 @@ def measure(avatar: Avatar, quality: Quality, frames: TestFrames, raster: Raster
         size = quality.size(cam.width_px)
         c = cam.resized(size, max(8, round(cam.height_px * size / cam.width_px)))
         if i == 0:
-            avatar.render_image(f.controls, c, raster, buffers=())
+            render_image(avatar, c, f.controls, RenderOptions(buffers=()), raster)
         t0 = time.perf_counter()
-        out = avatar.render_image(f.controls, c, raster, buffers=())  # the colour, as the studio shows it first
+        out = render_image(avatar, c, f.controls, RenderOptions(buffers=()), raster)  # the colour, as the studio shows
         times.append(time.perf_counter() - t0)
         images.append(upsample(out["rgb"], frames.truth[i].shape[:2]))
     finite = all(bool(np.isfinite(im).all()) for im in images)
@@ -310,7 +311,7 @@ def measure_nerface(path: Path | None, dataset: Path, frames: TestFrames, raster
     for f, cam in zip(frames.frames[:n], frames.cameras[:n], strict=True):
         t0 = time.perf_counter()
         with torch.inference_mode():
-            images.append(avatar.render_image(f.controls, cam, raster, frame=None)["rgb"])
+            images.append(render_image(avatar, cam, f.controls, RenderOptions(frame=None), raster)["rgb"])
         times.append(time.perf_counter() - t0)
     row = {"trained": path is not None, "ms": round(1e3 * float(np.median(times)), 1), "frames": n,
            "setting": avatar.describe_rendering()}

@@ -12,6 +12,7 @@ import numpy as np
 from app.configs import TurntableConfig
 from app.display import buffer_image, resized
 from models.avatars.base import Avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.head.controls import Controls
 from render.camera import turntable_camera
 from render.gl.raster import Rasterizer
@@ -48,7 +49,7 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
         cam = turntable_camera(avatar.rest_vertices(), yaw, cfg.elevation_deg, fov_y_deg=18.0,
                                width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
-        yield resized(buffer_image(avatar.render_image(c, cam, rasterizer, should_stop=should_stop, buffers=()),
-                                   "rgb"), cfg.size)
+        options = RenderOptions(should_stop=should_stop, buffers=())
+        yield resized(buffer_image(render_image(avatar, cam, c, options, rasterizer), "rgb"), cfg.size)
         if on_frame:
             on_frame(k)

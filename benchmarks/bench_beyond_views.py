@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera, load_rgb
 from models.head.lbs import rotation_matrix_from_axis_angle
@@ -49,7 +50,7 @@ def score(avatar, round_split, raster) -> dict:
     for f in round_split.frames:
         truth = load_rgb(f.image_path, avatar.background.numpy())
         with torch.inference_mode():
-            out = avatar.render_image(f.controls, frame_camera(round_split, f), raster, buffers=())
+            out = render_image(avatar, frame_camera(round_split, f), f.controls, RenderOptions(buffers=()), raster)
         angle = angle_from_face_deg(f)
         rows.append({"angle_deg": round(angle, 1), "bucket": int(min(ANGLES_DEG, key=lambda a: abs(a - angle))),
                      "psnr": psnr(out["rgb"], truth)})

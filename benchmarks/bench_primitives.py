@@ -24,6 +24,7 @@ from benchmarks.bench_render import median_seconds
 from models.avatars.checkpoint import CheckpointError
 from models.avatars.primitives import march, native
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image
 from models.head.controls import Controls
 from render.camera import framing_camera
 from render.gl.context import GLContext
@@ -37,18 +38,20 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int, buffers: 
     os.environ["AVATAR_STUDIO_NATIVE"] = "1" if in_c else "0"
     cam = framing_camera(avatar.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=size, height_px=size)
     geo = avatar.frame_geometry(controls, raster)
-    rays, _ = avatar.image_rays(geo, cam, raster)
+    rays, _ = pixel_rays_of(avatar, geo, cam, raster)
     eye = rays.origins[0]
-    with torch.inference_mode(), avatar.displaying(buffers):  # the decode and the march make those buffers alone
+    options = RenderOptions(buffers=buffers)  # the decode and the march make those buffers alone
+    extras = avatar.shown_channels(options=options)
+    with torch.inference_mode():
         code = avatar.codes(None, geo.code_weights)
-        decode = median_seconds(lambda: avatar.decode(geo, code, eye))
-        prims, _ = avatar.decode(geo, code, eye)
+        decode = median_seconds(lambda: avatar.decode(geo, code, eye, extras=extras))
+        prims, _ = avatar.decode(geo, code, eye, extras=extras)
         lists_s = median_seconds(lambda: march.candidate_lists(rays.origins, rays.directions, prims))
         lists = march.candidate_lists(rays.origins, rays.directions, prims)
         bg = avatar.ray_background(rays)
 
         def run():
-            return avatar.display_march(rays.origins, rays.directions, bg, prims)
+            return avatar.display_march(rays.origins, rays.directions, bg, prims, options)
 
         march_s = median_seconds(run)
         looked = []  # the lookups' share of one march: march.lookup timed where the march calls it
@@ -65,7 +68,7 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int, buffers: 
             out = run()
         finally:
             march.lookup = plain
-    whole = median_seconds(lambda: avatar.render_image(controls, cam, raster, buffers=buffers))
+    whole = median_seconds(lambda: render_image(avatar, cam, controls, RenderOptions(buffers=buffers), raster))
     return {"size": size, "buffers": "all" if buffers is None else "rgb", "march": "C" if in_c else "torch",
             "channels": prims.colour.shape[-1],
             "rays": len(rays), "decode_ms": 1e3 * decode, "lists_ms": 1e3 * lists_s,

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from models.avatars.registry import BASELINE_MODEL, load_avatar, untrained_avatar
+from models.avatars.rendering import render_image
 from models.head.controls import Controls
 from models.head.sources import load_head
 from render.camera import framing_camera
@@ -53,14 +54,14 @@ def main() -> None:
         name = "+".join(meta["effects"]) or "none"
         for size in (64, 128, 256):
             cam = framing_camera(avatar.head_model.template, 20, 5, fov_y_deg=18.0, width_px=size, height_px=size)
-            s = median_seconds(lambda cam=cam, av=avatar: av.render_image(Controls(), cam, raster))
+            s = median_seconds(lambda cam=cam, av=avatar: render_image(av, cam, Controls(), rasterizer=raster))
             results["avatar_ms"][f"{name} {size}px"] = round(1e3 * s, 1)
             print(f"avatar {name:24s} {size:4d} px: {1e3 * s:8.1f} ms", flush=True)
     if nerface is None:
         head = load_head(meta["head_model"])
         nerface = untrained_avatar(BASELINE_MODEL, head)
     cam = framing_camera(nerface.head_model.template, 20, 5, fov_y_deg=18.0, width_px=128, height_px=128)
-    s = median_seconds(lambda: nerface.render_image(Controls(), cam, raster), repeats=1)
+    s = median_seconds(lambda: render_image(nerface, cam, Controls(), rasterizer=raster), repeats=1)
     results["nerface_dense_128px_ms"] = round(1e3 * s, 1)
     print(f"NerFACE dense renderer 128 px: {s:.1f} s")
     for key, ms in results["avatar_ms"].items():

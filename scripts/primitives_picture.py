@@ -20,6 +20,7 @@ from app.head_commands import save_png
 from models.avatars.checkpoint import CheckpointError
 from models.avatars.primitives import march
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import render_image
 from models.head.controls import Controls
 from render.camera import Camera, framing_camera
 from render.gl.context import GLContext
@@ -52,7 +53,7 @@ def main() -> int:
     cam = framing_camera(avatar.rest_vertices(), args.yaw, 5.0, fov_y_deg=18.0, width_px=args.size,
                          height_px=args.size)
     raster = Rasterizer(GLContext.headless())
-    image = avatar.render_image(controls, cam, raster)["rgb"]
+    image = render_image(avatar, cam, controls, rasterizer=raster)["rgb"]
     geo = avatar.frame_geometry(controls, raster)
     with torch.inference_mode():
         prims, _ = avatar.decode(geo, avatar.codes(None, geo.code_weights),

@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera
 from render.gl.context import GLContext
@@ -31,7 +32,7 @@ def median_ms(avatar, frames, split, raster, size: int | None = None, repeats: i
         cam = cam if size is None else cam.resized(size, size)
         for _ in range(repeats):
             t0 = time.perf_counter()
-            avatar.render_image(f.controls, cam, raster)
+            render_image(avatar, cam, f.controls, rasterizer=raster)
             times.append(1e3 * (time.perf_counter() - t0))
     return float(np.median(times))
 

@@ -22,6 +22,7 @@ import torch
 from app.avatar_commands import face_mask_of
 from app.head_commands import save_png
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera, load_rgb
 from models.head.controls import Controls
@@ -60,7 +61,7 @@ def main() -> None:
     shown = test.frames[:: max(1, len(test.frames) // args.frames)][: args.frames]
     for f in test.frames:
         cam = frame_camera(test, f)
-        out = avatar.render_image(f.controls, cam, raster)
+        out = render_image(avatar, cam, f.controls, rasterizer=raster)
         geo = avatar.frame_geometry(f.controls, raster)
         posed = geo.posed.detach().cpu().numpy()
         mesh = raster.rasterize(posed, avatar.head_model.triangles, clipping_around(cam, posed))
@@ -83,7 +84,7 @@ def main() -> None:
         for yaw in (0.0, 45.0, 90.0):
             cam = framing_camera(avatar.rest_vertices(), yaw, -15.0, fov_y_deg=18.0, width_px=256, height_px=256,
                                  margin=1.4)
-            row.append(avatar.render_image(avatar.at_rest(Controls()), cam, raster, buffers=())["rgb"])
+            row.append(render_image(avatar, cam, avatar.at_rest(Controls()), RenderOptions(buffers=()), raster)["rgb"])
         edges.append(np.concatenate(row, 1))
     save_png(args.out / "edges.png", to_bytes(np.concatenate(edges, 0)))
     (args.out / "normals.json").write_text(json.dumps(report, indent=1))

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.head.controls import Controls
 from render.camera import framing_camera
 from render.gl.context import GLContext
@@ -37,7 +38,8 @@ def save(out: Path, folders: list[Path]) -> None:
             for yaw in (20.0, -35.0):
                 cam = framing_camera(head.template, yaw, 5.0, fov_y_deg=18.0, width_px=64, height_px=64)
                 for frame in (None, 3):
-                    for k, v in avatar.render_image(controls, cam, raster, frame=frame, inspect=True).items():
+                    options = RenderOptions(frame=frame, inspect=True)
+                    for k, v in render_image(avatar, cam, controls, options, raster).items():
                         images[f"{folder.name}/{ci}/{yaw}/{frame}/{k}"] = v
     np.savez(out, **images)
     print(f"wrote {out}: {len(images)} buffers")

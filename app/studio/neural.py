@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from models.avatars.rendering import RenderOptions, render_image
 from models.head.controls import Controls
 from render.camera import Camera, framing_camera
 
@@ -64,6 +65,9 @@ PASS_BUDGET_MS = FIRST_PIXELS_MS - DELIVERY_MS
 """A coarse pass is left out when a finer pass of the request, as lately timed at this size, renders within this
 (100 ms; the demo primitives avatar's final at 256 px in the window took 57-76 ms, the medians of 6 moves in six
 windows of three runs)."""
+CORES = os.cpu_count() or 1
+"""Cores a render may spread one batch over (RenderOptions.cores): the renderer keeps torch to one thread and gives
+the primitives' march groups the machine's cores."""
 
 
 TIMES_KEPT = 3
@@ -250,7 +254,6 @@ def serve(pipe, results, latest) -> None:
                     try:
                         avatar = None if folder is None else load_avatar(folder)[0]
                         if avatar is not None:
-                            avatar.display_cores = os.cpu_count() or 1
                             warm_up(avatar, raster)
                     except Exception as e:  # the window read the same folder: this is rare
                         avatar, measure = None, False
@@ -301,9 +304,9 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
         cam = scaled(request.camera, avatar.presets[name].quality.scale)
         results.put(("started", rid, recent.get((name, size))))  # the window paces its frames by it
         t0 = time.perf_counter()
-        buffers = avatar.render_image(request.controls, cam, raster, frame=request.frame,
-                                      should_stop=lambda: stale(rid), inspect=request.inspect,
-                                      chunk_rays=avatar.interactive_chunk_rays, buffers=request.buffers)
+        options = RenderOptions(frame=request.frame, inspect=request.inspect, buffers=request.buffers,
+                                chunk_rays=avatar.interactive_chunk_rays, should_stop=lambda: stale(rid), cores=CORES)
+        buffers = render_image(avatar, cam, request.controls, options, raster)
         ms = 1e3 * (time.perf_counter() - t0)
         if stale(rid):
             return
@@ -318,7 +321,7 @@ def warm_up(avatar, raster) -> None:
     the move); after this 56 ms render the first final takes 73."""
     cam = framing_camera(avatar.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=32, height_px=32)
     avatar.apply_preset("draft", 32)
-    avatar.render_image(avatar.at_rest(Controls()), cam, raster, buffers=None)
+    render_image(avatar, cam, avatar.at_rest(Controls()), RenderOptions(buffers=None, cores=CORES), raster)
 
 
 def seed_times(timed: dict[tuple[str, int], list[float]], figures: PresetFigures) -> None:
@@ -350,8 +353,9 @@ def measure_presets(avatar, raster, should_stop) -> PresetFigures:
         times = []
         for _ in range(3):
             t0 = time.perf_counter()
-            images[name] = avatar.render_image(avatar.at_rest(Controls()), c, raster, should_stop=should_stop,
-                                               chunk_rays=avatar.interactive_chunk_rays, buffers=())["rgb"]
+            options = RenderOptions(buffers=(), chunk_rays=avatar.interactive_chunk_rays, should_stop=should_stop,
+                                    cores=CORES)
+            images[name] = render_image(avatar, c, avatar.at_rest(Controls()), options, raster)["rgb"]
             times.append(1e3 * (time.perf_counter() - t0))
         figures.ms[name] = float(np.median(times))
         reference = images["final"]

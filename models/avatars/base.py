@@ -6,15 +6,14 @@ for avatar.json (`meta`). Per frame it makes a geometry from the head model's co
 whatever it needs, meshes, a shadow map, a rigid pose) and says which pixels' rays it renders. For a batch of
 rays it gives named buffers (`render_rays`: rgb, opacity, depth, and what its effects provide), its loss terms
 for a training batch (`loss_terms`: named, weighted), and after the hot path the inspection buffers it
-declares (`inspect`). `render_image` is the same for every model: rays of a camera in batches, cancellable,
-scattered back into images.
+declares (`inspect`). Images are the same for every model: rendering.py's `render_image` sends a camera's rays
+through `render_rays` in batches, with a frozen RenderOptions.
 """
 
 from __future__ import annotations
 
 import contextlib
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Collection
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -29,10 +28,9 @@ from models.avatars.quality import BUILTIN_PRESETS, Preset, Quality
 from models.head.controls import Controls
 from models.head.head import Head
 from models.head.model import HeadModel
-from render.camera import Camera, clipping_around
+from render.camera import Camera
 from render.gl.raster import Rasterizer
-from render.normals import depth_normal_image, mesh_normal_image, surface_normal_image
-from render.rays import Raster, Rays, image_rays, pixel_rays, rays_to_images
+from render.rays import Raster, Rays
 
 BACKGROUND = "background"
 """The fill of colour buffers outside the rendered pixels: the avatar's background colour."""
@@ -87,6 +85,9 @@ class Avatar(nn.Module, ABC):
     """The normals buffer is the rendered surface's (render/normals.py: the guide mesh's normals where the render's
     depth lies on the mesh, the depth's own elsewhere), made by render_image, not by render_rays: for a model with
     no normals of its own worth showing (a density's gradient, voxel by voxel, is noise)."""
+    reads_raster: ClassVar[bool] = True
+    """Whether the pixels it renders (image_pixels) and their rays read the posed guide mesh's raster; False: every
+    pixel's ray, no mesh rasterized (the primitives' march finds the rays that meet a primitive itself)."""
 
     @classmethod
     def default_config(cls, tracked: bool) -> Any:
@@ -110,15 +111,6 @@ class Avatar(nn.Module, ABC):
         self.rest_translation = np.zeros(3, np.float32)
         """Where its capture held the head (avatar.json "rest_pose": the training frames' mean translation): the
         field reads world positions, so new controls (sliders, turntables, `render`) place the head there."""
-        self.should_stop: Callable[[], bool] | None = None
-        """While render_image runs (within `displaying`): its should_stop, for models whose batches are long (the
-        primitives' march asks it between waves) to stop within a batch."""
-        self.display_buffers: tuple[str, ...] | None = None
-        """While render_image runs (within `displaying`): the optional buffers it makes (of default_buffers and the
-        inspection buffers, those asked for), for models that can leave out the work of the others; None: all."""
-        self.display_cores: int | None = None
-        """Cores a display render may spread its work over where the model can (None: torch's thread count); the
-        studio's renderer keeps torch to one thread and gives the primitives' march groups the machine's cores."""
         self.view_range: dict[str, list[float]] | None = None
         """The directions its capture saw the head from (avatar.json's "view_range": yaw_deg and pitch_deg, least
         and most); None: not recorded."""
@@ -329,10 +321,12 @@ class Avatar(nn.Module, ABC):
     # ---- rays ------------------------------------------------------------------------------------------
     @abstractmethod
     def render_rays(self, rays: Rays, geometry: Any, frame: int | None, generator: torch.Generator | None = None,
-                    training: bool = False) -> RayOutput:
+                    training: bool = False, options: Any = None) -> RayOutput:
         """Named buffers of R rays. frame: a training frame's codes (None: the mean code, for novel controls).
         training: the exact path with every random draw from `generator` (display may take the shortcuts its
-        render settings allow)."""
+        render settings allow). options: render_image's RenderOptions (models/avatars/rendering.py) for a display
+        batch: the optional buffers it makes, should_stop and cores for a model whose batches are long; None: all
+        buffers, never stopped."""
 
     @abstractmethod
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
@@ -382,86 +376,6 @@ class Avatar(nn.Module, ABC):
     def before_save(self, geometry: Any) -> None:
         """Called before each checkpoint with the first training frame's geometry (display caches follow the
         weights)."""
-
-    # ---- images: the same for every model --------------------------------------------------------------
-    def image_rays(self, geometry: Any, camera: Camera, rasterizer: Rasterizer | None) -> tuple[Rays, np.ndarray]:
-        """The rays of the pixels this avatar renders, and their flat pixel indices."""
-        origin, dirs = image_rays(camera)
-        raster = Raster.empty(camera.height_px, camera.width_px) if rasterizer is None else \
-            rasterizer.rasterize(geometry.posed.cpu().numpy(), self.head_model.triangles, camera)
-        idx = np.nonzero(self.image_pixels(camera, raster).ravel())[0]
-        surface_t = torch.as_tensor(raster.distance.ravel()[idx], dtype=torch.float32)
-        return Rays(origin.expand(len(idx), 3), dirs[idx], surface_t), idx
-
-    def render_image(self, controls: Controls, camera: Camera, rasterizer: Rasterizer | None, frame: int | None = None,
-                     should_stop: Callable[[], bool] | None = None, inspect: bool = False,
-                     chunk_rays: int | None = None, buffers: Collection[str] | None = None) -> dict[str, np.ndarray]:
-        """The avatar's buffers as images (H,W,...). `frame` picks a training frame's codes; None uses the mean
-        code (novel controls). `should_stop` is asked between batches of rays; when it says yes,
-        RenderCancelled is raised (a newer request won). `inspect` adds the inspection buffers. `chunk_rays`: rays a
-        batch (default the avatar's; smaller batches let a newer request in sooner). `buffers`: which of
-        default_buffers to make (None: all; rgb, opacity and depth always come)."""
-        device = self.background.device
-        geo = self.frame_geometry(controls, rasterizer).to(device)
-        camera = clipping_around(camera, geo.posed.cpu().numpy())  # the head may be anywhere (a translation)
-        rays, idx = self.image_rays(geo, camera, rasterizer)
-        plate = self.plate_for(camera)
-        if plate is not None:
-            rays = replace(rays, background=plate[torch.as_tensor(idx, device=plate.device)].cpu())
-        rays = rays.to(device)
-        names = self.inspection_buffers() if inspect else ()
-        wanted = tuple(b for b in self.default_buffers() if buffers is None or b in buffers)
-        surface = self.normals_from_surface and "normals" in wanted
-        wanted = tuple(b for b in wanted if not (surface and b == "normals"))
-        parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *wanted, *names)}
-        with self.displaying((*wanted, *names), should_stop):
-            with self.display_mode():
-                chunk = chunk_rays or self.chunk_rays
-                for a in range(0, len(rays), chunk):
-                    if should_stop is not None and should_stop():
-                        raise RenderCancelled
-                    out = self.render_rays(rays[a:a + chunk], geo, frame)
-                    made = out.buffers | self.inspect(out, geo, names)
-                    made["depth"] = torch.where(made["opacity"] > 0.5, made["depth"],
-                                                torch.full_like(made["depth"], np.inf))
-                    for k, v in made.items():
-                        if k in parts:  # a model that makes a buffer anyway: kept where asked for
-                            parts[k].append(v.detach())
-        background = (self.background if plate is None else plate).cpu().numpy()
-        layout = {k: (c, background if fill == BACKGROUND else fill) for k, (c, fill) in self.layout().items()}
-        images = rays_to_images(parts, camera.height_px, camera.width_px, idx, layout)
-        if surface:
-            images["normals"] = self.surface_normals(images["depth"], geo, camera, rasterizer)
-        return images
-
-    def surface_normals(self, depth: np.ndarray, geometry: Any, camera: Camera, rasterizer: Rasterizer | None
-                        ) -> np.ndarray:
-        """(H,W,3) the normals of the surface a depth image (distance along each pixel's ray, inf where nothing is
-        drawn) shows, joined to the posed guide mesh's where it lies on the mesh (render/normals.py); the depth's
-        alone without a rasterizer. The depth's normals are smoothed over 2 px at 256 px, alike at other sizes (on
-        three of the demo's test frames they are 15.5-17.9 degrees from the truth in the median at 2 px, 18.0-21.5 at
-        1 px, 13.2-14.7 at 4 px)."""
-        origin, directions = pixel_rays(camera)
-        from_depth = depth_normal_image(origin, directions, depth, sigma_px=max(camera.height_px, camera.width_px)
-                                        / 128.0)
-        if rasterizer is None:
-            return from_depth
-        posed = geometry.posed.detach().cpu().numpy()
-        raster = rasterizer.rasterize(posed, self.head_model.triangles, camera)
-        return surface_normal_image(from_depth, depth, mesh_normal_image(raster, posed, self.head_model.triangles),
-                                    raster.distance)
-
-    @contextlib.contextmanager
-    def displaying(self, buffers: tuple[str, ...] | None = None, should_stop: Callable[[], bool] | None = None):
-        """Within it, render_rays renders for display as render_image's batches do: only the optional `buffers` (of
-        default_buffers and the inspection buffers; None: all of them), and should_stop asked within a batch by a
-        model whose batches are long. The settings before it come back after."""
-        before = self.should_stop, self.display_buffers
-        self.should_stop, self.display_buffers = should_stop, buffers
-        try:
-            yield
-        finally:
-            self.should_stop, self.display_buffers = before
 
     def default_buffers(self) -> tuple[str, ...]:
         """The buffers render_image makes besides rgb, opacity and depth (render_rays gives them, but for the normals

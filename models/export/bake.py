@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from models.avatars.base import Avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.export.chart import Chart
 from models.head.controls import Controls
 from render.camera import Camera, project, turntable_camera
@@ -244,7 +245,7 @@ def bake_texture(avatar: Avatar, chart: Chart, size: int, render_px: int, n_yaws
     blend = ViewBlend(len(points))
     for k, (yaw, pitch) in enumerate(views):
         camera = turntable_camera(avatar.rest_vertices(), yaw, pitch, width_px=px, height_px=px)
-        images = avatar.render_image(controls, camera, rasterizer, buffers=())
+        images = render_image(avatar, camera, controls, RenderOptions(buffers=()), rasterizer)
         raster = rasterizer.rasterize(posed.astype(np.float32), triangles, camera)
         blend.add(k, *seen_from(camera, raster, images, background, points, normals))
         if on_view:

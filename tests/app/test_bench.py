@@ -17,6 +17,7 @@ from app.bench import REFERENCE, SETTINGS, BenchConfig, choose_presets, run_benc
 from app.cli import main
 from models.avatars.quality import Quality, load_presets, pareto
 from models.avatars.registry import load_avatar, untrained_avatar
+from models.avatars.rendering import render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera
 from models.training.metrics import psnr
@@ -95,7 +96,7 @@ def test_every_setting_is_finite_and_near_the_reference(tiny_avatar, capture, gl
         avatar.set_quality(q)
         size = q.size(cam.width_px)
         c = cam.resized(size, size)
-        return avatar.render_image(f.controls, c, raster)
+        return render_image(avatar, c, f.controls, rasterizer=raster)
 
     reference = render(REFERENCE)["rgb"]
     db = {}

@@ -10,6 +10,7 @@ from PIL import Image
 
 from app.animation import Animation, save_animation
 from app.cli import main
+from models.avatars.rendering import RenderOptions, render_image
 from tests.app.videos import mp4_frames, psnr
 from tests.conftest import DEMO
 
@@ -42,7 +43,7 @@ def test_render_writes_the_size_asked_for(demo, tmp_path, gl):
     assert img.size == (SIZE, SIZE)
     px = demo.apply_preset("preview", SIZE)
     cam = framing_camera(demo.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=px, height_px=px)
-    small = demo.render_image(demo.at_rest(Controls()), cam, Rasterizer(gl), buffers=())["rgb"]
+    small = render_image(demo, cam, demo.at_rest(Controls()), RenderOptions(buffers=()), Rasterizer(gl))["rgb"]
     small = (np.clip(small, 0, 1) * 255).round().astype(np.uint8)
     assert psnr(np.asarray(img.convert("RGB").resize((px, px), Image.Resampling.BOX)), small) > 27
 

@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from app.cli import main
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
@@ -157,7 +158,7 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     train = load_split(d3_dataset, "train")
     assert avatar.code_weights(train.frames[3].controls).argmax().item() == 3
     raster = Rasterizer(gl)
-    img = avatar.render_image(test.frames[0].controls, frame_camera(test, test.frames[0]), raster)
+    img = render_image(avatar, frame_camera(test, test.frames[0]), test.frames[0].controls, rasterizer=raster)
     raster.release()
     assert np.isfinite(img["rgb"]).all() and img["opacity"].max() > 0.1
     assert run_eval(EvalConfig(avatar=out, dataset=d3_dataset, out=tmp_path / "eval")) == 0

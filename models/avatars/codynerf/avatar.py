@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import asdict, dataclass, replace
-from typing import Annotated, ClassVar
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
 import torch
@@ -280,11 +280,12 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
                                   min_weight=rc.min_weight, skip_empty=rc.occupancy)
 
     def render_rays(self, rays: Rays, geometry: FrameGeometry, frame: int | None,
-                    generator: torch.Generator | None = None, training: bool = False,
+                    generator: torch.Generator | None = None, training: bool = False, options: Any = None,
                     create_graph: bool = False, mesh_normals: bool = False) -> RayOutput:
-        """Colour, opacity, depth (and, with normals, predicted and density-gradient normals) of R rays.
-        create_graph: keep the density gradients' graph (training through the normals, Eq. 13). mesh_normals:
-        the mesh's normals stand in for both (RaySettings.mesh_normals)."""
+        """Colour, opacity, depth (and, with normals, predicted and density-gradient normals) of R rays: every
+        buffer whatever the options ask. create_graph: keep the density gradients' graph (training through the
+        normals, Eq. 13). mesh_normals: the mesh's normals stand in for both (RaySettings.mesh_normals)."""
+        del options
         omega, phi = self.codes(frame, geometry.code_weights)
         if not training:
             omega, phi = omega.detach(), phi.detach()

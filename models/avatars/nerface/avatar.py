@@ -16,7 +16,7 @@ unposed mesh onto the posed one, so any head model works without knowing its joi
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Annotated, ClassVar
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
 import torch
@@ -220,10 +220,11 @@ class NerfaceAvatar(Avatar):
 
     # ---- rays ------------------------------------------------------------------------------------------
     def render_rays(self, rays: Rays, geometry: NerfaceGeometry, frame: int | None,
-                    generator: torch.Generator | None = None, training: bool = False) -> RayOutput:
+                    generator: torch.Generator | None = None, training: bool = False, options: Any = None
+                    ) -> RayOutput:
         """The fine pass's colour, opacity and depth; the coarse pass's colours in the internals (both are
-        trained). Display and training render alike (no shortcuts)."""
-        del training
+        trained). Display and training render alike (no shortcuts, whatever the options)."""
+        del training, options
         c = self.cfg
         R = len(rays)
         geo, latent = geometry, self.codes(frame, geometry.code_weights)

@@ -46,6 +46,7 @@ from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
 from models.avatars.primitives.seen import edge_fade, inside_share
 from models.avatars.quality import Quality
+from models.avatars.rendering import RenderOptions
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from models.head.lbs import rotation_matrix_from_axis_angle
@@ -199,6 +200,9 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     """avatar.json's entry for the sizes."""
     optional_buffers: ClassVar[tuple[str, ...]] = (*Avatar.optional_buffers, "seen_fade")
     normals_from_surface: ClassVar[bool] = True
+    reads_raster: ClassVar[bool] = False
+    """Every pixel's ray, without rasterizing the mesh: the march's screen tiles find the rays that may meet a
+    primitive, and a ray on no tile's list costs nothing."""
     """The opacity grids' gradients, voxel by voxel, are noise (41 degrees from the truth on the demo's capture):
     the normals buffer is the rendered surface's (base.py)."""
 
@@ -307,11 +311,11 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         `shadows` on a capture that records its key light."""
         return "shadows" in self._effects and self.light_dir is not None
 
-    def shown_channels(self, lit: bool = False) -> tuple[str, ...]:
+    def shown_channels(self, lit: bool = False, options: RenderOptions | None = None) -> tuple[str, ...]:
         """The colour grids' channels beyond rgb that display composites: the key light's visibility (1, for
-        rgb_light) where the avatar casts shadows and the render makes the buffer (display_buffers); none for the
+        rgb_light) where the avatar casts shadows and the render makes the buffer (options.buffers); none for the
         lit inspection pass (its rgb alone). The normals are the surface's (normals_from_surface), not composited."""
-        want = self.display_buffers
+        want = None if options is None else options.buffers
         return ("rgb_light",) if self.casts_shadows and not lit and (want is None or "rgb_light" in want) else ()
 
     def layout(self) -> dict[str, tuple[int, float | str]]:
@@ -329,13 +333,13 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         unknown = set(names) - set(self.inspection_buffers())
         if unknown:
             raise ValueError(f"{self.name} avatars with effects {self.describe_effects()} have no buffers {unknown}")
-        _, _, marched, rays, frame = out.internals
+        _, _, marched, rays, frame, options = out.internals
         found = {}
         if "rgb_light" in names:
             light, opacity = marched.extra[:, -1:], out.buffers["opacity"][:, None]
             found["rgb_light"] = (light + (1.0 - opacity)).clamp(0, 1).expand(-1, 3)  # lit where nothing is
         if "rgb_no_shadows" in names:
-            lit = self.render_rays(rays, geometry, frame, lit=True)
+            lit = self.render_rays(rays, geometry, frame, options=options, lit=True)
             found["rgb_no_shadows"] = lit.buffers["rgb"]
         return found
 
@@ -416,12 +420,6 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         image = torch.ones(K * K, M, M, device=vis.device)
         image[self.layout_cells] = vis
         return image.reshape(K, K, M, M).permute(0, 2, 1, 3).reshape(1, 1, K * M, K * M)
-
-    def image_rays(self, geometry: PrimitivesGeometry, camera: Camera, rasterizer: Rasterizer | None
-                   ) -> tuple[Rays, np.ndarray]:
-        """Every pixel's ray, without rasterizing the mesh: the march's screen tiles find the rays that may meet a
-        primitive, and a ray on no tile's list costs nothing."""
-        return super().image_rays(geometry, camera, None)
 
     def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
         return np.ones((camera.height_px, camera.width_px), bool)
@@ -591,10 +589,10 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return left_out_weights(keys, frame)[None] @ self.latent.weight
 
     def decoded(self, geo: PrimitivesGeometry, frame: int | None, eye: torch.Tensor, training: bool,
-                lit: bool = False, code: torch.Tensor | None = None):
+                lit: bool = False, code: torch.Tensor | None = None, options: RenderOptions | None = None):
         """decode, cached on the geometry for display (one decode a frame, and one lit for inspection, whatever
-        the batches of rays), with the channels the render shows (shown_channels). code: instead of the frame's
-        (training_code)."""
+        the batches of rays), with the channels the render shows (shown_channels of `options`). code: instead of
+        the frame's (training_code)."""
         code = self.codes(frame, geo.code_weights) if code is None else code
         if training:
             return self.decode(geo, code, eye, lit, training=True, frame=frame)
@@ -602,38 +600,40 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         if geo.decoded.get("key") != key:
             geo.decoded.clear()
             geo.decoded["key"] = key
-        extras = self.shown_channels(lit)
+        extras = self.shown_channels(lit, options)
         if (lit, extras) not in geo.decoded:
             geo.decoded[lit, extras] = self.decode(geo, code, eye, lit, frame=frame, extras=extras)
         return geo.decoded[lit, extras]
 
     # ---- rays ------------------------------------------------------------------------------------------
     def render_rays(self, rays: Rays, geometry: PrimitivesGeometry, frame: int | None,
-                    generator: torch.Generator | None = None, training: bool = False, lit: bool = False) -> RayOutput:
+                    generator: torch.Generator | None = None, training: bool = False,
+                    options: RenderOptions | None = None, lit: bool = False) -> RayOutput:
         """rgb, opacity and depth of R rays marched through the primitives they meet (one pinhole's rays are
         binned in screen tiles, march.candidate_lists). lit: decoded with every texel lit (inspection)."""
         if self.pose_corrections is not None and frame is not None:
             rays = self.corrected_rays(rays, geometry, frame)
         code = self.training_code(frame, generator) if training and frame is not None else None
-        prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit, code)
+        prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit, code, options)
         if training:
             out, _ = dispatch.march_rays(rays.origins, rays.directions, self.ray_background(rays), prims,
                                          self.cfg.samples)
         else:
-            out = self.display_march(rays.origins, rays.directions, self.ray_background(rays), prims)
+            out = self.display_march(rays.origins, rays.directions, self.ray_background(rays), prims, options)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
-        return RayOutput(buffers, (prims, offsets, out, rays, frame))
+        return RayOutput(buffers, (prims, offsets, out, rays, frame, options))
 
     def display_march(self, origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor,
-                      prims: march.Primitives) -> march.MarchOutput:
+                      prims: march.Primitives, options: RenderOptions | None = None) -> march.MarchOutput:
         """The march as display runs it (and the bench times it): in C where it can, else in torch (dispatch.py; what
-        ran is kept for describe_display); the rays in as many groups as display_cores (else torch's threads; one
+        ran is kept for describe_display); the rays in as many groups as options.cores (else torch's threads; one
         thread a group); in waves with early termination, samples by the voxels a segment crosses, colour looked up
-        only where it shows; render_image's should_stop asked between waves."""
-        cores = self.display_cores or torch.get_num_threads()
+        only where it shows; options.should_stop asked between waves."""
+        options = options or RenderOptions()
+        cores = options.cores or torch.get_num_threads()
         parts = cores if len(origins) >= DISPLAY_PARALLEL_RAYS else 1
-        out, self.displayed_by = dispatch.march_rays(origins, directions, background, prims, self.samples,
-                                                     dispatch.Display(self.cfg.stop_below, parts, self.should_stop))
+        display = dispatch.Display(self.cfg.stop_below, parts, options.should_stop)
+        out, self.displayed_by = dispatch.march_rays(origins, directions, background, prims, self.samples, display)
         return out
 
     def describe_display(self) -> str:

@@ -10,6 +10,7 @@ import pytest
 
 from app.studio.neural import PASS_BUDGET_MS, TIMES_KEPT, Request, measure_presets, render_passes
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.head.controls import Controls
 from render.camera import framing_camera
 from render.gl.raster import Rasterizer
@@ -73,7 +74,7 @@ def test_the_quality_panel_says_which_march_displays(gl, monkeypatch):
     cam = framing_camera(avatar.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=16, height_px=16)
 
     def shown() -> str:
-        avatar.render_image(avatar.at_rest(Controls()), cam, raster, buffers=())
+        render_image(avatar, cam, avatar.at_rest(Controls()), RenderOptions(buffers=()), raster)
         return avatar.describe_display()
 
     assert avatar.describe_display() == ""

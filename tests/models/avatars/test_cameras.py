@@ -10,6 +10,7 @@ import torch
 from models.avatars.codynerf.avatar import silhouette_margin_px
 from models.avatars.nerface.avatar import NerfaceAvatar, NerfaceConfig
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.head.controls import Controls
 from render.camera import Camera, framing_camera
 from render.gl.raster import Rasterizer
@@ -32,8 +33,8 @@ def test_codynerf_crop_renders_the_same_pixels(gl):
     full_cam, crop_cam = cameras(avatar.head_model.template)
     r = Rasterizer(gl)
     controls = Controls(jaw=np.array([0.2, 0.0, 0.0], np.float32))
-    full = avatar.render_image(controls, full_cam, r, inspect=True)
-    crop = avatar.render_image(controls, crop_cam, r, inspect=True)
+    full = render_image(avatar, full_cam, controls, RenderOptions(inspect=True), r)
+    crop = render_image(avatar, crop_cam, controls, RenderOptions(inspect=True), r)
     # Pixels within the silhouette margin of the crop's border may differ: which rays are rendered is the mesh's
     # silhouette grown by that margin, and the crop does not see the silhouette beyond its border.
     m = silhouette_margin_px(avatar.render_cfg, crop_cam, r.rasterize(avatar.frame_geometry(controls, r).posed.numpy(),
@@ -53,8 +54,8 @@ def test_nerface_crop_renders_the_same_pixels(gl, builtin_model):
     avatar = NerfaceAvatar(builtin_model, NerfaceConfig(width=32, depth=2, coarse_samples=16, fine_samples=8), 1,
                            np.ones(3, np.float32)).eval()
     full_cam, crop_cam = cameras(builtin_model.template)
-    full = avatar.render_image(Controls(), full_cam, None)
-    crop = avatar.render_image(Controls(), crop_cam, None)
+    full = render_image(avatar, full_cam, Controls(), rasterizer=None)
+    crop = render_image(avatar, crop_cam, Controls(), rasterizer=None)
     for name in ("rgb", "opacity", "depth"):
         a, b = full[name][TOP:TOP + H, LEFT:LEFT + W], crop[name]
         finite = np.isfinite(a)

@@ -10,6 +10,7 @@ import pytest
 
 from models.avatars.checkpoint import save_checkpoint
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import render_image
 from models.head.controls import Controls
 from models.tracking.masks import background_plate
 from render.camera import Camera, framing_camera
@@ -90,7 +91,7 @@ def test_a_frames_window_of_the_plate_composites_behind_it(gl):
     window = canvas.cropped(14, 6, 24, 20)
     np.testing.assert_array_equal(avatar.plate_for(window).numpy(), plate[6:26, 14:38].reshape(-1, 3))
     r = Rasterizer(gl)
-    out = avatar.render_image(Controls(), window, r)
+    out = render_image(avatar, window, Controls(), rasterizer=r)
     r.release()
     assert out["opacity"][0, 0] < 1e-3  # no head in the window's corner: the plate's pixel (14, 6) shows
     np.testing.assert_allclose(out["rgb"][0, 0], plate[6, 14], atol=1e-3)
@@ -110,19 +111,19 @@ def test_plate_composites_behind_the_capture_camera_only(gl):
     cam = framing_camera(avatar.head_model.template, 10.0, 0.0, fov_y_deg=18.0, width_px=40, height_px=36)
     r = Rasterizer(gl)
     controls = Controls(jaw=np.array([0.15, 0.0, 0.0], np.float32))
-    bare = avatar.render_image(controls, cam, r)
+    bare = render_image(avatar, cam, controls, rasterizer=r)
     plate = np.random.default_rng(1).random((36, 40, 3)).astype(np.float32)
     avatar.set_plate(plate, cam)
-    with_plate = avatar.render_image(controls, cam, r)
+    with_plate = render_image(avatar, cam, controls, rasterizer=r)
     bg = avatar.background.numpy()
     expected = bare["rgb"] + (1 - bare["opacity"])[..., None] * (plate - bg)
     np.testing.assert_allclose(with_plate["rgb"], expected, atol=2e-5)
     assert (bare["opacity"] < 1e-3).mean() > 0.3  # much of the frame is the room
     np.testing.assert_array_equal(with_plate["opacity"], bare["opacity"])
-    half = avatar.render_image(controls, cam.resized(20, 18), r)  # the same camera at half the size: the plate
+    half = render_image(avatar, cam.resized(20, 18), controls, rasterizer=r)  # the same camera at half the size
     np.testing.assert_allclose(half["rgb"][0, 0], plate[:2, :2].mean((0, 1)), atol=1e-5)  # area-averaged
-    other = avatar.render_image(controls, framing_camera(avatar.head_model.template, 40.0, 0.0, fov_y_deg=18.0,
-                                                         width_px=40, height_px=36), r)  # another view: no plate
+    other = render_image(avatar, framing_camera(avatar.head_model.template, 40.0, 0.0, fov_y_deg=18.0, width_px=40,
+                                                height_px=36), controls, rasterizer=r)  # another view: no plate
     np.testing.assert_allclose(other["rgb"][0, 0], bg, atol=1e-6)
     r.release()
 

@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from models.avatars.components.views import into_cone, view_cone
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import render_image
 from models.head.controls import Controls
 from render.camera import turntable_camera
 from render.gl.raster import Rasterizer
@@ -63,15 +64,15 @@ def test_a_fixed_camera_gives_the_colour_the_way_to_it(gl):
     r = Rasterizer(gl)
     controls = avatar.at_rest(Controls())
     cam = turntable_camera(avatar.rest_vertices(), 25.0, 5.0, width_px=32, height_px=32)
-    plain = avatar.render_image(controls, cam, r)
+    plain = render_image(avatar, cam, controls, rasterizer=r)
     eye = torch.as_tensor(cam.position, dtype=torch.float32)
     avatar.note_views(SimpleNamespace(origins=eye.expand(4, 3)))
     assert torch.equal(avatar.capture_eye, eye)
-    same = avatar.render_image(controls, cam, r)
+    same = render_image(avatar, cam, controls, rasterizer=r)
     np.testing.assert_allclose(same["rgb"], plain["rgb"], atol=2e-5)
     front = turntable_camera(avatar.rest_vertices(), 0.0, 5.0, width_px=32, height_px=32)
     avatar.note_views(SimpleNamespace(origins=torch.as_tensor(front.position, dtype=torch.float32).expand(4, 3)))
-    held = avatar.render_image(controls, cam, r)
+    held = render_image(avatar, cam, controls, rasterizer=r)
     np.testing.assert_allclose(held["opacity"], plain["opacity"], atol=1e-6)
     shown = plain["opacity"] > 0.5
     assert np.abs(held["rgb"] - plain["rgb"])[shown].max() > 1e-3

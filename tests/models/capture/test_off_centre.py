@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 from app.avatar_commands import EvalConfig, run_eval
+from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera
 from models.training.trainer import TrainConfig, prepare_training
@@ -55,8 +56,8 @@ def test_off_centre_capture_trains_and_sees_the_same_pixels(synth_capture, gl, t
     original = load_split(src, "train")
     f = original.frames[0]
     r = Rasterizer(gl)
-    full = t.avatar.eval().render_image(f.controls, frame_camera(original, f), r, frame=0)["rgb"]
-    part = t.avatar.render_image(f.controls, cam, r, frame=0)["rgb"]
+    full = render_image(t.avatar.eval(), frame_camera(original, f), f.controls, RenderOptions(frame=0), r)["rgb"]
+    part = render_image(t.avatar, cam, f.controls, RenderOptions(frame=0), r)["rgb"]
     # Away from the crop's border (the rendered pixels are the mesh's silhouette grown by a few pixels, and the
     # crop does not see the silhouette beyond its border), the same pixels.
     m = 4

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from models.avatars.rendering import RenderOptions, render_image
 from models.export.bake import (
     FEATHER_COS,
     ViewBlend,
@@ -118,7 +119,7 @@ def textured_psnr(avatar, raster, chart, image: np.ndarray, yaw_deg: float, pitc
     """PSNR (dB) of the guide mesh drawn with the texture (over the background as far as the render is background)
     against the avatar's own render at rest, over the pixels where both show the head."""
     camera = turntable_camera(avatar.rest_vertices(), yaw_deg, pitch_deg, width_px=px, height_px=px)
-    ref = avatar.render_image(avatar.at_rest(Controls()), camera, raster, buffers=())
+    ref = render_image(avatar, camera, avatar.at_rest(Controls()), RenderOptions(buffers=()), raster)
     r = raster.rasterize(avatar.rest_vertices()[chart.vertex_of], chart.triangles, camera)
     o = ref["opacity"][..., None]
     drawn = o * texture_image(r, chart.uv, chart.triangles, image) + (1 - o) * avatar.background.numpy()

@@ -13,6 +13,7 @@ import torch
 
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, render_image
 from models.head.controls import Controls
 from models.training.trainer import TrainConfig, prepare_training
 from render.camera import Camera, look_at
@@ -87,10 +88,10 @@ def test_shell_sampler_matches_dense_reference(trained, gl):
 
     cam = frame_camera(t.split, f)
     r = Rasterizer(gl)
-    fast = t.avatar.render_image(f.controls, cam, r, frame=3)["rgb"]
+    fast = render_image(t.avatar, cam, f.controls, RenderOptions(frame=3), r)["rgb"]
     t.avatar.render_cfg = replace(t.avatar.render_cfg, dense_samples=256)
     try:
-        dense = t.avatar.render_image(f.controls, cam, r, frame=3)["rgb"]
+        dense = render_image(t.avatar, cam, f.controls, RenderOptions(frame=3), r)["rgb"]
     finally:
         t.avatar.render_cfg = replace(t.avatar.render_cfg, dense_samples=0)
     err = np.abs(fast - dense)
@@ -110,7 +111,7 @@ def test_effect_sets_build_only_what_they_need(capture, gl, tmp_path):
     from models.capture.frames import frame_camera
 
     with torch.inference_mode():
-        out = none.avatar.render_image(f.controls, frame_camera(none.split, f), Rasterizer(gl))
+        out = render_image(none.avatar, frame_camera(none.split, f), f.controls, rasterizer=Rasterizer(gl))
     assert "normals" not in out and np.isfinite(out["rgb"]).all()
     assert parse_effects("specular, shading") == ("shading", "specular")
     with pytest.raises(ValueError, match="unknown effect"):
@@ -125,7 +126,7 @@ def test_hard_cases_stay_finite(trained, gl):
     extreme = Controls(expression=np.full(16, 10.0, np.float32), root=np.array([0.0, np.pi, 0.0], np.float32),
                        jaw=np.array([1.5, 0, 0], np.float32))
     for controls in (Controls(), extreme):
-        out = av.render_image(controls, inside, Rasterizer(gl))
+        out = render_image(av, inside, controls, rasterizer=Rasterizer(gl))
         assert np.isfinite(out["rgb"]).all() and np.isfinite(out["opacity"]).all()
         assert not np.isnan(out["depth"]).any()  # inf (nothing seen) is allowed, nan is not
     geo = av.geometry(Controls())
@@ -150,16 +151,16 @@ def test_occupancy_grid_is_off_by_default_and_its_error_is_known(trained, gl):
     from models.capture.frames import frame_camera
 
     cam, r = frame_camera(t.split, f), Rasterizer(gl)
-    default = av.render_image(f.controls, cam, r, frame=5)["rgb"]
+    default = render_image(av, cam, f.controls, RenderOptions(frame=5), r)["rgb"]
     av.occupancy.built.fill_(False)
     try:
-        unbuilt = av.render_image(f.controls, cam, r, frame=5)["rgb"]
+        unbuilt = render_image(av, cam, f.controls, RenderOptions(frame=5), r)["rgb"]
     finally:
         av.occupancy.built.fill_(True)
     assert np.array_equal(default, unbuilt)
     av.render_cfg = replace(av.render_cfg, occupancy=True)
     try:
-        skipped = av.render_image(f.controls, cam, r, frame=5)["rgb"]
+        skipped = render_image(av, cam, f.controls, RenderOptions(frame=5), r)["rgb"]
     finally:
         av.render_cfg = replace(av.render_cfg, occupancy=False)
     err = np.abs(skipped - default)
@@ -186,8 +187,8 @@ def test_inspection_buffers(capture, gl, tmp_path):
     assert av.inspection_buffers() == ("rgb_no_shadows", "rgb_light", "rgb_flat")
     f = t.split.frames[3]
     cam, r = frame_camera(t.split, f), Rasterizer(gl)
-    out = av.render_image(f.controls, cam, r, frame=3, inspect=True)
-    assert np.array_equal(out["rgb"], av.render_image(f.controls, cam, r, frame=3)["rgb"])
+    out = render_image(av, cam, f.controls, RenderOptions(frame=3, inspect=True), r)
+    assert np.array_equal(out["rgb"], render_image(av, cam, f.controls, RenderOptions(frame=3), r)["rgb"])
     assert all(np.isfinite(out[k]).all() for k in ("rgb", "rgb_no_shadows", "rgb_light", "rgb_flat"))
     light = out["rgb_light"]
     assert light.min() >= 0 and light.max() <= 1 + 1e-6 and np.allclose(light[out["opacity"] == 0], 1.0)
@@ -207,12 +208,12 @@ def test_inspection_buffers(capture, gl, tmp_path):
     old, _ = load_avatar(tmp_path / "legacy")
     assert old.field.shadow_net is None and old.inspection_buffers() == ("rgb_no_shadows", "rgb_flat")
     neutral = Controls()
-    out = old.render_image(neutral, cam, r, inspect=True)
+    out = render_image(old, cam, neutral, RenderOptions(inspect=True), r)
     np.testing.assert_allclose(out["rgb_no_shadows"], out["rgb"], atol=1e-5)
     head = old.head_model
     turned = Controls(root=np.array([0.0, 0.5, 0.0], np.float32), jaw=np.array([0.3, 0, 0], np.float32)) \
         if "jaw" in head.joint_names else Controls(root=np.array([0.0, 0.5, 0.0], np.float32))
-    moved = old.render_image(turned, cam, r, inspect=True)
+    moved = render_image(old, cam, turned, RenderOptions(inspect=True), r)
     assert np.abs(moved["rgb_no_shadows"] - moved["rgb"]).max() > 1e-4  # untrained colour: small, but 10x the above
     r.release()
 

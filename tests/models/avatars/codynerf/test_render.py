@@ -15,6 +15,7 @@ from models.avatars.codynerf import render
 from models.avatars.codynerf.field import FieldOutput
 from models.avatars.codynerf.prior import PriorSamples
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import pixel_rays_of
 from models.head.controls import Controls
 from render.camera import framing_camera
 from render.gl.raster import Rasterizer
@@ -33,7 +34,7 @@ def scene(gl):
     r = Rasterizer(gl)
     geo = avatar.frame_geometry(Controls(), r)
     cam = framing_camera(avatar.head_model.template, 20.0, 5.0, fov_y_deg=18.0, width_px=48, height_px=48)
-    rays, _ = avatar.image_rays(geo, cam, r)
+    rays, _ = pixel_rays_of(avatar, geo, cam, r)
     r.release()
     return avatar, geo, rays
 

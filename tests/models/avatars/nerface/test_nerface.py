@@ -12,6 +12,7 @@ import torch
 
 from models.avatars.components.rigid import kabsch
 from models.avatars.nerface.avatar import NerfaceAvatar, NerfaceConfig
+from models.avatars.rendering import render_image
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from models.training.trainer import TrainConfig, prepare_training
@@ -64,7 +65,7 @@ def test_tiny_nerface_run(capture, gl, tmp_path):
     avatar, meta = saved_and_reloaded(t)
     assert isinstance(avatar, NerfaceAvatar) and meta["model"] == "nerface"
     f = t.split.frames[0]
-    out = avatar.render_image(f.controls, frame_camera(t.split, f), Rasterizer(gl))
+    out = render_image(avatar, frame_camera(t.split, f), f.controls, rasterizer=Rasterizer(gl))
     assert out["rgb"].shape == (32, 32, 3) and np.isfinite(out["rgb"]).all()
     # Rays that miss the head's box see exactly the background.
     far = avatar.render_rays(Rays(torch.tensor([[0.0, 0.0, 5.0]]), torch.tensor([[0.0, 1.0, 0.0]]),

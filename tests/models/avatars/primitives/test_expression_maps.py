@@ -15,6 +15,7 @@ from models.avatars.checkpoint import CheckpointError
 from models.avatars.primitives.avatar import EXPRESSION_MAP_UNIT_M, PrimitivesAvatar, PrimitivesConfig
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import ELEVATION_DEG
+from models.avatars.rendering import render_image
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from models.ranges import OptionError
@@ -138,8 +139,8 @@ def test_trained_with_expression_maps_saves_and_renders(synth_capture, gl, tmp_p
     assert meta["primitives"]["expression_maps"] is True and avatar.decoder.geometry_channels == 3
     f = t.split.frames[0]
     cam, r = frame_camera(t.split, f), Rasterizer(gl)
-    np.testing.assert_array_equal(avatar.render_image(f.controls, cam, r)["rgb"],
-                                  t.avatar.render_image(f.controls, cam, r)["rgb"])
+    np.testing.assert_array_equal(render_image(avatar, cam, f.controls, rasterizer=r)["rgb"],
+                                  render_image(t.avatar, cam, f.controls, rasterizer=r)["rgb"])
     # the options are the new avatar's: a resumed one keeps its own, a bad one names itself
     with pytest.raises(CheckpointError, match="--model-options with --resume"):
         prepare_training(TrainConfig(dataset=capture, out=cfg.out, resume=True, model_options=options), gl)

@@ -11,6 +11,7 @@ import torch
 
 from models.avatars.base import RenderCancelled
 from models.avatars.primitives import dispatch, march, native
+from models.avatars.rendering import RenderOptions, render_image
 from tests.models.avatars.primitives.test_march import camera_rays, random_primitives
 
 pytestmark = pytest.mark.skipif(native.library() is None, reason=f"the C march was not built: {native.failure()}")
@@ -92,9 +93,9 @@ def test_a_source_that_does_not_build_names_itself(tmp_path):
 def test_the_demo_avatar_renders_the_same_frame_either_way(monkeypatch, demo_avatar_and_raster):
     avatar, raster, controls, cam = demo_avatar_and_raster
     with torch.inference_mode():
-        fast = avatar.render_image(controls, cam, raster, buffers=None)
+        fast = render_image(avatar, cam, controls, RenderOptions(buffers=None), raster)
         monkeypatch.setenv("AVATAR_STUDIO_NATIVE", "0")
-        slow = avatar.render_image(controls, cam, raster, buffers=None)
+        slow = render_image(avatar, cam, controls, RenderOptions(buffers=None), raster)
     assert fast["opacity"].max() > 0.99 and fast["opacity"].min() < 0.01  # the head and the space round it
     for name in ("rgb", "normals"):
         mse = float(np.mean((fast[name] - slow[name]) ** 2))

@@ -23,6 +23,7 @@ from models.avatars.primitives.layout import (
     surface_frames,
 )
 from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
 from models.head.flame import load_flame
@@ -144,8 +145,8 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     f = t.split.frames[0]
     cam = frame_camera(t.split, f)
     r = Rasterizer(gl)
-    out = avatar.render_image(f.controls, cam, r)
-    again = avatar.render_image(f.controls, cam, r)
+    out = render_image(avatar, cam, f.controls, rasterizer=r)
+    again = render_image(avatar, cam, f.controls, rasterizer=r)
     assert out["rgb"].shape == (32, 32, 3) and np.isfinite(out["rgb"]).all() and out["opacity"].max() > 0.5
     # `all` effects: the normals buffer, from the opacity grids' gradients, is unit where the head is opaque
     assert avatar.needs_normals and avatar.light_dir is not None
@@ -167,7 +168,7 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
                                                           + (-1 + 2 * y / (M - 1)) * rot[p, :, 1])
             assert abs(float(image[i * M + y, j * M + x]) - float(geo.light.visibility(point[None])[0])) < 1e-5
     assert image.min() < 0.5 < image.max()  # some texels in the head's own shadow, some lit
-    inspected = avatar.render_image(f.controls, cam, r, inspect=True)
+    inspected = render_image(avatar, cam, f.controls, RenderOptions(inspect=True), r)
     light = inspected["rgb_light"]
     assert light.shape == (32, 32, 3) and light.min() >= 0 and light.max() <= 1
     assert (light[out["opacity"] < 1e-3] > 1 - 1e-3).all()  # no head: nothing casts a shadow there
@@ -177,7 +178,7 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     assert np.abs(inspected["rgb_no_shadows"] - out["rgb"]).max() > 1e-4
     # Display decodes once a frame: a frame's batches of rays share its decode.
     geo = avatar.frame_geometry(f.controls, r)
-    rays, _ = avatar.image_rays(geo, cam, r)
+    rays, _ = pixel_rays_of(avatar, geo, cam, r)
     with torch.inference_mode():
         avatar.render_rays(rays[:50], geo, None)
         cached = geo.decoded[False, ("rgb_light",)]
@@ -186,18 +187,19 @@ def test_tiny_primitives_run(synth_capture, gl, tmp_path):
         assert cached[0].colour.shape[-1] == 3 + 1  # the normals are the surface's (render_image), not composited
     # A render makes the buffers asked for alone: the colour render composites rgb, 3 of the grids' 4 channels,
     # and gives the same pixels.
-    plain = avatar.render_image(f.controls, cam, r, buffers=())
+    plain = render_image(avatar, cam, f.controls, RenderOptions(buffers=()), r)
     assert "normals" not in plain and "normals" in out
     np.testing.assert_array_equal(plain["rgb"], out["rgb"])
-    avatar.display_buffers = ()
-    assert avatar.shown_channels() == () and avatar.shown_channels(lit=True) == ()
+    colour_only = RenderOptions(buffers=())
+    extras = avatar.shown_channels(options=colour_only)
+    assert extras == () and avatar.shown_channels(lit=True, options=colour_only) == ()
     with torch.inference_mode():
-        assert avatar.decode(geo, avatar.codes(None, geo.code_weights), rays.origins[0])[0].colour.shape[-1] == 3
-    avatar.display_buffers = None
+        decoded = avatar.decode(geo, avatar.codes(None, geo.code_weights), rays.origins[0], extras=extras)
+        assert decoded[0].colour.shape[-1] == 3
     r.release()
     # A new expression changes the render (the decoder reads the controls).
-    moved = avatar.render_image(f.controls.with_expression(avatar.head_model, {avatar.head_model.expr_names[0]: 1.0}),
-                                cam, Rasterizer(gl))
+    expression = f.controls.with_expression(avatar.head_model, {avatar.head_model.expr_names[0]: 1.0})
+    moved = render_image(avatar, cam, expression, rasterizer=Rasterizer(gl))
     assert np.abs(moved["rgb"] - out["rgb"]).max() > 1e-3
 
 
@@ -215,16 +217,17 @@ def test_a_newer_request_stops_a_frame_within_its_one_batch(gl):
         asked.append(1)
         return len(asked) > 3
 
-    avatar.display_cores = 2
     with pytest.raises(RenderCancelled):
-        avatar.render_image(controls, cam, raster, should_stop=after_three, chunk_rays=avatar.interactive_chunk_rays)
+        render_image(avatar, cam, controls, RenderOptions(should_stop=after_three, cores=2,
+                                                          chunk_rays=avatar.interactive_chunk_rays), raster)
     assert len(asked) > 3  # the one batch's check, then the waves'
-    assert avatar.should_stop is None  # the render's own, cleared
+    assert not hasattr(avatar, "should_stop")  # the render's own, never set on the avatar
     asked.clear()
-    image = avatar.render_image(controls, cam, raster, should_stop=lambda: bool(asked.append(1)),
-                                chunk_rays=avatar.interactive_chunk_rays)["rgb"]
+    options = RenderOptions(should_stop=lambda: bool(asked.append(1)), cores=2,
+                            chunk_rays=avatar.interactive_chunk_rays)
+    image = render_image(avatar, cam, controls, options, raster)["rgb"]
     assert len(asked) > 3 and image.shape == (96, 96, 3)  # asked between waves, and never told to stop
-    again = avatar.render_image(controls, cam, raster)["rgb"]
+    again = render_image(avatar, cam, controls, rasterizer=raster)["rgb"]
     torch.testing.assert_close(torch.as_tensor(image), torch.as_tensor(again))
     raster.release()
 
@@ -265,9 +268,9 @@ def test_opacity_fades_where_the_capture_never_looked(synth_capture, tmp_path, g
     cam = framing_camera(avatar.rest_vertices(), fov_y_deg=18.0, width_px=48, height_px=48)
     r = Rasterizer(gl)
     controls = avatar.at_rest(Controls())
-    faded = avatar.render_image(controls, cam, r, buffers=())
+    faded = render_image(avatar, cam, controls, RenderOptions(buffers=()), r)
     del avatar.seen_fade
-    whole = avatar.render_image(controls, cam, r, buffers=())
+    whole = render_image(avatar, cam, controls, RenderOptions(buffers=()), r)
     r.release()
     # rows' largest opacity, measured: whole 1 down to row 37 (0.68 in 38), faded 0.97, 0.45, then 0 from row 33
     lower, upper = slice(34, 38), slice(0, 24)

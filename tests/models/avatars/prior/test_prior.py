@@ -15,6 +15,7 @@ import torch
 from models.avatars.primitives.chart import GEOMETRY_SCALE_M, chart_sampler, eye_cells, geometry_map, texel_points
 from models.avatars.prior.avatar import PriorAvatar, PriorConfig
 from models.avatars.prior.maps import texture_map
+from models.avatars.rendering import render_image
 from models.capture.synthetic import SynthConfig, synthesize
 from models.head.controls import Controls
 from models.head.sources import load_builtin
@@ -284,8 +285,8 @@ def test_corpus_prior_and_personalize_from_the_command_line(tmp_path, capsys):
     from render.gl.context import GLContext
 
     gl = GLContext.headless()
-    img = avatar.render_image(Controls(), framing_camera(avatar.rest_vertices(), width_px=32, height_px=32),
-                              Rasterizer(gl))["rgb"]
+    img = render_image(avatar, framing_camera(avatar.rest_vertices(), width_px=32, height_px=32), Controls(),
+                       rasterizer=Rasterizer(gl))["rgb"]
     gl.release()
     assert np.isfinite(img).all() and img.shape == (32, 32, 3)
 
@@ -322,8 +323,8 @@ def test_one_persons_expression_drives_another(gl):
     avatar.personalize(torch.zeros(1, 3, *avatar.neutral_texture.shape[2:]), avatar.neutral_geometry_of(b_shape))
     cam = framing_camera(head.template, width_px=96, height_px=96)
     r = Rasterizer(gl)
-    rest = avatar.render_image(Controls(shape=b_shape), cam, r)["rgb"]
-    opened = avatar.render_image(Controls(shape=b_shape, jaw=jaw), cam, r)["rgb"]
+    rest = render_image(avatar, cam, Controls(shape=b_shape), rasterizer=r)["rgb"]
+    opened = render_image(avatar, cam, Controls(shape=b_shape, jaw=jaw), rasterizer=r)["rgb"]
     r.release()
     lips = head.landmarks.as_barycentric(head.triangles)
     ids, bary = lips
@@ -359,6 +360,6 @@ def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker
     camera = frame_camera(split, split.frames[0])
     plate = avatar.plate_for(camera)
     assert plate is not None  # the room was kept with the weights
-    image = avatar.render_image(split.frames[0].controls, camera, None)["rgb"]
+    image = render_image(avatar, camera, split.frames[0].controls, rasterizer=None)["rgb"]
     corner = image[:4, :4].reshape(-1, 3)  # no person up there: the room shows as the plate has it
     np.testing.assert_allclose(corner, plate.reshape(64, 64, 3)[:4, :4].reshape(-1, 3).numpy(), atol=0.02)
