@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -35,7 +34,7 @@ from app.capture_commands import next_train
 from app.configs import TrackConfig
 from app.errors import UserInputError
 from app.progress import Progress
-from app.user_config import config_folder, remember, remembered
+from app.user_config import config_folder, find_landmarker, remember, remembered
 from models.capture.dataset import write_split
 from models.capture.synthetic import absolute_head_spec, write_png8
 from models.files import partial_folder
@@ -53,27 +52,11 @@ from models.tracking.splits import frame_splits
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames, video_info
 from render.video import write_video
 
-LANDMARKER_URL = ("https://storage.googleapis.com/mediapipe-models/face_landmarker/face_landmarker/float16/1/"
-                  "face_landmarker.task")
-
 
 def landmarker_path(cfg: TrackConfig) -> Path:
-    """The face landmarker bundle: --landmarker, else $AVATAR_STUDIO_LANDMARKER, else the one remembered (the path a
-    past --landmarker left in the config folder's config.json, or a face_landmarker.task put in that folder), else
-    the one a Python package ships (models/tracking/landmarker.py: packaged_bundle)."""
-    if cfg.landmarker:
-        return cfg.landmarker
-    if os.environ.get("AVATAR_STUDIO_LANDMARKER"):
-        return Path(os.environ["AVATAR_STUDIO_LANDMARKER"])
-    kept = remembered("landmarker")
-    if kept and Path(kept).is_file():
-        return Path(kept)
-    for found in (config_folder() / "face_landmarker.task", packaged_bundle()):
-        if found is not None and found.is_file():
-            return found
-    gone = f" (the remembered {kept} is gone)" if kept else ""
-    raise UserInputError(f"no face landmarker bundle{gone}: download {LANDMARKER_URL} and pass it with --landmarker "
-                         "PATH once (it is remembered for later runs)")
+    """The face landmarker bundle: --landmarker, else as app/user_config.py finds one (find_landmarker), the
+    packaged one last."""
+    return find_landmarker(cfg.landmarker, packaged_bundle)
 
 
 def remember_landmarker(cfg: TrackConfig, bundle: Path) -> None:

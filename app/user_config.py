@@ -6,9 +6,15 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 
+from app.errors import UserInputError
 from models.files import atomic_write_bytes
+from models.tracking.landmarker import packaged_bundle
+
+LANDMARKER_URL = ("https://storage.googleapis.com/mediapipe-models/face_landmarker/face_landmarker/float16/1/"
+                  "face_landmarker.task")
 
 
 def config_folder() -> Path:
@@ -35,3 +41,23 @@ def remember(key: str, value: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(path, (json.dumps({**_settings(), key: value}, indent=1) + "\n").encode())
     return path
+
+
+def find_landmarker(given: Path | None = None, packaged: Callable[[], Path | None] = packaged_bundle) -> Path:
+    """The face landmarker bundle: the one given (a command's --landmarker), else $AVATAR_STUDIO_LANDMARKER, else the
+    one remembered (the path a past --landmarker left in the config folder's config.json, or a face_landmarker.task
+    put in that folder), else the one a Python package ships (`packaged`: models/tracking/landmarker.py's
+    packaged_bundle)."""
+    if given:
+        return Path(given)
+    if os.environ.get("AVATAR_STUDIO_LANDMARKER"):
+        return Path(os.environ["AVATAR_STUDIO_LANDMARKER"])
+    kept = remembered("landmarker")
+    if kept and Path(kept).is_file():
+        return Path(kept)
+    for found in (config_folder() / "face_landmarker.task", packaged()):
+        if found is not None and found.is_file():
+            return found
+    gone = f" (the remembered {kept} is gone)" if kept else ""
+    raise UserInputError(f"no face landmarker bundle{gone}: download {LANDMARKER_URL} and pass it with --landmarker "
+                         "PATH once (it is remembered for later runs)")

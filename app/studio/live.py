@@ -1,0 +1,273 @@
+"""Live driving's worker: a camera (an OpenCV device index) or a video file played in real time, each frame tracked
+as it comes (MediaPipe's face landmarker in video mode, then models/tracking/live.py: the retargeting `reenact`
+uses, smoothed), in a process of its own, so that neither the window's frames nor the neural render hold up the
+tracker (nor it them) on Python's interpreter lock.
+
+Latency over throughput: a reader thread keeps only the newest frame (a video file's frames come at their own
+times; where the reader falls behind, the frames already late are skipped undecoded), the tracker takes the newest
+one each time it is free, and the window keeps only the newest pose. Every pose carries the time its frame came
+(time.perf_counter: one clock for every process on the machine), from which the window measures the time to the
+avatar's pixels on screen."""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from app.animation import SLIDER_RANGES
+from models.head.model import HeadModel
+
+LIMITS = {key: SLIDER_RANGES[key] for key in ("expression", "jaw.open", "gaze")}
+"""Carried values are kept inside the Controls panel's slider ranges (as reenact keeps them)."""
+
+
+def is_camera(source: str) -> bool:
+    """A source that is a whole number names a camera (OpenCV's device index); anything else a video file."""
+    return source.strip().isdigit()
+
+
+def open_capture(source: str):
+    """The source opened with OpenCV (its start-up warnings kept off the terminal), and what is wrong with it ("" where
+    nothing is): a camera that does not exist, a file that is not there or not a video OpenCV can read."""
+    import cv2
+
+    from models.tracking.landmarker import quiet_stderr
+
+    if is_camera(source):
+        with quiet_stderr():  # OpenCV's V4L2 back end warns on stderr for a camera that is not there
+            cap = cv2.VideoCapture(int(source))
+        if not cap.isOpened():
+            return None, f"camera {source}: no camera there (OpenCV cannot open device {source}); give a video file " \
+                "with --source VIDEO to drive the avatar from one"
+        cap.set(cv2.CAP_PROP_BUFFERSIZE, 1)  # the newest frame, not a queue of old ones
+        return cap, ""
+    path = Path(source)
+    if not path.is_file():
+        return None, f"{source}: no such video file (a camera is given by its index: --source 0)"
+    with quiet_stderr():
+        cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened() or not cap.grab():
+        cap.release()
+        return None, f"{source}: not a video OpenCV can read"
+    cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+    return cap, ""
+
+
+def source_problem(source: str) -> str:
+    """What is wrong with a live source, in one line ("" where it can be opened)."""
+    cap, problem = open_capture(source)
+    if cap is not None:
+        cap.release()
+    return problem
+
+
+@dataclass
+class Frame:
+    index: int
+    stamp: float
+    """time.perf_counter when the frame came (a camera's read returned; a video file's frame was due)."""
+    media_ms: int
+    """The frame's time in the stream (increasing: the landmarker's video mode needs it)."""
+    bgr: np.ndarray
+
+
+class Feed:
+    """A thread reading the source, keeping only its newest frame. A video file plays in real time: frame k is due
+    k / fps seconds after the start, and frames already a frame late are skipped without being decoded."""
+
+    def __init__(self, cap, camera: bool):
+        import cv2
+
+        self.cap, self.camera = cap, camera
+        self.fps = float(cap.get(cv2.CAP_PROP_FPS)) or 30.0
+        self.newest: Frame | None = None
+        self.ended = False
+        self.skipped = 0
+        """Frames of a video file never decoded: they were late before the reader came to them."""
+        self.cond = threading.Condition()
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._read, name="live-feed", daemon=True)
+        self.start = time.perf_counter()
+        self.thread.start()
+
+    def _read(self) -> None:
+        k = 0
+        try:
+            while not self.stop.is_set():
+                if self.camera:
+                    ok, bgr = self.cap.read()
+                    stamp = time.perf_counter()
+                    media_ms = round(1e3 * (stamp - self.start))
+                else:
+                    while time.perf_counter() > self.start + (k + 1) / self.fps:  # late already: skip it
+                        if not self.cap.grab():
+                            break
+                        k, self.skipped = k + 1, self.skipped + 1
+                    ok, bgr = self.cap.read()
+                    due = self.start + k / self.fps
+                    if ok and due > time.perf_counter():
+                        time.sleep(due - time.perf_counter())
+                    stamp = time.perf_counter()
+                    media_ms = round(1e3 * k / self.fps)
+                if not ok:
+                    break
+                with self.cond:
+                    self.newest = Frame(k, stamp, media_ms, bgr)
+                    self.cond.notify_all()
+                k += 1
+        finally:
+            with self.cond:
+                self.ended = True
+                self.cond.notify_all()
+
+    def next_after(self, index: int, timeout_s: float = 0.1) -> Frame | None:
+        """The newest frame if it is newer than `index` (waiting up to timeout_s for one); None: none yet."""
+        with self.cond:
+            self.cond.wait_for(lambda: self.ended or (self.newest is not None and self.newest.index > index),
+                               timeout_s)
+            f = self.newest
+            return f if f is not None and f.index > index else None
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(timeout=2)
+        self.cap.release()
+
+
+@dataclass
+class Pose:
+    """The avatar's channels for one tracked frame."""
+
+    index: int
+    stamp: float
+    """When its frame came (time.perf_counter)."""
+    channels: dict[str, float]
+    track_ms: float
+    """The landmarker's and the retargeting's time for it."""
+    dropped: int
+    """Frames that came and were never tracked, so far (a newer one was there when the tracker was free)."""
+
+
+def serve(source: str, bundle: str, head: HeadModel, results, commands) -> None:
+    """The live process: open the source, then track its newest frame whenever the tracker is free, sending each
+    pose; ("neutral",) makes the next face the neutral one, ("quit",) ends it."""
+    import cv2
+
+    from models.tracking.landmarker import Landmarker
+    from models.tracking.live import LiveRetarget
+
+    cap, problem = open_capture(source)
+    if cap is None:
+        results.put(("error", problem))
+        return
+    try:
+        landmarker = Landmarker(bundle, max_faces=1, video=True)
+    except ValueError as e:  # BundleError: the bundle named is not a landmarker
+        results.put(("error", str(e)))
+        cap.release()
+        return
+    retarget = LiveRetarget(head, LIMITS)
+    feed = Feed(cap, is_camera(source))
+    results.put(("started", feed.fps, is_camera(source)))
+    last, tracked, no_face = -1, 0, 0
+    try:
+        while True:
+            while commands.poll():
+                msg = commands.recv()
+                if msg[0] == "quit":
+                    return
+                if msg[0] == "neutral":
+                    retarget.set_neutral()
+            frame = feed.next_after(last)
+            if frame is None:
+                if feed.ended:
+                    results.put(("ended", "the video ended" if not feed.camera else "the camera stopped"))
+                    return
+                continue
+            last = frame.index
+            t0 = time.perf_counter()
+            faces = landmarker.detect(cv2.cvtColor(frame.bgr, cv2.COLOR_BGR2RGB), frame.media_ms)
+            if not faces:
+                no_face += 1
+                results.put(("no_face", frame.index))
+                continue
+            channels = retarget(faces[0], frame.stamp)
+            tracked += 1
+            dropped = frame.index + 1 - tracked - no_face
+            results.put(("pose", Pose(frame.index, frame.stamp, channels, 1e3 * (time.perf_counter() - t0),
+                                      dropped)))
+    except (EOFError, OSError, KeyboardInterrupt):  # the window is gone
+        return
+    finally:
+        feed.close()
+        landmarker.close()
+        with contextlib.suppress(OSError, ValueError):
+            results.put(("closed",))
+
+
+class LiveWorker:
+    """The window's side of the live process: its newest pose (`pose`, numbered by `received`), its state and
+    message; `wake` is set as each pose comes, so the window's frame pacing draws it at once."""
+
+    def __init__(self, source: str, bundle: Path, head: HeadModel, wake: threading.Event):
+        ctx = mp.get_context("spawn")
+        self.source = source
+        self.wake = wake
+        self._results = ctx.Queue()
+        inbox, self._commands = ctx.Pipe(duplex=False)
+        self.pose: Pose | None = None
+        self.received = 0
+        self.no_face = 0
+        self.state = "starting"
+        """starting, running, ended (the video ended, the camera stopped), failed (the message says why), stopped."""
+        self.message = ""
+        self.fps = 0.0
+        """The source's frame rate."""
+        self._proc = ctx.Process(target=serve, args=(source, str(bundle), head, self._results, inbox),
+                                 name="live-tracking", daemon=True)
+        self._proc.start()
+        self._reader = threading.Thread(target=self._read, name="live-results", daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        while True:
+            try:
+                msg = self._results.get()
+            except (EOFError, OSError, ValueError):
+                return
+            kind = msg[0]
+            if kind == "pose":
+                self.pose = msg[1]
+                self.received += 1
+                self.wake.set()
+            elif kind == "no_face":
+                self.no_face += 1
+            elif kind == "started":
+                self.state, self.fps = "running", msg[1]
+            elif kind in ("ended", "error"):
+                self.state, self.message = ("ended" if kind == "ended" else "failed"), msg[1]
+                self.wake.set()
+            elif kind == "closed":
+                return
+
+    def set_neutral(self) -> None:
+        self._send(("neutral",))
+
+    def _send(self, msg: tuple) -> None:
+        with contextlib.suppress(OSError, ValueError, BrokenPipeError):
+            self._commands.send(msg)
+
+    def close(self) -> None:
+        self._send(("quit",))
+        self._proc.join(timeout=5)
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(timeout=5)
+        if self.state in ("starting", "running"):
+            self.state = "stopped"
