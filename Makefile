@@ -18,7 +18,7 @@ lint: $(STAMP)
 
 setup: $(STAMP)
 
-$(SYSTAMP):
+$(SYSTAMP): scripts/setup_system.sh
 	bash scripts/setup_system.sh
 	mkdir -p $(VENV) && touch $@
 

@@ -230,11 +230,12 @@ class ExportMeshConfig:
 class ExportConfig:
     avatar: Path
     """Avatar folder."""
-    format: Literal["glb"] = "glb"
-    """The file's format: glb, a glTF 2.0 binary (Blender, Unity with glTFast, three.js): the guide mesh with the
-    expressions as morph targets, the jaw and eyes as a skeleton, a texture baked from the avatar, the animation."""
+    format: Literal["glb", "web"] = "glb"
+    """glb: a glTF 2.0 binary (Blender, Unity with glTFast, three.js): the guide mesh with the expressions as morph
+    targets, the jaw and eyes as a skeleton, a texture baked from the avatar, the animation; web: a folder to host,
+    that .glb as avatar.glb with a player page (index.html: sliders, play and pause, an orbit camera) and three.js."""
     out: Path = Path("out/avatar.glb")
-    """The file to write."""
+    """The file to write (glb), or the folder (web)."""
     animation: Path | None = None
     """An animation file (JSON, as `animate` reads) to include: expressions as morph weights, head, neck, jaw and
     gaze as joint rotations (camera channels are left out)."""

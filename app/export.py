@@ -22,6 +22,7 @@ from app.errors import UserInputError
 from app.head_commands import _check_out
 from app.progress import progress_callback
 from app.sliders import View
+from app.web import GLB_NAME, check_web_out, write_web_folder
 from models.export.keys import Clip, morph_keys, pose_frames
 from models.files import atomic_write_bytes
 from models.head.head import Head
@@ -54,7 +55,10 @@ def run_export(cfg: ExportConfig) -> int:
     from render.gl.context import GLContext
     from render.gl.raster import Rasterizer
 
-    _check_out(cfg.out, (".glb",))
+    if cfg.format == "web":
+        check_web_out(cfg.out)
+    else:
+        _check_out(cfg.out, (".glb",))
     avatar, _ = open_avatar(cfg.avatar)
     clip = None
     if cfg.animation is not None:
@@ -68,9 +72,16 @@ def run_export(cfg: ExportConfig) -> int:
     t0 = time.perf_counter()
     done = export_glb(avatar, Rasterizer(GLContext.headless()), settings, clip,
                       progress_callback("baking the texture", "views"))
-    atomic_write_bytes(cfg.out, done.data)
+    if cfg.format == "web":
+        files = write_web_folder(cfg.out, done.data)
+        where = (f"{cfg.out}/ (the player and three.js, {len(files)} files, "
+                 f"{sum(f.stat().st_size for f in files) / 1e6:.1f} MB; to see it: python3 -m http.server -d "
+                 f"{cfg.out}, then http://localhost:8000/) with {cfg.out / GLB_NAME}")
+    else:
+        atomic_write_bytes(cfg.out, done.data)
+        where = str(cfg.out)
     skipped = sorted(c for c in anim.tracks if c.startswith("camera.")) if clip is not None else []
-    print(f"wrote {cfg.out} ({summary(done, clip, skipped)}) in {time.perf_counter() - t0:.1f} s")
+    print(f"wrote {where} ({summary(done, clip, skipped)}) in {time.perf_counter() - t0:.1f} s")
     return 0
 
 

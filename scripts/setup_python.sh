@@ -25,10 +25,11 @@ fi
 # pyrender pins PyOpenGL 3.1.0, whose EGL platform predates current Mesa's; the 3.1.7+ release works
 # with pyrender's OffscreenRenderer and keeps its API.
 "$PIP" install -q "PyOpenGL>=3.1.7"
-# The Khronos glTF validator for the export tests (they skip without it), from the npm registry into .node/.
+# From the npm registry into .node/: the Khronos glTF validator for the export tests, and three.js, which
+# `export --format web` copies beside the player page (web/) and the browser tests load (both skip without them).
 if command -v npm >/dev/null; then
     mkdir -p .node
-    npm install --silent --no-audit --no-fund --prefix .node gltf-validator@2.0.0-dev.3.10 \
-        || echo "gltf-validator not installed: the export tests that use it skip" >&2
+    npm install --silent --no-audit --no-fund --prefix .node gltf-validator@2.0.0-dev.3.10 three@0.187.0 \
+        || echo "gltf-validator and three.js not installed: the export tests that use them skip" >&2
 fi
 echo "python environment ready in $VENV"
