@@ -76,10 +76,12 @@ function setPlaying(on) {
   else action.paused = true;
 }
 
-function seek(seconds) {
+function seek(seconds) {  // the animation at that time, paused
+  setPlaying(false);
+  action.paused = false;  // a paused action's time stands still through setTime
   action.play();
-  action.paused = true;
   mixer.setTime(seconds);
+  action.paused = true;
   showControls();
   dirty = true;
 }
@@ -154,7 +156,7 @@ async function load(url) {
     const play = document.getElementById('play'), time = document.getElementById('time');
     play.disabled = time.disabled = false;
     play.addEventListener('click', () => setPlaying(!playing));
-    time.addEventListener('input', () => { setPlaying(false); seek(time.value * action.getClip().duration); });
+    time.addEventListener('input', () => seek(time.value * action.getClip().duration));
   }
   document.getElementById('reset').addEventListener('click', neutral);
   frameHead();

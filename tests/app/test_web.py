@@ -74,13 +74,12 @@ def centre(page, element_id: str) -> tuple[float, float]:
                                f"return [r.left + r.width / 2, r.top + r.height / 2]; }})()"))
 
 
-def click_slider(page, name: str, share: float) -> float:
+def click_slider(page, element_id: str, share: float) -> float:
     """Click a slider's track `share` of the way along it; the value the slider then holds (its output's text)."""
-    box = page.evaluate(f"(() => {{ const s = document.getElementById('s-{name}'); s.scrollIntoView({{block: "
-                        f"'center'}}); const r = s.getBoundingClientRect(); return [r.left, r.top, r.width, r.height]; "
-                        f"}})()")
-    click(page, box[0] + share * box[2], box[1] + box[3] / 2)
-    return float(page.evaluate(f"document.getElementById('s-{name}').nextElementSibling.value"))
+    x, y = centre(page, element_id)
+    width = page.evaluate(f"document.getElementById('{element_id}').getBoundingClientRect().width")
+    click(page, x + (share - 0.5) * width, y)
+    return float(page.evaluate(f"document.getElementById('{element_id}').nextElementSibling.value"))
 
 
 def region(head, camera, expression: str) -> tuple[slice, slice]:
@@ -106,7 +105,7 @@ def test_a_mouth_slider_moves_the_mouths_pixels_and_a_brow_slider_leaves_them(pa
         d = np.abs(image[box] - neutral[box])
         return float(d.mean()), int((d.max(-1) > 10).sum())
 
-    assert 0.9 < click_slider(page, "mouthStretch", 0.8) < 1.2  # range -1..1.5, the thumb's half-width inset
+    assert 0.9 < click_slider(page, "s-mouthStretch", 0.8) < 1.2  # range -1..1.5, the thumb's half-width inset
     stretched = snapshot(page)[0]
     assert change(stretched, mouth)[0] > 1.0 and change(stretched, mouth)[1] > 100
     assert change(stretched, brow)[0] < 0.05
@@ -114,11 +113,11 @@ def test_a_mouth_slider_moves_the_mouths_pixels_and_a_brow_slider_leaves_them(pa
     assert page.evaluate("document.getElementById('s-mouthStretch').value") == "0"
     assert change(snapshot(page)[0], mouth)[0] < 0.05  # back where it was
 
-    assert 15 < click_slider(page, "jaw", 0.7) < 25  # degrees, range -5..30
+    assert 15 < click_slider(page, "s-jaw", 0.7) < 25  # degrees, range -5..30
     assert change(snapshot(page)[0], mouth)[0] > 4.0
     click(page, *centre(page, "reset"))
 
-    assert 0.9 < click_slider(page, "browRaise_L", 0.8) < 1.2
+    assert 0.9 < click_slider(page, "s-browRaise_L", 0.8) < 1.2
     raised = snapshot(page)[0]
     assert change(raised, brow)[1] > 300
     assert change(raised, mouth)[0] < 0.05
@@ -150,3 +149,10 @@ def test_play_runs_the_animation_and_pause_holds_it(page, builtin_model):
     time.sleep(0.3)
     assert float(page.evaluate("document.getElementById('time-out').value")) == t
     np.testing.assert_array_equal(snapshot(page)[0], held)
+
+    # The time slider shows the animation at the time clicked (a quarter of the way: about 0.5 s), paused.
+    t = click_slider(page, "time", 0.25)
+    assert 0.3 < t < 0.7
+    smile = float(page.evaluate("document.getElementById('s-smile_L').value"))
+    assert smile == pytest.approx(t, abs=0.02)
+    assert page.evaluate("document.getElementById('play').textContent") == "play"
