@@ -26,7 +26,7 @@ from app.configs import (
     TrackConfig,
     TurntableConfig,
 )
-from app.studio.config import StudioConfig
+from app.studio.config import LiveConfig, StudioConfig
 from models.capture.configs import SynthConfig
 from models.training.configs import PriorTrainConfig, TrainConfig
 
@@ -82,6 +82,8 @@ COMMANDS = (
     Command("reenact", "Drive an avatar from a performance video: track it, carry its expressions, jaw, gaze and head "
             "turns (relative to the driver's neutral frame) onto the avatar; an mp4 side by side and the animation.",
             ReenactConfig, "app.reenact:run_reenact", positional=("avatar", "video")),
+    Command("live", "Drive an avatar live in the studio from a camera or a video played in real time; record the "
+            "performance as an animation.", LiveConfig, "app.studio.app:run_live", positional=("avatar",)),
     Command("export-mesh", "Write an avatar as a coloured mesh (PLY or OBJ with vertex colours) for "
             "Blender and game engines.", ExportMeshConfig, "app.avatar_commands:run_export_mesh",
             positional=("avatar",)),

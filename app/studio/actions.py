@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from app.animation import (
+    Animation,
     AnimationError,
     all_channels,
     channel_value,
@@ -20,6 +21,7 @@ from app.animation import (
     load_animation,
     rest_sliders,
     save_animation,
+    set_channel,
 )
 from app.display import needs_covered
 from app.sliders import Sliders, View
@@ -615,3 +617,109 @@ class ExportAnimation(Command):
     out: Path
     size: int = 256
     preset: str = "preview"
+
+
+# ---- live driving --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StartLive(Command):
+    """Drive the open avatar from a camera (its OpenCV index, "0") or a video file played in real time."""
+
+    source: str
+
+
+@dataclass(frozen=True)
+class StopLive(Command):
+    pass
+
+
+@dataclass(frozen=True)
+class LiveNeutral(Command):
+    """The next face the live source shows becomes the neutral one (the avatar at rest)."""
+
+
+@dataclass(frozen=True)
+class LiveStarted(Action):
+    source: str
+
+    def apply(self, s: Session) -> None:
+        s.live.source, s.live.running, s.live.message = self.source, True, ""
+        s.live.index, s.live.stamp = -1, None
+
+
+@dataclass(frozen=True)
+class LiveStopped(Action):
+    """Live driving ended (stopped, the video ended, the source failed: `message` says which); a recording in
+    progress is finished onto the timeline."""
+
+    message: str = ""
+
+    def apply(self, s: Session) -> None:
+        if s.live.recording:
+            StopRecording().apply(s)
+        s.live.running, s.live.message, s.live.stamp = False, self.message, None
+        if self.message:
+            s.report(self.message)
+
+
+@dataclass(frozen=True)
+class LivePose(Action):
+    """A tracked frame's channel values (app/animation.py's channels) on the sliders, to be rendered; recorded where
+    a recording runs. `stamp`: when the frame came (time.perf_counter, seconds)."""
+
+    channels: dict[str, float]
+    stamp: float
+    index: int
+
+    def apply(self, s: Session) -> None:
+        if s.avatar is None or not s.live.running:
+            return
+        head = s.avatar.head_model
+        for channel, value in self.channels.items():
+            set_channel(s.sliders, s.view, head, channel, value)
+        s.live.index, s.live.stamp = self.index, self.stamp
+        controls_moved(s)
+        live = s.live
+        if live.recording:
+            live.record_start = self.stamp if live.record_start is None else live.record_start
+            t = round(self.stamp - live.record_start, 6)
+            for channel, value in self.channels.items():
+                live.recorded.setdefault(channel, []).append((t, round(float(value), 6)))
+
+
+@dataclass(frozen=True)
+class StartRecording(Action):
+    """Keep the live performance from the next pose on."""
+
+    def apply(self, s: Session) -> None:
+        if not s.live.running:
+            s.report("nothing to record: start live driving first")
+            return
+        s.live.recording, s.live.record_start, s.live.recorded = True, None, {}
+
+
+@dataclass(frozen=True)
+class StopRecording(Action):
+    """The recorded performance becomes the animation on the timeline (one linear key a tracked frame, the format
+    `animate` reads), saved to `path` where one is given."""
+
+    path: Path | None = None
+
+    def apply(self, s: Session) -> None:
+        live = s.live
+        live.recording = False
+        keys = live.recorded
+        if not keys:
+            s.report("nothing recorded: no face was tracked while recording")
+            return
+        fps = 30.0
+        end = max(k[-1][0] for k in keys.values())
+        s.animation = Animation(fps=fps, duration_s=round(max(end + 1.0 / fps, 1.0 / fps), 6),
+                                interpolation="linear", tracks={c: tuple(k) for c, k in keys.items()})
+        s.anim_time, s.playing = 0.0, False
+        if self.path is not None:
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                s.report(f"{self.path.parent}: cannot make the folder for the recording ({e.strerror})")
+                return
+            SaveAnimation(self.path).apply(s)

@@ -11,7 +11,7 @@ import json
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -19,18 +19,20 @@ from imgui_bundle import hello_imgui, imgui, immapp
 from PIL import Image
 
 from app.display import render_needs
-from app.errors import INPUT_ERRORS
+from app.errors import INPUT_ERRORS, UserInputError
 from app.jobs import JobQueue
 from app.sliders import sliders_json
 from app.studio import actions as a
-from app.studio import avatar_panel, controls_panel, export_panel, jobs_panel, quality_panel, viewport
-from app.studio.config import StudioConfig
+from app.studio import avatar_panel, controls_panel, export_panel, jobs_panel, live_panel, quality_panel, viewport
+from app.studio.config import LiveConfig, StudioConfig
 from app.studio.context import PanelContext
 from app.studio.exporting import Exporter
+from app.studio.live import LiveFigures, LiveWorker, source_problem
 from app.studio.neural import NeuralWorker, Request
 from app.studio.script import Script
 from app.studio.script_fields import ScriptError
 from app.studio.session import AvatarFiles, Session, read_avatar_folder, remember_recent
+from app.user_config import find_landmarker
 from render.gl.context import GLContext
 
 REPO = Path(__file__).resolve().parents[2]
@@ -78,7 +80,7 @@ class Studio:
     """The application: the Session (one value), the workers that serve it (the neural render, training jobs,
     exports, avatar reading), the panels that draw it, and the actions that change it."""
 
-    def __init__(self, cfg: StudioConfig):
+    def __init__(self, cfg: StudioConfig, live: str | None = None):
         self.cfg = cfg
         self.script = Script.load(cfg.script) if cfg.script else None
         """Read and checked first: a wrong script ends the command before a renderer starts or a window opens."""
@@ -115,6 +117,13 @@ class Studio:
         self.pending_viewport_shot: Path | None = None
         self.after_open: Path | None = None
         """An animation to put on the timeline once the avatar being opened is open (a reenactment's)."""
+        self.live: LiveWorker | None = None
+        """Live driving's tracker (app/studio/live.py), while a source drives the avatar."""
+        self.live_applied = 0
+        """The live poses taken so far (LiveWorker.received when last looked)."""
+        self.live_after_open: str | None = live
+        """A live source to start once the first avatar is open (the `live` command's)."""
+        self.live_figures = LiveFigures()
 
     # ---- actions -----------------------------------------------------------------------------------------
     def act(self, action: a.Action | a.Command) -> None:
@@ -160,6 +169,13 @@ class Studio:
                 self.exporter.cancel()
             case a.SaveViewport(path):
                 self.save_viewport(path)
+            case a.StartLive(source):
+                self.start_live(source)
+            case a.StopLive():
+                self.stop_live("")
+            case a.LiveNeutral():
+                if self.live is not None:
+                    self.live.set_neutral()
             case _:
                 raise TypeError(f"no such studio command: {action!r}")
 
@@ -208,6 +224,59 @@ class Studio:
         if after is not None:
             self.act(a.LoadAnimation(after))
 
+    def start_live(self, source: str) -> None:
+        """Track the source in a process of its own and drive the open avatar by it (poll_live)."""
+        s = self.session
+        if s.avatar is None:
+            s.report("live driving needs an open avatar")
+            return
+        try:
+            bundle = find_landmarker()
+        except INPUT_ERRORS as e:
+            s.report(str(e))
+            return
+        self.stop_live("")
+        self.live = LiveWorker(source.strip(), bundle, s.avatar.head_model, self.wake_for_pose)
+        self.live_applied = 0
+        self.live_figures = LiveFigures()
+        self.act(a.LiveStarted(source.strip()))
+
+    def wake_for_pose(self) -> None:
+        """A live pose came (on the live worker's thread): the window's wait ends where the renderer can take it."""
+        if not self.worker.busy or self.live is None or self.live.state != "running":
+            self.worker.arrived.set()
+
+    def stop_live(self, message: str) -> None:
+        if self.live is not None:
+            self.live.close()
+            self.live = None
+        if self.session.live.running:
+            self.act(a.LiveStopped(message))
+
+    def poll_live(self) -> None:
+        """The newest tracked pose onto the sliders (older ones not yet taken are passed over); the end of the
+        source, or its failure, stops live driving with its reason."""
+        live = self.live
+        if live is None:
+            return
+        if live.received > self.live_applied and live.pose is not None:
+            pose = live.pose
+            self.live_applied = live.received
+            self.live_figures.took(pose)
+            self.act(a.LivePose(pose.channels, pose.stamp, pose.index))
+        if live.state in ("ended", "failed"):
+            message = live.message if live.state == "failed" else f"live: {live.source}: {live.message}"
+            self.stop_live(message)
+
+    def render_due(self) -> bool:
+        """Whether a new request may go to the renderer now. While live, not before the request in flight has shown
+        its first pixels: each pose in turn would cancel the one before it, and none would be shown. The newest pose
+        waits on the sliders meanwhile, and older ones are dropped."""
+        if not self.session.live.running or not self.worker.busy:
+            return True
+        r = self.worker.result
+        return r is not None and r.request_id == self.last_submit_id
+
     def save_viewport(self, path: Path) -> None:
         """The viewport as shown (the guide and the render, beside or over each other), as a PNG: read from the
         window once this frame is drawn (take_viewport_shot)."""
@@ -232,6 +301,15 @@ class Studio:
         self.exporter.message = f"saved {path}"
 
     # ---- per frame ---------------------------------------------------------------------------------------
+    def submit_if_due(self) -> None:
+        """A new render request where the Session changed and the renderer may take one (render_due)."""
+        if self.session.dirty and self.render_due():
+            self.latency_ms = None
+            self.pass_latency_ms = {}
+            self.pass_render_ms = {}
+            self.drawn = []
+            self.submit_render()
+
     def submit_render(self) -> None:
         s = self.session
         if s.avatar is None:
@@ -240,16 +318,19 @@ class Studio:
         passes = ("draft", "preview", "final")[: ("draft", "preview", "final").index(s.display.refine_to) + 1]
         frame = s.timeline_frame if s.timeline_frame >= 0 else None
         buffers, inspect = render_needs(s.display.buffer)
+        live = s.live.stamp is not None
         self.last_submit_id = self.worker.submit(Request(s.controls(), cam, passes, frame, inspect=inspect,
-                                                         buffers=buffers))
+                                                         buffers=buffers, live=live))
         self.last_submit_time = time.perf_counter()
+        self.live_figures.submitted(self.last_submit_id, s.live.index, s.live.stamp)
+        s.live.stamp = None
         self.latency_from = "slider" if self.worker.result is not None else "opening"
         s.dirty = False
 
     def context(self) -> PanelContext:
         return PanelContext(self.session, self.act, self.worker, self.jobs, self.exporter, self.clock.fps(),
                             float(np.median(self.gui_ms)) if self.gui_ms else None, self.latency_ms,
-                            self.latency_from)
+                            self.latency_from, self.live_figures if self.live is not None else None)
 
     def gui(self) -> None:
         t0 = time.perf_counter()
@@ -263,6 +344,10 @@ class Studio:
             if self.cfg.avatar is not None or DEMO_AVATAR.is_dir():
                 self.open_avatar(self.cfg.avatar or DEMO_AVATAR)
         self.poll_opening()
+        if self.live_after_open is not None and self.session.avatar is not None:
+            source, self.live_after_open = self.live_after_open, None
+            self.start_live(source)
+        self.poll_live()
         self.jobs.poll()
         for job in self.jobs.jobs:  # a new avatar from video opens when its job is done, a reenactment too
             if job.video is not None and job.state == "done" and not job.opened:
@@ -290,23 +375,21 @@ class Studio:
                 result.pass_name not in self.pass_render_ms:
             self.pass_render_ms[result.pass_name] = result.ms
             self.drawn.append(result.pass_name)
+            self.live_figures.drawing(result.request_id, result.ms)
+        if self.session.live.stamp is not None:
+            self.submit_if_due()  # a live pose goes to the renderer before this frame is drawn, not after
 
         w, h = imgui.get_io().display_size
         left, right = 330, 420
         ctx = self.context()
         self._window("Avatar", (0, 0), (left, 260), lambda: avatar_panel.draw(ctx))
-        self._window("Controls", (0, 260), (left, h - 260), lambda: controls_panel.draw(ctx))
+        self._window("Controls", (0, 260), (left, h - 260), lambda: (live_panel.draw(ctx), controls_panel.draw(ctx)))
         self._window("Viewport", (left, 0), (w - left - right, h), lambda: viewport.draw(ctx, self.viewport))
         self._window("Quality", (w - right, 0), (right, 200), lambda: quality_panel.draw(ctx))
         self._window("Jobs", (w - right, 200), (right, h - 440), lambda: jobs_panel.draw(ctx))
         self._window("Export", (w - right, h - 240), (right, 240), lambda: export_panel.draw(ctx))
         self._close_dialog()
-        if self.session.dirty:
-            self.latency_ms = None
-            self.pass_latency_ms = {}
-            self.pass_render_ms = {}
-            self.drawn = []
-            self.submit_render()
+        self.submit_if_due()
         self.frame_count += 1
         if self.cfg.screenshot and self.script is None and self.frame_count >= self.cfg.frames:
             hello_imgui.get_runner_params().app_shall_exit = True
@@ -366,6 +449,7 @@ class Studio:
         for name in self.drawn:
             self.latency_ms = ms if self.latency_ms is None else self.latency_ms
             self.pass_latency_ms.setdefault(name, ms)
+        self.live_figures.shown(time.perf_counter())
         self.drawn = []
 
     def figures(self) -> dict:
@@ -387,13 +471,16 @@ class Studio:
                 "errors": list(self.session.errors),
                 "viewport": {"space": self.viewport.space, "rect": self.viewport.rect,
                              "images": dict(self.viewport.images)},
+                "live": self.live_figures.report(self.live),
                 "steps_run": None if self.script is None else self.script.ran,
                 "latencies": None if self.script is None else self.script.latencies,
-                "sliders_log": None if self.script is None else self.script.sliders_log}
+                "sliders_log": None if self.script is None else self.script.sliders_log,
+                "live_log": None if self.script is None else self.script.live_log}
 
     def close(self) -> None:
         """The window is gone, however it ended (closed, a script done or failed, an error): the renders stop,
         and so do the training jobs (checkpointed) unless the user chose to keep them."""
+        self.stop_live("")
         self.worker.close()
         self.exporter.cancel()
         if not self.keep_jobs:
@@ -442,8 +529,18 @@ def frame_wait(now: float, last_end: float, cap_fps: float, due: float | None) -
     return spare
 
 
-def run_studio(cfg: StudioConfig) -> int:
-    studio = Studio(cfg)
+def run_live(cfg: LiveConfig) -> int:
+    """The studio, driven live from the start by a camera or a video file; one line and exit status 2 where the
+    source cannot be opened (no camera there, no such video)."""
+    problem = source_problem(cfg.source)
+    if problem:
+        raise UserInputError(problem)
+    find_landmarker()  # none: one line, exit status 2, before a window opens
+    return run_studio(StudioConfig(**{f.name: getattr(cfg, f.name) for f in fields(StudioConfig)}), live=cfg.source)
+
+
+def run_studio(cfg: StudioConfig, live: str | None = None) -> int:
+    studio = Studio(cfg, live)
     params = hello_imgui.RunnerParams()
     params.app_window_params.window_title = "Avatar Studio"
     params.app_window_params.window_geometry.size = (cfg.width, cfg.height)

@@ -34,3 +34,9 @@ class StudioConfig:
     """While the neural render works, the window's frames take at most this share of one core (its own CPU time
     per frame, measured as it runs: a large window on a software GL draws fewer frames; a window whose frames cost
     under 25 ms of CPU keeps rendering_fps_cap), and never fewer than 8 frames a second."""
+
+
+@dataclass(frozen=True)
+class LiveConfig(StudioConfig):
+    source: str = "0"
+    """The performer: a camera's OpenCV device index (0: the first camera) or a video file, played in real time."""

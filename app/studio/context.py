@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from app.jobs import JobQueue
 from app.studio.actions import Action, Command
 from app.studio.exporting import Exporter
+from app.studio.live import LiveFigures
 from app.studio.neural import NeuralWorker
 from app.studio.session import Session
 
@@ -29,3 +30,5 @@ class PanelContext:
     """Slider to first neural pixels, for the latest request."""
     latency_from: str = "slider"
     """What latency_ms counts from: "slider" (a change), or "opening" (the avatar's first pixels)."""
+    live: LiveFigures | None = None
+    """Live driving's figures, while a source drives the avatar."""

@@ -15,7 +15,8 @@ import contextlib
 import multiprocessing as mp
 import threading
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -110,9 +111,9 @@ class Feed:
                             break
                         k, self.skipped = k + 1, self.skipped + 1
                     ok, bgr = self.cap.read()
-                    due = self.start + k / self.fps
-                    if ok and due > time.perf_counter():
-                        time.sleep(due - time.perf_counter())
+                    wait = self.start + k / self.fps - time.perf_counter()
+                    if ok and wait > 0:
+                        time.sleep(wait)
                     stamp = time.perf_counter()
                     media_ms = round(1e3 * k / self.fps)
                 if not ok:
@@ -211,11 +212,73 @@ def serve(source: str, bundle: str, head: HeadModel, results, commands) -> None:
             results.put(("closed",))
 
 
+@dataclass
+class LiveFigures:
+    """Live driving measured: each shown live render's time from its camera frame to its pixels on screen, when each
+    was shown, the tracker's time per frame, and which source frame is on screen."""
+
+    latency_ms: list[float] = field(default_factory=list)
+    age_ms: list[float] = field(default_factory=list)
+    """Each live request's pose's age when it went to the renderer (from its camera frame)."""
+    render_ms: list[float] = field(default_factory=list)
+    """Each shown live request's render time."""
+    shown_at: list[float] = field(default_factory=list)
+    track_ms: list[float] = field(default_factory=list)
+    dropped: int = 0
+    poses: int = 0
+    pending: dict[int, tuple[int, float]] = field(default_factory=dict)
+    """Render request id -> its source frame and that frame's time (time.perf_counter), until its first pixels are
+    drawn."""
+    drawn: list[tuple[int, float]] = field(default_factory=list)
+    """Source frames (and times) whose renders the frame being drawn shows first, until it is presented."""
+    on_screen: int = -1
+    """The source frame whose render is on screen (-1: none yet)."""
+
+    def took(self, pose) -> None:
+        self.poses += 1
+        self.track_ms.append(pose.track_ms)
+        self.dropped = pose.dropped
+
+    def submitted(self, request_id: int, index: int, stamp: float | None) -> None:
+        """A render request went out for the pose of source frame `index` (stamp None: not a live pose)."""
+        if stamp is not None:
+            self.pending = {rid: v for rid, v in self.pending.items() if rid > request_id - 4}
+            self.pending[request_id] = (index, stamp)
+            self.age_ms.append(1e3 * (time.perf_counter() - stamp))
+
+    def drawing(self, request_id: int, render_ms: float) -> None:
+        """The frame being drawn shows a pass of this request, rendered in render_ms."""
+        if request_id in self.pending:
+            self.drawn.append(self.pending.pop(request_id))
+            self.render_ms.append(render_ms)
+
+    def shown(self, now: float) -> None:
+        """The frame drawn is presented: its live renders are on screen."""
+        for index, stamp in self.drawn:
+            self.latency_ms.append(1e3 * (now - stamp))
+            self.shown_at.append(now)
+            self.on_screen = max(self.on_screen, index)
+        self.drawn = []
+
+    def report(self, live) -> dict:
+        """The figures as the scripted run's report keeps them (benchmarks/bench_live.py)."""
+        t = self.shown_at
+        return {"poses": self.poses, "shown": len(self.latency_ms), "dropped": self.dropped,
+                "fps_shown": round((len(t) - 1) / (t[-1] - t[0]), 2) if len(t) > 1 and t[-1] > t[0] else 0.0,
+                "latency_ms": [round(v, 1) for v in self.latency_ms],
+                "track_ms_median": round(float(np.median(self.track_ms)), 2) if self.track_ms else None,
+                "age_at_request_ms_median": round(float(np.median(self.age_ms)), 1) if self.age_ms else None,
+                "render_ms_median": round(float(np.median(self.render_ms)), 1) if self.render_ms else None,
+                "on_screen": self.on_screen, "state": None if live is None else live.state}
+
+
 class LiveWorker:
     """The window's side of the live process: its newest pose (`pose`, numbered by `received`), its state and
-    message; `wake` is set as each pose comes, so the window's frame pacing draws it at once."""
+    message; `wake()` is called as each pose comes (the window wakes for it where the renderer is free: where it is
+    not, the window's next frame takes the pose, and frames drawn for poses no one could render would only take
+    the cores the render needs)."""
 
-    def __init__(self, source: str, bundle: Path, head: HeadModel, wake: threading.Event):
+    def __init__(self, source: str, bundle: Path, head: HeadModel, wake: Callable[[], None]):
         ctx = mp.get_context("spawn")
         self.source = source
         self.wake = wake
@@ -245,14 +308,14 @@ class LiveWorker:
             if kind == "pose":
                 self.pose = msg[1]
                 self.received += 1
-                self.wake.set()
+                self.wake()
             elif kind == "no_face":
                 self.no_face += 1
             elif kind == "started":
                 self.state, self.fps = "running", msg[1]
             elif kind in ("ended", "error"):
                 self.state, self.message = ("ended" if kind == "ended" else "failed"), msg[1]
-                self.wake.set()
+                self.wake()
             elif kind == "closed":
                 return
 

@@ -32,6 +32,7 @@ class Request:
     frame: int | None = None  # a training frame's codes (timeline), or the mean code
     inspect: bool = False  # also the colour variants behind the shadow and shading buffers
     buffers: tuple[str, ...] | None = None  # the avatar's optional buffers to make (render_image's; None: all)
+    live: bool = False  # a live pose: one pass (live_pass), the next pose follows at once
 
 
 @dataclass
@@ -99,6 +100,28 @@ def passes_to_render(passes: tuple[str, ...], timed: dict[tuple[str, int], float
     """
     return tuple(name for i, name in enumerate(passes)
                  if not any(timed.get((later, size), np.inf) <= PASS_BUDGET_MS for later in passes[i + 1:]))
+
+
+LIVE_PASS_MS = 70.0
+"""A live pose renders one pass: the finest whose recent render time at this size is within this (live driving's
+10 frames a second leave 100 ms a frame, of which the window's frame that shows it takes about 30), else the
+coarsest."""
+
+
+def live_pass(passes: tuple[str, ...], timed: dict[tuple[str, int], float], size: int) -> tuple[str, ...]:
+    """The one pass a live pose renders (`timed` as passes_to_render takes it; a pass not timed yet counts as fast
+    enough: the presets' measurement at opening times them).
+
+    >>> live_pass(("draft", "preview", "final"), {("final", 256): 62.0, ("preview", 256): 30.0}, 256)
+    ('final',)
+    >>> live_pass(("draft", "preview", "final"), {("final", 256): 210.0, ("preview", 256): 65.0}, 256)
+    ('preview',)
+    >>> live_pass(("draft", "preview", "final"), {("final", 256): 900.0, ("preview", 256): 300.0,
+    ...                                           ("draft", 256): 90.0}, 256)
+    ('draft',)
+    """
+    fitting = [name for name in passes if timed.get((name, size), 0.0) <= LIVE_PASS_MS]
+    return (fitting[-1] if fitting else passes[0],)
 
 
 def scaled(camera: Camera, scale: float) -> Camera:
@@ -295,7 +318,8 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
     are made; each pass's time goes into `timed` (its last TIMES_KEPT kept)."""
     size = request.camera.width_px
     recent = recent_ms(timed)
-    passes = passes_to_render(request.passes, recent, size)
+    passes = live_pass(request.passes, recent, size) if request.live else passes_to_render(request.passes, recent,
+                                                                                            size)
     qualities = [avatar.presets[name].quality for name in passes]
     for i, name in enumerate(passes):
         if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:

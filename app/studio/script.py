@@ -49,6 +49,15 @@ its value, the fields beside it); a step that cannot be done ends the run with o
   {"wait_export": true}
   {"wait_frames": N}                      let N frames pass (frame-rate measurements)
   {"orbit": DX}                           orbit the camera as a mouse drag of DX pixels does
+  {"live": SOURCE}                        drive the open avatar live from a camera ("0") or a video file in real time
+  {"wait_live": FRAME}                    until the render of the source's frame FRAME (or a later one) is on screen
+                                          (fails where live driving stops first)
+  {"wait_live_end": true}                 until live driving stops (a video file ends)
+  {"save_live": PNG}                      the live render on screen now (its source frame kept for the report's
+                                          "live_log")
+  {"live_neutral": true}                  the next face becomes the neutral one
+  {"record": true}                        record the live performance
+  {"stop_recording": JSON}                stop: the recording onto the timeline and into the file
   {"expect_error": TEXT}                  fail unless a message in the window contains TEXT
   {"expect_warning": TEXT|null}           fail unless the viewport's warning contains TEXT (null: unless it has none)
 
@@ -72,6 +81,7 @@ from app.jobs import JobQueue
 from app.sliders import sliders_json
 from app.studio import actions as a
 from app.studio.exporting import Exporter
+from app.studio.live import LiveFigures
 from app.studio.neural import NeuralWorker
 from app.studio.script_fields import (
     BOOL,
@@ -114,6 +124,7 @@ class Driven(Protocol):
     latency_ms: float | None
     pass_latency_ms: dict[str, float]
     pass_render_ms: dict[str, float]
+    live_figures: LiveFigures
 
     def act(self, action: a.Action | a.Command) -> None: ...
 
@@ -157,6 +168,8 @@ class Script:
     log: list[str] = field(default_factory=list)
     latencies: list[dict[str, float]] = field(default_factory=list)
     sliders_log: list[dict] = field(default_factory=list)
+    live_log: list[dict] = field(default_factory=list)
+    """What each save_live step saved: the file and the source frame on screen."""
     """What each record_latency step saw."""
 
     @staticmethod
@@ -551,3 +564,53 @@ def _expect_warning(sc: Script, st: Driven, s: dict) -> bool:
         return sc.fail(f"no viewport warning containing {expected!r} (it shows: {warning or 'none'})")
     return True
 
+
+
+@step("live", TEXT)
+def _live(sc: Script, st: Driven, s: dict) -> bool:
+    needs_avatar(st)
+    st.act(a.StartLive(s["live"]))
+    return True
+
+
+@step("wait_live", COUNT, WAIT)
+def _wait_live(sc: Script, st: Driven, s: dict) -> bool:
+    shown, live = st.live_figures.on_screen, st.session.live
+    if shown < s["wait_live"] and not live.running:
+        raise ValueError(f"live driving stopped at frame {shown}" + (f": {live.message}" if live.message else ""))
+    return not sc.waiting(shown >= s["wait_live"], shown, what=f"frame {s['wait_live']} of the live source not shown")
+
+
+@step("wait_live_end", TRUE, WAIT)
+def _wait_live_end(sc: Script, st: Driven, s: dict) -> bool:
+    return not sc.waiting(not st.session.live.running, st.live_figures.on_screen, what="live driving still running")
+
+
+@step("live_neutral", TRUE)
+def _live_neutral(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.LiveNeutral())
+    return True
+
+
+@step("record", TRUE)
+def _record(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.StartRecording())
+    return True
+
+
+@step("stop_recording", PATH)
+def _stop_recording(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.StopRecording(Path(s["stop_recording"])))
+    return True
+
+
+@step("save_live", PATH)
+def _save_live(sc: Script, st: Driven, s: dict) -> bool:
+    if st.viewport.neural_image is None or st.live_figures.on_screen < 0:
+        raise ValueError("no live render on screen (a live step, then wait_live, before it)")
+    path = Path(s["save_live"])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(st.viewport.neural_image).save(path)
+    sc.live_log.append({"file": str(path), "frame": st.live_figures.on_screen,
+                        "sliders": sliders_json(st.session.sliders)})
+    return True

@@ -123,6 +123,26 @@ def _groups_of_names(names: tuple[str, ...], count: int) -> dict[str, list[int]]
 
 
 @dataclass
+class Live:
+    """Live driving: what drives the sliders (a camera's index or a video file), the frame behind the sliders now,
+    and the performance being recorded."""
+
+    source: str = ""
+    running: bool = False
+    message: str = ""
+    """Why it stopped (the video ended, no camera there): shown in the Live panel."""
+    index: int = -1
+    """The source frame whose pose the sliders hold (-1: none yet)."""
+    stamp: float | None = None
+    """When that frame came (time.perf_counter); taken by the render request that shows it."""
+    recording: bool = False
+    record_start: float | None = None
+    """The first recorded pose's frame time: the recording's 0 s."""
+    recorded: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
+    """Channel -> keys (seconds from the first recorded pose, value): the animation being recorded."""
+
+
+@dataclass
 class History:
     """Undo and redo of the sliders and the camera. One change is one step back: a slider dragged through many
     values is one change, as long as the same slider keeps moving (under GESTURE_S between its values)."""
@@ -183,6 +203,7 @@ class Session:
     history: History = field(default_factory=History)
     poses: dict[str, dict[str, float]] = field(default_factory=dict)
     """The open avatar's named poses (app/studio/poses.py)."""
+    live: Live = field(default_factory=Live)
 
     @property
     def avatar(self) -> Avatar | None:
