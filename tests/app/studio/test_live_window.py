@@ -1,0 +1,83 @@
+"""Live driving in the real window under Xvfb: a shared video of a person (expressions_d3.mp4, whose mouth opens
+from 10 s on) played in real time drives the demo avatar; the avatar's mouth opens on screen, the performance is
+recorded into a file `animate` reads, and every shown render has its camera-to-pixels time."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from app.animation import load_animation
+from tests.app.studio.test_window import run_script
+from tests.conftest import DEMO, REPO, xvfb
+
+SHARED_VIDEO = REPO.parent / "shared" / "data" / "video" / "expressions_d3.mp4"
+pytestmark = [pytest.mark.gl, pytest.mark.skipif(not SHARED_VIDEO.is_file(),
+                                                 reason=f"{SHARED_VIDEO} is not on this machine (../shared)")]
+
+
+@pytest.fixture(scope="module")
+def display():
+    with xvfb(":87", "1600x1000x24") as disp:
+        yield disp
+
+
+def lips(image: np.ndarray) -> np.ndarray:
+    """The demo avatar's lips: red (green under half of red), not dark."""
+    r, g = image[..., 0].astype(np.int16), image[..., 1].astype(np.int16)
+    return (g < 0.5 * r) & (r > 80)
+
+
+def mouth(image: np.ndarray) -> tuple[float, float]:
+    """The mouth as the render shows it: the height of the box about the lips and the dark pixels inside it (the
+    open mouth's inside), each against the face (its height; its area in pixels off the plain background)."""
+    ys, xs = np.nonzero(lips(image))
+    box = image[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    face = np.abs(image.astype(np.int16) - image[0, 0]).max(-1) > 20
+    rows = np.nonzero(face.any(1))[0]
+    return (ys.max() - ys.min() + 1) / (rows.max() - rows.min() + 1), float((box.mean(-1) < 60).sum() / face.sum())
+
+
+def test_a_video_drives_the_avatar_and_its_mouth_opens_on_screen(display, tmp_path):
+    closed, opened, perf = tmp_path / "closed.png", tmp_path / "open.png", tmp_path / "takes" / "perf.json"
+    steps = [{"wait_render": "draft"}, {"live": str(SHARED_VIDEO)}, {"record": True},
+             {"wait_live": 240}, {"save_live": str(closed)},  # 8 s in: the mouth shut
+             {"wait_live": 320}, {"save_live": str(opened)},  # 10.7 s: the mouth open
+             {"wait_live_end": True, "timeout_s": 60}, {"stop_recording": str(perf)}]
+    report = run_script(display, tmp_path, DEMO, steps, size="1440x900")
+    assert report["steps_run"] == len(steps)
+    shut, wide = report["live_log"]
+    assert 240 <= shut["frame"] < 290 and wide["frame"] >= 320, report["live_log"]
+    # The sliders the poses set: the jaw shut, then open (jawOpen about 0.55 there: 0.55 x 20 degrees).
+    assert shut["sliders"]["jaw_open_deg"] < 2.0 < 6.0 < wide["sliders"]["jaw_open_deg"], report["live_log"]
+    a, b = (np.asarray(Image.open(p)) for p in (closed, opened))
+    assert a.shape == b.shape and a.shape[0] >= 64
+    # The person turns between the two frames, so the face's pixels move everywhere; the mouth's own change is the
+    # opening: the lips' box taller (at 64 px 3 rows against 6, the face 55 rows), dark inside (4 pixels against 26
+    # of about 2,200 on the face).
+    (h_shut, dark_shut), (h_open, dark_open) = mouth(a), mouth(b)
+    print("lips' height / face's", h_shut, h_open, "dark inside / face's area", dark_shut, dark_open)
+    assert h_open > 1.5 * h_shut and dark_open > max(2 * dark_shut, 0.005)
+    # The recording: the file animate reads, the jaw shut then open in it, over the video's length.
+    anim = load_animation(perf)
+    jaw = dict(anim.tracks["jaw.open"])
+    times = np.array(sorted(jaw))
+    assert 9.0 < times[-1] - times[0] < 12.5 and len(times) > 30
+    assert max(v for t, v in jaw.items() if t < 7.0) < 2.0 < 6.0 < max(jaw.values())
+    assert json.loads(perf.read_text())["interpolation"] == "linear"
+    live = report["live"]
+    assert live["shown"] > 10 and len(live["latency_ms"]) == live["shown"]
+    assert all(0 < ms < 5000 for ms in live["latency_ms"]) and live["track_ms_median"] > 0
+    assert not any("render failed" in e for e in report["errors"]), report["errors"]
+    assert report["errors"][-1] == f"live: {SHARED_VIDEO}: the video ended"
+
+
+def test_a_missing_video_is_one_message_and_the_studio_goes_on(display, tmp_path):
+    missing = tmp_path / "nothing.mp4"
+    report = run_script(display, tmp_path, DEMO, [{"wait_render": "draft"}, {"live": str(missing)},
+                                                  {"wait_frames": 30}, {"expect_error": "no such video file"},
+                                                  {"expression": 0, "value": 0.5}, {"wait_render": "draft"}])
+    assert report["errors"] == [f"{missing}: no such video file (a camera is given by its index: --source 0)"]
