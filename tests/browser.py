@@ -16,18 +16,28 @@ import pytest
 from PIL import Image
 
 from app.chromium import Chromium, find_chromium, served
+from app.web import missing_three
 from render.camera import Camera
+
+
+def _absent(why: str) -> None:
+    """Skip, or on CI (where the set-up installs everything) fail."""
+    (pytest.fail if os.environ.get("CI") else pytest.skip)(why)
 
 
 def chromium_or_skip() -> str:
     binary = find_chromium()
     if binary is None:
-        why = ("no Chromium on the PATH (the set-up installs Debian's `chromium`: scripts/setup_system.sh; "
-               "CHROMIUM=PATH names another)")
-        if os.environ.get("CI"):
-            pytest.fail(why)
-        pytest.skip(why)
+        _absent("no Chromium on the PATH (the set-up installs Debian's `chromium`: scripts/setup_system.sh; "
+                "CHROMIUM=PATH names another)")
     return binary
+
+
+def three_or_skip() -> None:
+    """three.js, which a web export copies, is installed (or the test skips)."""
+    why = missing_three()
+    if why is not None:
+        _absent(why)
 
 
 @contextmanager

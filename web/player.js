@@ -118,8 +118,9 @@ function setView(viewMatrix, projection, width, height) {
   camera.updateMatrixWorld();
   camera.projectionMatrix.copy(matrix(projection));
   camera.projectionMatrixInverse.copy(camera.projectionMatrix).invert();
+  const distance = camera.position.distanceTo(controls.target);  // the orbit's centre: as far ahead as it was
   const forward = new THREE.Vector3(0, 0, -1).applyQuaternion(camera.quaternion);
-  controls.target.copy(camera.position).addScaledVector(forward, camera.position.distanceTo(controls.target));
+  controls.target.copy(camera.position).addScaledVector(forward, distance);
   dirty = true;
 }
 
@@ -167,6 +168,7 @@ async function load(url) {
 }
 
 window.addEventListener('resize', fit);
+controls.addEventListener('change', () => { dirty = true; });
 const file = new URLSearchParams(location.search).get('glb') || 'avatar.glb';
 const ready = load(file).catch((e) => { status.textContent = `could not open ${file}: ${e.message}`; throw e; });
 window.player = { ready, setWeight, setJawDeg, setPlaying, seek, neutral, setView, snapshot };

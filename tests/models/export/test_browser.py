@@ -7,18 +7,17 @@ fail them (checked below against the same screenshot)."""
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import pytest
 import torch
 
-from app.web import missing_three, write_web_folder
+from app.web import write_web_folder
 from models.export.bake import texture_image
 from models.head.controls import Controls
 from models.head.head import Head
 from render.camera import turntable_camera
-from tests.browser import player_page, show_through, snapshot
+from tests.browser import player_page, show_through, snapshot, three_or_skip
 
 PX = 256
 MOUTH_POSE = ({"mouthStretch": 1.0, "smile_R": 0.7}, 15.0)
@@ -33,9 +32,7 @@ the neutral pose where the mouth is open 38-41 over the moved pixels; a camera t
 
 @pytest.fixture(scope="module")
 def browser(demo_export, tmp_path_factory):
-    why = missing_three()
-    if why is not None:
-        (pytest.fail if os.environ.get("CI") else pytest.skip)(why)
+    three_or_skip()
     folder = tmp_path_factory.mktemp("web") / "demo"
     write_web_folder(folder, demo_export[0].data)
     with player_page(folder) as page:
