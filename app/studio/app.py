@@ -375,7 +375,7 @@ class Studio:
                 result.pass_name not in self.pass_render_ms:
             self.pass_render_ms[result.pass_name] = result.ms
             self.drawn.append(result.pass_name)
-            self.live_figures.drawing(result.request_id, result.ms)
+            self.live_figures.drawing(result.request_id, result.ms, result.pass_name)
         if self.session.live.stamp is not None:
             self.submit_if_due()  # a live pose goes to the renderer before this frame is drawn, not after
 
@@ -471,7 +471,7 @@ class Studio:
                 "errors": list(self.session.errors),
                 "viewport": {"space": self.viewport.space, "rect": self.viewport.rect,
                              "images": dict(self.viewport.images)},
-                "live": self.live_figures.report(self.live),
+                "live": {**self.live_figures.report(self.live), "render_px": self.session.display.neural_size},
                 "steps_run": None if self.script is None else self.script.ran,
                 "latencies": None if self.script is None else self.script.latencies,
                 "sliders_log": None if self.script is None else self.script.sliders_log,

@@ -222,6 +222,8 @@ class LiveFigures:
     """Each live request's pose's age when it went to the renderer (from its camera frame)."""
     render_ms: list[float] = field(default_factory=list)
     """Each shown live request's render time."""
+    passes: dict[str, int] = field(default_factory=dict)
+    """How many shown live renders each pass made (neural.py's live_pass chooses it)."""
     shown_at: list[float] = field(default_factory=list)
     track_ms: list[float] = field(default_factory=list)
     dropped: int = 0
@@ -246,11 +248,12 @@ class LiveFigures:
             self.pending[request_id] = (index, stamp)
             self.age_ms.append(1e3 * (time.perf_counter() - stamp))
 
-    def drawing(self, request_id: int, render_ms: float) -> None:
+    def drawing(self, request_id: int, render_ms: float, pass_name: str = "") -> None:
         """The frame being drawn shows a pass of this request, rendered in render_ms."""
         if request_id in self.pending:
             self.drawn.append(self.pending.pop(request_id))
             self.render_ms.append(render_ms)
+            self.passes[pass_name] = self.passes.get(pass_name, 0) + 1
 
     def shown(self, now: float) -> None:
         """The frame drawn is presented: its live renders are on screen."""
@@ -266,9 +269,11 @@ class LiveFigures:
         return {"poses": self.poses, "shown": len(self.latency_ms), "dropped": self.dropped,
                 "fps_shown": round((len(t) - 1) / (t[-1] - t[0]), 2) if len(t) > 1 and t[-1] > t[0] else 0.0,
                 "latency_ms": [round(v, 1) for v in self.latency_ms],
+                "shown_at_s": [round(v - t[0], 4) for v in t],
                 "track_ms_median": round(float(np.median(self.track_ms)), 2) if self.track_ms else None,
                 "age_at_request_ms_median": round(float(np.median(self.age_ms)), 1) if self.age_ms else None,
                 "render_ms_median": round(float(np.median(self.render_ms)), 1) if self.render_ms else None,
+                "passes": dict(self.passes),
                 "on_screen": self.on_screen, "state": None if live is None else live.state}
 
 
