@@ -532,6 +532,8 @@ def frame_wait(now: float, last_end: float, cap_fps: float, due: float | None) -
 def run_live(cfg: LiveConfig) -> int:
     """The studio, driven live from the start by a camera or a video file; one line and exit status 2 where the
     source cannot be opened (no camera there, no such video)."""
+    if cfg.avatar is not None and not (cfg.avatar / "avatar.json").is_file():
+        raise UserInputError(f"{cfg.avatar}: not an avatar folder (no avatar.json)")
     problem = source_problem(cfg.source)
     if problem:
         raise UserInputError(problem)
