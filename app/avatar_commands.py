@@ -318,7 +318,7 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
         bg = split.background if plate is None else plate[0].reshape(-1, 3).mean(0)
         avatar.background.copy_(torch.as_tensor(np.asarray(bg, np.float32)))
         if plate is not None:
-            avatar.set_plate(*plate)
+            avatar.plate.note(*plate, avatar.background.device)
         shape = split.frames[0].controls.shape
         avatar.personalize(neutral_texture(split, avatar, gl), avatar.neutral_geometry_of(shape))
     if cfg.tune == "decoder":

@@ -34,7 +34,7 @@ def main() -> int:
     if len(frames) != int(meta["frames"]):
         print(f"{dataset}: {len(frames)} training frames, not the avatar's {meta['frames']}", file=sys.stderr)
         return 2
-    avatar.key_codes([f.controls for f in frames])
+    avatar.code_keys.note([f.controls for f in frames])
     avatar.note_views(build_frames(split, avatar, GLContext.headless()))
     save_checkpoint(out, meta, avatar.state_dict(), int(meta.get("step", 1)))
     print(f"wrote {out}")

@@ -21,8 +21,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from models.avatars.components.codes import KEY_SCALE_FLOOR, control_key, nearest_code_weights
-from models.avatars.components.views import into_cone, view_cone
+from models.avatars.components.kept import keep_weight_names
 from models.avatars.mesh import MeshField
 from models.avatars.quality import BUILTIN_PRESETS, Preset, Quality
 from models.head.controls import Controls
@@ -103,6 +102,7 @@ class Avatar(nn.Module, ABC):
         self.head_model = head_model
         self.head = Head(head_model)
         self.register_buffer("background", torch.as_tensor(np.asarray(background, np.float32)))
+        keep_weight_names(self)  # what a model keeps of its capture (components/kept.py) saved under its old names
         self.presets: dict[str, Preset] = {k: Preset(q) for k, q in BUILTIN_PRESETS.items()}
         """draft/preview/final: those `bench` measured on this avatar (presets.json), else the built-in ones."""
         self.presets_measured: dict = {}
@@ -114,39 +114,6 @@ class Avatar(nn.Module, ABC):
         self.view_range: dict[str, list[float]] | None = None
         """The directions its capture saw the head from (avatar.json's "view_range": yaw_deg and pitch_deg, least
         and most); None: not recorded."""
-
-    # ---- the background plate --------------------------------------------------------------------------
-    def set_plate(self, image: np.ndarray, camera: Camera) -> None:
-        """The capture's background plate (H,W,3): what its fixed camera sees behind the person (a tracked video's
-        room). Rays of that camera composite over it, as NerFACE's fixed background; every other camera (an orbit,
-        a turntable) over the background colour. Saved with the weights."""
-        self.register_buffer("plate", torch.as_tensor(np.asarray(image, np.float32), device=self.background.device))
-        self.register_buffer("plate_camera", torch.as_tensor(camera_key(camera), device=self.background.device))
-
-    def plate_for(self, camera: Camera) -> torch.Tensor | None:
-        """(H*W,3) the plate where `camera` sees it: the capture's camera, a frame's window of it (a following
-        crop's frames each see a part of the plate), or either scaled to another image size (the studio's timeline
-        renders at the size it shows: the plate resampled to it, area-averaged); else None (plate_window)."""
-        key = getattr(self, "plate_camera", None)
-        if key is None:
-            return None
-        window = plate_window(key.cpu().numpy(), camera_key(camera))
-        if window is None:
-            return None
-        x0, y0, w, h = window
-        if (x0, y0, w, h) == (0, 0, *self.plate.shape[1::-1]) and (w, h) == (camera.width_px, camera.height_px):
-            return self.plate.reshape(-1, 3)
-        if (w, h) == (camera.width_px, camera.height_px):
-            return self.plate[y0:y0 + h, x0:x0 + w].reshape(-1, 3)
-        size = (camera.width_px, camera.height_px)
-        cached = getattr(self, "_plate_resized", None)
-        if cached is None or cached[0] != (size, window) or cached[1] is not self.plate:  # once per size and window
-            import cv2
-
-            image = cv2.resize(self.plate[y0:y0 + h, x0:x0 + w].cpu().numpy(), size, interpolation=cv2.INTER_AREA)
-            cached = ((size, window), self.plate, torch.as_tensor(image, device=self.plate.device).reshape(-1, 3))
-            self._plate_resized = cached
-        return cached[2]
 
     def at_rest(self, controls: Controls) -> Controls:
         """New controls (the sliders', a turntable's) placed where the capture held the head (rest_translation
@@ -180,71 +147,12 @@ class Avatar(nn.Module, ABC):
         """What each ray sees behind the avatar: the plate's pixel where the rays carry one, else the colour."""
         return self.background if rays.background is None else rays.background
 
-    # ---- the views its capture saw (components/views.py) ----------------------------------------------
-    def capture_views(self, frames: Any) -> torch.Tensor | None:
-        """(N,3) the view directions a model that reads one a frame was trained on (towards the camera, in the
-        frame it reads them), for the cone new views are held to (seen_view); None: no cone."""
-        del frames
-        return None
-
-    def note_views(self, frames: Any) -> None:
-        """Remember (with the weights) where the capture's camera stood if it stood still (a tracked video:
-        towards_capture_camera) and the cone of capture_views."""
-        device = self.background.device
-        origins = frames.origins
-        if len(origins) and float((origins - origins[0]).norm(dim=-1).max()) < 1e-4:
-            self.register_buffer("capture_eye", origins[0].float().clone().to(device))
-        views = self.capture_views(frames)
-        cone = None if views is None else view_cone(views)
-        if cone is not None:
-            self.register_buffer("view_axis", cone[0].to(device))
-            self.register_buffer("view_cos", torch.tensor(cone[1], dtype=torch.float32, device=device))
-
-    def seen_view(self, towards: torch.Tensor) -> torch.Tensor:
-        """(N,3) view directions (towards the camera), held to the capture's cone where the avatar has one."""
-        axis = getattr(self, "view_axis", None)
-        return towards if axis is None else into_cone(towards, axis, float(self.view_cos))
-
-    def towards_capture_camera(self, points: torch.Tensor) -> torch.Tensor | None:
-        """(P,3) unit directions from world points to the capture's camera where it stood still, else None.
-
-        One fixed camera saw every point of the head from one direction only, the way to that camera (the head
-        turned, the camera did not): a colour network that reads the view learnt it there and nowhere else. So
-        on such a capture the view it reads is that direction whatever camera renders: along the capture
-        camera's own rays it is the ray's direction reversed (the same input as before), and a turntable or
-        an orbit of the studio's camera no longer asks it for views it never saw (components/views.py)."""
-        eye = getattr(self, "capture_eye", None)
-        if eye is None:
-            return None
-        v = eye.to(points) - points
-        return v / v.norm(dim=-1, keepdim=True).clamp_min(1e-9)
-
-    # ---- codes for new controls ------------------------------------------------------------------------
-    def key_codes(self, controls: list[Controls]) -> None:
-        """Let new controls take the codes of the training frames (in order) whose controls are nearest
-        (components/codes.py); the keys are saved with the weights. Without keys: the mean code."""
-        keys = np.stack([control_key(c, self.head_model.num_expression) for c in controls])
-        scale = np.maximum(keys.std(0), KEY_SCALE_FLOOR)
-        device = self.background.device
-        self.register_buffer("code_keys", torch.as_tensor(keys / scale, dtype=torch.float32, device=device))
-        self.register_buffer("code_key_scale", torch.as_tensor(scale, dtype=torch.float32, device=device))
-
-    def code_weights(self, controls: Controls) -> torch.Tensor | None:
-        """(N,) the training frames' share of the codes for these controls; None: the avatar has no keys (an
-        older one, or a capture that did not call for them): the mean code."""
-        keys = getattr(self, "code_keys", None)
-        if keys is None:
-            return None
-        query = torch.as_tensor(control_key(controls, self.head_model.num_expression), device=keys.device)
-        return nearest_code_weights(keys, query / self.code_key_scale)
-
-    optional_buffers: ClassVar[tuple[str, ...]] = ("plate", "plate_camera", "code_keys", "code_key_scale",
-                                                   "view_axis", "view_cos", "capture_eye")
-    """Buffers an avatar has only where its capture gave them (registered when noted, saved with the weights)."""
+    optional_buffers: ClassVar[tuple[str, ...]] = ()
+    """Buffers of a model's own that it has only where its capture gave them (registered when noted, saved with the
+    weights); the plate, the views and the code keys are components (components/kept.py)."""
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
-        """Weights with optional buffers (a plate, code keys...) give the avatar them (of their size) before they are
-        read."""
+        """Weights with optional buffers give the avatar them (of their size) before they are read."""
         for name in self.optional_buffers:
             if prefix + name in state_dict:
                 self.register_buffer(name, torch.empty_like(state_dict[prefix + name]))
@@ -304,6 +212,11 @@ class Avatar(nn.Module, ABC):
         """n flat pixel indices of one frame for a training step, from its active ones (K,)."""
         del n_pixels
         return active[torch.randint(len(active), (n,), generator=generator)]
+
+    @abstractmethod
+    def note_views(self, frames: Any) -> None:
+        """Keep what the training frames (models/training/data.py: their rays' origins, geometry, split) say of
+        the views the model was trained on (its `views`, components/views.py), with the weights."""
 
     def fit_to_capture(self, foreground_reach_m: np.ndarray | None) -> None:
         """Adapt the render settings to the capture: how far (metres, per foreground pixel of the masks) the
@@ -392,42 +305,3 @@ class Avatar(nn.Module, ABC):
         """Rays a batch in the studio's window: a new request waits at most for the batch in flight (a quarter of
         chunk_rays, whose batches are for throughput: about 40 ms of CoDyNeRF's `final` here)."""
         return 1024
-
-
-def plate_window(plate_key: np.ndarray, key: np.ndarray, tol_px: float = 1e-3) -> tuple[int, int, int, int] | None:
-    """Where a camera's image lies in a plate's (both as camera_key gives them): (x0, y0, w, h) in the plate's
-    pixels, when the camera is the plate's own, cut to a window of whole pixels and possibly scaled (its focal
-    lengths sx, sy times the plate's: its pixel x is the plate's x0 + x / sx); None for any other camera (another
-    view, focal ratio, or a window reaching past the plate).
-
-    >>> plate = camera_key_of(256, 192, 500.0, 500.0, 150.0, 100.0)
-    >>> plate_window(plate, camera_key_of(64, 64, 500.0, 500.0, 150.0 - 40, 100.0 - 16))  # a window at (40, 16)
-    (40, 16, 64, 64)
-    >>> plate_window(plate, camera_key_of(32, 32, 250.0, 250.0, 55.0, 42.0))  # that window at half the size
-    (40, 16, 64, 64)
-    >>> plate_window(plate, camera_key_of(64, 64, 500.0, 500.0, 150.0 - 200, 100.0)) is None  # past the plate
-    True
-    """
-    if not np.allclose(key[6:], plate_key[6:], rtol=1e-6, atol=1e-4):
-        return None
-    sx, sy = key[2] / plate_key[2], key[3] / plate_key[3]
-    w, h, x0, y0 = key[0] / sx, key[1] / sy, plate_key[4] - key[4] / sx, plate_key[5] - key[5] / sy
-    whole = np.round([x0, y0, w, h])
-    if np.abs(whole - [x0, y0, w, h]).max() > tol_px:
-        return None
-    x0, y0, w, h = (int(v) for v in whole)
-    if x0 < 0 or y0 < 0 or w < 1 or h < 1 or x0 + w > plate_key[0] or y0 + h > plate_key[1]:
-        return None
-    return x0, y0, w, h
-
-
-def camera_key_of(width: int, height: int, fx: float, fy: float, cx: float, cy: float,
-                  view: np.ndarray | None = None) -> np.ndarray:
-    """camera_key's layout from its parts (view: the identity where not given)."""
-    view = np.eye(4) if view is None else view
-    return np.concatenate([[width, height, fx, fy, cx, cy], np.asarray(view).ravel()]).astype(np.float64)
-
-
-def camera_key(camera: Camera) -> np.ndarray:
-    """(22,) float64: a camera's image size, pixel intrinsics and view matrix (which camera a plate belongs to)."""
-    return camera_key_of(camera.width_px, camera.height_px, *camera.intrinsics, camera.view)

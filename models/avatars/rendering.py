@@ -50,7 +50,7 @@ def render_image(avatar: Avatar, camera: Camera, controls: Controls, options: Re
     geo = avatar.frame_geometry(controls, rasterizer).to(device)
     camera = clipping_around(camera, geo.posed.cpu().numpy())  # the head may be anywhere (a translation)
     rays, idx = pixel_rays_of(avatar, geo, camera, rasterizer)
-    plate = avatar.plate_for(camera)
+    plate = avatar.plate.for_camera(camera)
     if plate is not None:
         rays = replace(rays, background=plate[torch.as_tensor(idx, device=plate.device)].cpu())
     rays = rays.to(device)

@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from models.avatars.base import Avatar, camera_key, plate_window
+from models.avatars.base import Avatar
+from models.avatars.components.plate import camera_key, plate_window
 from models.capture.dataset import CaptureSplit, DatasetError
 from models.capture.frames import camera_of, foreground_reach_m, frame_camera, has_alpha, load_mask, load_rgb, load_rgb8
 from render.gl.context import GLContext
@@ -143,9 +144,9 @@ def frames_on_plate(split: CaptureSplit, avatar: Avatar, cameras: list
     as a fixed crop's do), its width; (None, None, 0) without a plate. A frame whose camera sees no part of the
     plate is an error naming it (its rays would composite over nothing the capture recorded)."""
     if all(f.intrinsics is None for f in split.frames):
-        plate = avatar.plate_for(cameras[0]) if cameras else None
+        plate = avatar.plate.for_camera(cameras[0]) if cameras else None
         return None if plate is None else plate.cpu(), None, 0
-    key = getattr(avatar, "plate_camera", None)
+    key = avatar.plate.camera
     if key is None:
         return None, None, 0
     key, windows = key.cpu().numpy(), []
@@ -155,7 +156,7 @@ def frames_on_plate(split: CaptureSplit, avatar: Avatar, cameras: list
             raise DatasetError(f"{split.folder / f'transforms_{split.split}.json'}: frame {f.index}: its camera "
                                f"(intrinsics {list(split.frame_intrinsics(f))}) sees no window of the background plate")
         windows.append(w[:2])
-    return avatar.plate.reshape(-1, 3).cpu(), windows, int(key[0])
+    return avatar.plate.image.reshape(-1, 3).cpu(), windows, int(key[0])
 
 
 def validation_frame(split: CaptureSplit, background: np.ndarray) -> ValidationFrame:

@@ -83,12 +83,12 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None,
         avatar = avatar_class(model).for_capture(head, len(split.frames), bg, parse_effects(cfg.effects or "all"),
                                                      split.lighting, model_config)
         if plate is not None:
-            avatar.set_plate(*plate)
+            avatar.plate.note(*plate)
     if split.tracked:  # (a resumed avatar too: what it learns is not all in avatar.json)
         avatar.fit_to_tracked_video(cfg.corrections)
         # Its codes carry what the controls miss (hair, shoulders) and follow the controls: held-out frames and
         # sliders take the nearest training frames' (components/codes.py). Synthetic captures keep the mean code.
-        avatar.key_codes([f.controls for f in split.frames])
+        avatar.code_keys.note([f.controls for f in split.frames])
     frames = build_frames(split, avatar, gl, on_frame)
     avatar.note_views(frames)
     validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None

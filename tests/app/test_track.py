@@ -145,7 +145,7 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     assert log[-1]["photometric"] < 0.7 * log[0]["photometric"], (log[0], log[-1])
     avatar, _ = load_avatar(out)
     test = load_split(d3_dataset, "test")
-    assert avatar.plate_for(frame_camera(test, test.frames[0])) is not None
+    assert avatar.plate.for_camera(frame_camera(test, test.frames[0])) is not None
     assert avatar.pose_corrections is not None and 0 < avatar.pose_corrections.abs().max() < 0.05  # learned, small
     # New controls are placed where the video held the head (the field reads world positions): the rest pose is the
     # training frames' mean translation, half a metre in front of the camera.
@@ -156,7 +156,7 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     # Held-out controls take the nearest training frames' codes: a training frame's own controls give its own
     # code the largest share.
     train = load_split(d3_dataset, "train")
-    assert avatar.code_weights(train.frames[3].controls).argmax().item() == 3
+    assert avatar.code_keys.weights(train.frames[3].controls).argmax().item() == 3
     raster = Rasterizer(gl)
     img = render_image(avatar, frame_camera(test, test.frames[0]), test.frames[0].controls, rasterizer=raster)
     raster.release()
@@ -497,7 +497,7 @@ def test_a_head_that_travels_gets_a_crop_that_follows_it(face_video, landmarker,
         origin, dirs = pixel_rays(cam)
         np.testing.assert_allclose(rays.directions.numpy(), dirs.reshape(-1, 3), atol=1e-6)
         np.testing.assert_allclose(rays.origins[0].numpy(), origin, atol=1e-6)
-        np.testing.assert_array_equal(rays.background.numpy(), avatar.plate_for(cam).numpy())
+        np.testing.assert_array_equal(rays.background.numpy(), avatar.plate.for_camera(cam).numpy())
     # the plate is the room as the frames saw it, each through its window: where a training frame's pixel shows the
     # room alone (outside the strip the walking frame ever covered: x 200..670, y 400..640 of the video), the
     # plate's pixel at the frame's offset shows the same, within 3 levels, wherever enough frames saw it free (the

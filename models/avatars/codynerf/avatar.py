@@ -25,8 +25,10 @@ from models.avatars.codynerf.occupancy import OccupancyGrid
 from models.avatars.codynerf.prior import deformation_prior, nearest_vertices, prior_within, vertex_tree
 from models.avatars.codynerf.training import LossWeights, consistency_weight, ray_terms
 from models.avatars.components import losses
-from models.avatars.components.codes import frame_code
+from models.avatars.components.codes import CodeKeys, frame_code
+from models.avatars.components.plate import Plate
 from models.avatars.components.poses import PoseCorrected
+from models.avatars.components.views import CaptureViews
 from models.avatars.effects import key_light_dir
 from models.avatars.mesh import MeshField, front_eye
 from models.avatars.quality import Quality
@@ -124,8 +126,16 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
         self.pose_corrections: nn.Parameter | None = None
         """(N,6) per training frame (components/poses.py); None: the poses as given."""
         self.expression_corrections: nn.Parameter | None = None  # (its guide mesh's trees are made once a frame)
+        self.plate, self.views = Plate(), CaptureViews()
+        """What the capture kept (components/): its background plate, where its camera stood."""
+        self.code_keys = CodeKeys(head_model.num_expression)
+        """The training frames' control keys: new controls take the nearest frames' codes."""
 
     # ---- making and describing -------------------------------------------------------------------------
+    def note_views(self, frames) -> None:
+        """Where the capture's camera stood, if it stood still (its colour reads the view from there)."""
+        self.views.note(frames.origins, None, self.background.device)
+
     def make_field(self) -> CoDyNeRFField:
         """The fields of field_cfg; a tri-plane covers the template grown by the farthest reach (MAX_REACH_M)."""
         template = torch.as_tensor(self.head_model.template, dtype=torch.float32)
@@ -180,7 +190,7 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
     def geometry(self, controls: Controls) -> FrameGeometry:
         """The frame's meshes, tree, landmarks and box (no shadow map), and the codes' weights new controls take."""
         return replace(frame_geometry(self.head, controls, self.render_cfg.box_margin_m),
-                       code_weights=self.code_weights(controls))
+                       code_weights=self.code_keys.weights(controls))
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> FrameGeometry:
         geo = self.geometry(controls)
@@ -306,7 +316,7 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
             pts, d, sigma, weights, remaining = self._densities(rays, geo, omega, samples,
                                                                 replace(settings, stop_below=0))
         shown = render.shown_samples(d, weights, rays.directions, settings.min_weight)
-        fixed_view = self.towards_capture_camera(pts[shown.keep])  # a tracked video's view (base.py)
+        fixed_view = self.views.towards_camera(pts[shown.keep])  # a tracked video's view
         shown = shown if fixed_view is None else replace(shown, view=fixed_view)
         mesh_vis = geo.light.visibility(pts[shown.keep]) if self.field_cfg.shadow_factor else None
         lit, factor, visibility = self.field.appearance_terms(shown.field, shown.prior, shown.view, phi,

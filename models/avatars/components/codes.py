@@ -9,9 +9,12 @@ controls. So new controls take a blend of the codes of the training frames whose
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 import torch
 
+from models.avatars.components.kept import Kept
 from models.head.controls import Controls, fit_length
 
 NEAREST_FRAMES = 5
@@ -87,3 +90,29 @@ def left_out_weights(keys: torch.Tensor, frame: int, window: int = LEFT_OUT_WIND
     else:
         w[frame] = 1.0
     return w
+
+
+class CodeKeys(Kept):
+    """The training frames' control keys (N,D), divided by their spread (D,) (`scale`), that let new controls take
+    the codes of the nearest training frames; none where the capture did not call for them (the mean code)."""
+
+    weight_names: ClassVar[dict[str, str]] = {"keys": "code_keys", "scale": "code_key_scale"}
+
+    def __init__(self, num_expression: int):
+        super().__init__()
+        self.num_expression = num_expression
+
+    def note(self, controls: list[Controls], device: torch.device | str = "cpu") -> None:
+        """Key the training frames' controls (in order; saved with the weights)."""
+        keys = np.stack([control_key(c, self.num_expression) for c in controls])
+        scale = np.maximum(keys.std(0), KEY_SCALE_FLOOR)
+        self.keep("keys", torch.as_tensor(keys / scale, dtype=torch.float32, device=device))
+        self.keep("scale", torch.as_tensor(scale, dtype=torch.float32, device=device))
+
+    def weights(self, controls: Controls) -> torch.Tensor | None:
+        """(N,) the training frames' share of the codes for these controls; None without keys (an older avatar,
+        or a capture that did not call for them): the mean code."""
+        if self.keys is None:
+            return None
+        query = torch.as_tensor(control_key(controls, self.num_expression), device=self.keys.device)
+        return nearest_code_weights(self.keys, query / self.scale)

@@ -8,10 +8,11 @@ which reads no view, is the same in both). Two rules, by what the model reads (m
 
 - a colour read per sample (CoDyNeRF, NerFACE) on a capture whose camera stood still (a tracked video): one
   camera saw every point from one direction, the way to that camera, so that is the direction the colour reads
-  whatever camera renders (`Avatar.towards_capture_camera`);
+  whatever camera renders (`CaptureViews.towards_camera`);
 - a view read once a frame (the primitives' decoder, in the head's frame): held to the cone of the training
-  frames' views (`view_cone`, `into_cone`): its axis and the largest angle from it, plus a margin; a direction
-  outside moves to the nearest direction on the rim, in the plane of the direction and the axis.
+  frames' views (`view_cone`, `into_cone`; `CaptureViews.seen`): its axis and the largest angle from it, plus a
+  margin; a direction outside moves to the nearest direction on the rim, in the plane of the direction and the
+  axis.
 
 Directions the capture gave are untouched either way: its own frames render exactly as before. A capture that saw
 the head from all round (the mean direction shorter than a few percent, or a cone wider than a hemisphere) gets
@@ -21,8 +22,11 @@ no cone.
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import torch
+
+from models.avatars.components.kept import Kept
 
 MARGIN_DEG = 2.0
 """Added to the widest training direction: pose corrections turn a tracked video's rays by a fraction of it."""
@@ -79,3 +83,37 @@ def into_cone(v: torch.Tensor, axis: torch.Tensor, cos_max: float) -> torch.Tens
     rim = (rim / rim.norm(dim=-1, keepdim=True)).to(v.dtype)
     inside = v @ axis.to(v) >= cos_max  # in the caller's precision: what it holds inside stays bit for bit
     return torch.where(inside[:, None], v, rim)
+
+
+class CaptureViews(Kept):
+    """Where the capture's camera stood if it stood still (a tracked video: `eye`) and the cone of the views a
+    model read once a frame (`axis`, `cos`); none of them for a capture that gave none (saved with the weights)."""
+
+    weight_names: ClassVar[dict[str, str]] = {"eye": "capture_eye", "axis": "view_axis", "cos": "view_cos"}
+
+    def note(self, origins: torch.Tensor, views: torch.Tensor | None, device: torch.device | str = "cpu") -> None:
+        """Remember the capture's camera where its rays' origins (N,3) stand still, and the cone of the views (N,3)
+        (towards the camera, in the frame the model reads them) where the model reads one a frame (else None)."""
+        if len(origins) and float((origins - origins[0]).norm(dim=-1).max()) < 1e-4:
+            self.keep("eye", origins[0].float().clone().to(device))
+        cone = None if views is None else view_cone(views)
+        if cone is not None:
+            self.keep("axis", cone[0].to(device))
+            self.keep("cos", torch.tensor(cone[1], dtype=torch.float32, device=device))
+
+    def seen(self, towards: torch.Tensor) -> torch.Tensor:
+        """(N,3) view directions (towards the camera), held to the capture's cone where there is one."""
+        return towards if self.axis is None else into_cone(towards, self.axis, float(self.cos))
+
+    def towards_camera(self, points: torch.Tensor) -> torch.Tensor | None:
+        """(P,3) unit directions from world points to the capture's camera where it stood still, else None.
+
+        One fixed camera saw every point of the head from one direction only, the way to that camera (the head
+        turned, the camera did not): a colour network that reads the view learnt it there and nowhere else. So
+        on such a capture the view it reads is that direction whatever camera renders: along the capture
+        camera's own rays it is the ray's direction reversed (the same input as before), and a turntable or
+        an orbit of the studio's camera no longer asks it for views it never saw."""
+        if self.eye is None:
+            return None
+        v = self.eye.to(points) - points
+        return v / v.norm(dim=-1, keepdim=True).clamp_min(1e-9)

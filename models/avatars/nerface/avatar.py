@@ -25,9 +25,11 @@ from torch import nn
 
 from models.avatars.base import Avatar, RayOutput, TrainingBatch
 from models.avatars.components import losses
-from models.avatars.components.codes import frame_code
+from models.avatars.components.codes import CodeKeys, frame_code
 from models.avatars.components.encoding import encoded_size, frequency_encoding
+from models.avatars.components.plate import Plate
 from models.avatars.components.rigid import kabsch
+from models.avatars.components.views import CaptureViews
 from models.head.controls import Controls
 from models.head.model import HeadModel
 from models.ranges import Range, check_config
@@ -151,8 +153,16 @@ class NerfaceAvatar(Avatar):
         self.register_buffer("box_min", template.min(0).values - cfg.box_margin_m)
         self.register_buffer("box_max", template.max(0).values + cfg.box_margin_m)
         self.scale_m = float((self.box_max - self.box_min).max()) / 2
+        self.plate, self.views = Plate(), CaptureViews()
+        """What the capture kept (components/): its background plate, where its camera stood."""
+        self.code_keys = CodeKeys(head_model.num_expression)
+        """The training frames' control keys: new controls take the nearest frames' codes."""
 
     # ---- making and describing -------------------------------------------------------------------------
+    def note_views(self, frames) -> None:
+        """Where the capture's camera stood, if it stood still (its colour reads the view from there)."""
+        self.views.note(frames.origins, None, self.background.device)
+
     @classmethod
     def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
                     lighting: dict | None, config: NerfaceConfig | None = None) -> NerfaceAvatar:
@@ -187,7 +197,7 @@ class NerfaceAvatar(Avatar):
             expr[self.head_model.num_expression + 3 * k:self.head_model.num_expression + 3 * k + 3] = \
                 controls.rotation(joint)
         return NerfaceGeometry(rotation, translation, torch.as_tensor(expr)[None].to(rotation.device), v[1],
-                               self.code_weights(controls))
+                               self.code_keys.weights(controls))
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> NerfaceGeometry:
         del rasterizer  # NerFACE samples every ray densely; it does not need the mesh
@@ -240,7 +250,7 @@ class NerfaceAvatar(Avatar):
             t_mid = 0.5 * (t0 + t1)
             pts = (o[:, None] + d[:, None] * t_mid[..., None]).reshape(-1, 3)
             view = (-d[:, None]).expand(R, S, 3).reshape(-1, 3)
-            fixed_view = self.towards_capture_camera(pts @ rot.T + tr)  # a tracked video's view (base.py)
+            fixed_view = self.views.towards_camera(pts @ rot.T + tr)  # a tracked video's view
             view = view if fixed_view is None else fixed_view @ rot
             sigma, rgb = net(pts, view, condition.repeat_interleave(S, 0), self.scale_m)
             sigma = sigma.reshape(R, S) * hits[:, None]

@@ -26,9 +26,11 @@ from torch import nn
 
 from models.avatars.base import BACKGROUND, Avatar, RayOutput, TrainingBatch
 from models.avatars.components import losses
-from models.avatars.components.codes import frame_code, left_out_weights
+from models.avatars.components.codes import CodeKeys, frame_code, left_out_weights
+from models.avatars.components.plate import Plate
 from models.avatars.components.poses import PoseCorrected
 from models.avatars.components.rigid import kabsch
+from models.avatars.components.views import CaptureViews
 from models.avatars.effects import key_light_dir
 from models.avatars.mesh import MeshField
 from models.avatars.primitives import dispatch, march
@@ -241,6 +243,10 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """The chart at the slabs' texels, where the decoder reads expression maps (made on first use)."""
         self._neutral: tuple[bytes, torch.Tensor] | None = None
         """The neutral face's texel map and the shape it is of (an avatar is one person: one is kept)."""
+        self.plate, self.views = Plate(), CaptureViews()
+        """What the capture kept (components/): its background plate, where its camera stood."""
+        self.code_keys = CodeKeys(head_model.num_expression)
+        """The training frames' control keys: new controls take the nearest frames' codes."""
 
     def make_decoder(self) -> SlabDecoder:
         """The decoder of the frame's condition (expression and jaw/neck unless only the expression maps carry
@@ -384,7 +390,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         cond[E:E + 3], cond[E + 3:E + 6] = controls.rotation("jaw"), controls.rotation("neck")
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
-        return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_weights(controls),
+        return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_keys.weights(controls),
                                   controls=controls,
                                   expression=self.controls_expression_map(controls, v[1], joints[1, 0]))
 
@@ -486,15 +492,14 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         view = (eye - geo.translation) @ geo.rotation
         return view / view.norm().clamp_min(1e-9)
 
-    def capture_views(self, frames) -> torch.Tensor:
-        """The decoder reads one view a frame: the direction to each training frame's camera."""
-        pairs = zip(frames.geometry, frames.origins, strict=True)
-        return torch.stack([self.view_of(geo, eye.to(geo.translation)) for geo, eye in pairs])
-
     def note_views(self, frames) -> None:
-        """The base's views, and how far inside the training frames each texel of the chart came (seen.py): the
-        primitives' opacity fades out where the capture stopped seeing the head (seen_fade)."""
-        super().note_views(frames)
+        """Where the capture's camera stood if it stood still, the cone of the views the decoder read (one a frame:
+        the direction to each training frame's camera), and how far inside the training frames each texel of the
+        chart came (seen.py): the primitives' opacity fades out where the capture stopped seeing the head
+        (seen_fade)."""
+        pairs = zip(frames.geometry, frames.origins, strict=True)
+        views = torch.stack([self.view_of(geo, eye.to(geo.translation)) for geo, eye in pairs])
+        self.views.note(frames.origins, views, self.background.device)
         self.note_reach(frames)
 
     @torch.no_grad()
@@ -549,7 +554,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         lit: every texel lit (no cast shadows). training: colour alone (the buffers' extra channels are display's).
         frame: a training frame's expression correction (frame_inputs)."""
         posed, condition = self.frame_inputs(geo, frame)
-        view = self.seen_view(self.view_of(geo, eye)[None])[0]
+        view = self.views.seen(self.view_of(geo, eye)[None])[0]
         inputs = [condition, code, view[None]]
         if self.light_dir is not None:
             inputs.append((torch.as_tensor(self.light_dir, dtype=view.dtype, device=view.device) @ geo.rotation)[None])
@@ -582,7 +587,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     def training_code(self, frame: int, generator: torch.Generator | None) -> torch.Tensor:
         """(1,C) the code a training step decodes with: the frame's own, or on code_swap's share of the steps the
         code of the frame left out (left_out_weights)."""
-        keys = getattr(self, "code_keys", None)
+        keys = self.code_keys.keys
         if keys is None or self.cfg.code_swap <= 0 or generator is None \
                 or float(torch.rand((), generator=generator)) >= self.cfg.code_swap:
             return self.codes(frame)

@@ -87,20 +87,21 @@ def test_a_frames_window_of_the_plate_composites_behind_it(gl):
     canvas = framing_camera(avatar.head_model.template, 0.0, 0.0, fov_y_deg=30.0, width_px=60, height_px=40)
     fx, fy, cx, cy = canvas.intrinsics
     plate = np.random.default_rng(4).random((40, 60, 3)).astype(np.float32)
-    avatar.set_plate(plate, canvas)
+    avatar.plate.note(plate, canvas)
     window = canvas.cropped(14, 6, 24, 20)
-    np.testing.assert_array_equal(avatar.plate_for(window).numpy(), plate[6:26, 14:38].reshape(-1, 3))
+    np.testing.assert_array_equal(avatar.plate.for_camera(window).numpy(), plate[6:26, 14:38].reshape(-1, 3))
     r = Rasterizer(gl)
     out = render_image(avatar, window, Controls(), rasterizer=r)
     r.release()
     assert out["opacity"][0, 0] < 1e-3  # no head in the window's corner: the plate's pixel (14, 6) shows
     np.testing.assert_allclose(out["rgb"][0, 0], plate[6, 14], atol=1e-3)
     half = window.resized(12, 10)
-    np.testing.assert_allclose(avatar.plate_for(half).numpy().reshape(10, 12, 3)[0, 0], plate[6:8, 14:16].mean((0, 1)),
+    np.testing.assert_allclose(avatar.plate.for_camera(half).numpy().reshape(10, 12, 3)[0, 0],
+                               plate[6:8, 14:16].mean((0, 1)),
                                atol=1e-6)
     past = canvas.cropped(40, 0, 24, 20)  # x 40..64 of a 60-wide plate
     between = Camera.from_intrinsics(canvas.view, fx, fy, cx - 14.5, cy - 6, 24, 20, near_m=0.05, far_m=10.0)
-    assert avatar.plate_for(past) is None and avatar.plate_for(between) is None
+    assert avatar.plate.for_camera(past) is None and avatar.plate.for_camera(between) is None
 
 
 @pytest.mark.gl
@@ -113,7 +114,7 @@ def test_plate_composites_behind_the_capture_camera_only(gl):
     controls = Controls(jaw=np.array([0.15, 0.0, 0.0], np.float32))
     bare = render_image(avatar, cam, controls, rasterizer=r)
     plate = np.random.default_rng(1).random((36, 40, 3)).astype(np.float32)
-    avatar.set_plate(plate, cam)
+    avatar.plate.note(plate, cam)
     with_plate = render_image(avatar, cam, controls, rasterizer=r)
     bg = avatar.background.numpy()
     expected = bare["rgb"] + (1 - bare["opacity"])[..., None] * (plate - bg)
@@ -132,11 +133,12 @@ def test_plate_is_saved_with_the_avatar(tmp_path):
     avatar, meta = load_avatar(CODYNERF_DEMO)
     cam = framing_camera(avatar.head_model.template, 0.0, 0.0, width_px=12, height_px=10)
     plate = np.random.default_rng(2).random((10, 12, 3)).astype(np.float32)
-    avatar.set_plate(plate, cam)
+    avatar.plate.note(plate, cam)
     save_checkpoint(tmp_path / "av", json.loads(json.dumps(meta)), avatar.state_dict(), 1)
     again, _ = load_avatar(tmp_path / "av")
-    np.testing.assert_array_equal(again.plate.numpy(), plate)
-    assert again.plate_for(cam) is not None and again.plate_for(cam.resized(24, 20)).shape == (480, 3)
-    assert again.plate_for(framing_camera(again.head_model.template, 5.0, 0.0, width_px=12, height_px=10)) is None
+    np.testing.assert_array_equal(again.plate.image.numpy(), plate)
+    assert again.plate.for_camera(cam) is not None and again.plate.for_camera(cam.resized(24, 20)).shape == (480, 3)
+    other = framing_camera(again.head_model.template, 5.0, 0.0, width_px=12, height_px=10)
+    assert again.plate.for_camera(other) is None
     # An avatar without a plate (the shipped demo) still loads, and has none.
-    assert load_avatar(CODYNERF_DEMO)[0].plate_for(cam) is None
+    assert load_avatar(CODYNERF_DEMO)[0].plate.for_camera(cam) is None

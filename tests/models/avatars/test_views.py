@@ -67,7 +67,7 @@ def test_a_fixed_camera_gives_the_colour_the_way_to_it(gl):
     plain = render_image(avatar, cam, controls, rasterizer=r)
     eye = torch.as_tensor(cam.position, dtype=torch.float32)
     avatar.note_views(SimpleNamespace(origins=eye.expand(4, 3)))
-    assert torch.equal(avatar.capture_eye, eye)
+    assert torch.equal(avatar.views.eye, eye)
     same = render_image(avatar, cam, controls, rasterizer=r)
     np.testing.assert_allclose(same["rgb"], plain["rgb"], atol=2e-5)
     front = turntable_camera(avatar.rest_vertices(), 0.0, 5.0, width_px=32, height_px=32)
@@ -78,7 +78,7 @@ def test_a_fixed_camera_gives_the_colour_the_way_to_it(gl):
     assert np.abs(held["rgb"] - plain["rgb"])[shown].max() > 1e-3
     moving = load_avatar(CODYNERF_DEMO)[0]
     moving.note_views(SimpleNamespace(origins=torch.tensor([[0.0, 0.0, 1.0], [0.1, 0.0, 1.0]])))
-    assert moving.towards_capture_camera(torch.zeros(1, 3)) is None
+    assert moving.views.towards_camera(torch.zeros(1, 3)) is None
 
 
 @pytest.mark.gl
@@ -93,7 +93,7 @@ def test_primitives_decode_new_views_as_the_nearest_seen(gl):
                                                                           np.float32))), r) for y in (-10, 0, 10)]
     avatar.note_views(SimpleNamespace(origins=eye.expand(3, 3), geometry=geos))
     # 10 degrees each side and the margin (the root turns about the head's centre, not its origin: a little more)
-    assert math.degrees(math.acos(float(avatar.view_cos))) == pytest.approx(12.0, abs=0.1)
+    assert math.degrees(math.acos(float(avatar.views.cos))) == pytest.approx(12.0, abs=0.1)
     code = avatar.codes(None)
 
     def colour(at: torch.Tensor) -> torch.Tensor:
@@ -102,8 +102,8 @@ def test_primitives_decode_new_views_as_the_nearest_seen(gl):
 
     turned = torch.as_tensor(Rotation.from_euler("y", 40.0, degrees=True).apply((eye - geo.translation).numpy()),
                              dtype=torch.float32) + geo.translation
-    rim = into_cone(avatar.view_of(geo, turned)[None], avatar.view_axis, float(avatar.view_cos))[0]
-    assert float(angle_deg(rim, avatar.view_axis)) == pytest.approx(math.degrees(math.acos(float(avatar.view_cos))),
+    rim = into_cone(avatar.view_of(geo, turned)[None], avatar.views.axis, float(avatar.views.cos))[0]
+    assert float(angle_deg(rim, avatar.views.axis)) == pytest.approx(math.degrees(math.acos(float(avatar.views.cos))),
                                                                     abs=1e-3)
     on_rim = geo.translation + geo.rotation @ rim  # a camera 1 m away in that direction (head frame -> world)
     assert torch.allclose(colour(turned), colour(on_rim), atol=1e-5)

@@ -49,10 +49,10 @@ def test_a_training_frames_own_controls_take_its_code_and_the_keys_are_saved(tmp
     rng = np.random.default_rng(3)
     controls = [Controls(expression=rng.uniform(0, 1, 6).astype(np.float32),
                          jaw=np.array([rng.uniform(0, 0.3), 0, 0], np.float32)) for _ in range(n)]
-    assert avatar.code_weights(controls[0]) is None  # no keys: the mean code
-    avatar.key_codes(controls)
+    assert avatar.code_keys.weights(controls[0]) is None  # no keys: the mean code
+    avatar.code_keys.note(controls)
     j = n // 2
-    w = avatar.code_weights(controls[j])
+    w = avatar.code_keys.weights(controls[j])
     assert w.argmax().item() == j and w[j] > 0.3
     with torch.no_grad():
         avatar.omega.weight.copy_(torch.randn_like(avatar.omega.weight))
@@ -62,7 +62,7 @@ def test_a_training_frames_own_controls_take_its_code_and_the_keys_are_saved(tmp
     torch.testing.assert_close(geo.code_weights, w)
     save_checkpoint(tmp_path / "av", json.loads(json.dumps(meta)), avatar.state_dict(), 1)
     again, _ = load_avatar(tmp_path / "av")
-    torch.testing.assert_close(again.code_weights(controls[j]), w)
+    torch.testing.assert_close(again.code_keys.weights(controls[j]), w)
 
 
 def test_a_swapped_training_step_decodes_with_the_left_out_frames_code():
@@ -73,10 +73,10 @@ def test_a_swapped_training_step_decodes_with_the_left_out_frames_code():
     g = torch.Generator().manual_seed(0)
     with torch.no_grad():
         avatar.latent.weight.copy_(torch.randn(avatar.latent.weight.shape, generator=g))
-    avatar.key_codes([Controls(expression=np.full(4, k / n, np.float32)) for k in range(n)])  # frame k at k / n
+    avatar.code_keys.note([Controls(expression=np.full(4, k / n, np.float32)) for k in range(n)])  # frame k at k / n
     torch.testing.assert_close(avatar.training_code(7, g), avatar.latent.weight[7:8])  # the demo's code_swap is 0
     avatar.cfg = replace(avatar.cfg, code_swap=1.0)
-    w = left_out_weights(avatar.code_keys, 7, window=LEFT_OUT_WINDOW)
+    w = left_out_weights(avatar.code_keys.keys, 7, window=LEFT_OUT_WINDOW)
     assert w[7 - LEFT_OUT_WINDOW:8 + LEFT_OUT_WINDOW].sum() == 0 and abs(float(w.sum()) - 1) < 1e-6
     assert w[8 + LEFT_OUT_WINDOW] > 0  # the nearest frame left in: the first after the window
     torch.testing.assert_close(avatar.training_code(7, g), w[None] @ avatar.latent.weight)

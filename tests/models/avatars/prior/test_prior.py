@@ -358,7 +358,7 @@ def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker
     avatar, _ = load_avatar(out)
     split = load_split(scan, "test")
     camera = frame_camera(split, split.frames[0])
-    plate = avatar.plate_for(camera)
+    plate = avatar.plate.for_camera(camera)
     assert plate is not None  # the room was kept with the weights
     image = render_image(avatar, camera, split.frames[0].controls, rasterizer=None)["rgb"]
     corner = image[:4, :4].reshape(-1, 3)  # no person up there: the room shows as the plate has it
