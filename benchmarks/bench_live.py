@@ -44,7 +44,8 @@ def live_row(report: dict) -> dict:
             "latency_ms": {"median": round(float(np.median(kept)), 1), "p90": round(float(np.percentile(kept, 90)), 1),
                            "worst": round(float(np.max(kept)), 1)} if kept else {},
             "track_ms_median": live["track_ms_median"], "age_at_request_ms_median": live["age_at_request_ms_median"],
-            "render_ms_median": live["render_ms_median"], "poses": live["poses"], "dropped": live["dropped"],
+            "render_ms_median": live["render_ms_median"], "delivery_ms_median": live["delivery_ms_median"],
+            "poses": live["poses"], "dropped": live["dropped"],
             "fps_window": report["fps_rendering"]}
 
 

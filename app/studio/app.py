@@ -375,7 +375,7 @@ class Studio:
                 result.pass_name not in self.pass_render_ms:
             self.pass_render_ms[result.pass_name] = result.ms
             self.drawn.append(result.pass_name)
-            self.live_figures.drawing(result.request_id, result.ms, result.pass_name)
+            self.live_figures.drawing(result.request_id, result.ms, result.pass_name, result.arrived)
         if self.session.live.stamp is not None:
             self.submit_if_due()  # a live pose goes to the renderer before this frame is drawn, not after
 

@@ -222,6 +222,8 @@ class LiveFigures:
     """Each live request's pose's age when it went to the renderer (from its camera frame)."""
     render_ms: list[float] = field(default_factory=list)
     """Each shown live request's render time."""
+    delivery_ms: list[float] = field(default_factory=list)
+    """Each shown live render's time from its pixels' arrival in the window's process to their presentation."""
     passes: dict[str, int] = field(default_factory=dict)
     """How many shown live renders each pass made (neural.py's live_pass chooses it)."""
     shown_at: list[float] = field(default_factory=list)
@@ -231,7 +233,7 @@ class LiveFigures:
     pending: dict[int, tuple[int, float]] = field(default_factory=dict)
     """Render request id -> its source frame and that frame's time (time.perf_counter), until its first pixels are
     drawn."""
-    drawn: list[tuple[int, float]] = field(default_factory=list)
+    drawn: list[tuple[int, float, float]] = field(default_factory=list)
     """Source frames (and times) whose renders the frame being drawn shows first, until it is presented."""
     on_screen: int = -1
     """The source frame whose render is on screen (-1: none yet)."""
@@ -248,17 +250,20 @@ class LiveFigures:
             self.pending[request_id] = (index, stamp)
             self.age_ms.append(1e3 * (time.perf_counter() - stamp))
 
-    def drawing(self, request_id: int, render_ms: float, pass_name: str = "") -> None:
-        """The frame being drawn shows a pass of this request, rendered in render_ms."""
+    def drawing(self, request_id: int, render_ms: float, pass_name: str = "", arrived: float | None = None) -> None:
+        """The frame being drawn shows a pass of this request, rendered in render_ms, its pixels in the window's
+        process since `arrived` (time.perf_counter)."""
         if request_id in self.pending:
-            self.drawn.append(self.pending.pop(request_id))
+            index, stamp = self.pending.pop(request_id)
+            self.drawn.append((index, stamp, stamp if arrived is None else arrived))
             self.render_ms.append(render_ms)
             self.passes[pass_name] = self.passes.get(pass_name, 0) + 1
 
     def shown(self, now: float) -> None:
         """The frame drawn is presented: its live renders are on screen."""
-        for index, stamp in self.drawn:
+        for index, stamp, arrived in self.drawn:
             self.latency_ms.append(1e3 * (now - stamp))
+            self.delivery_ms.append(1e3 * (now - arrived))
             self.shown_at.append(now)
             self.on_screen = max(self.on_screen, index)
         self.drawn = []
@@ -273,6 +278,7 @@ class LiveFigures:
                 "track_ms_median": round(float(np.median(self.track_ms)), 2) if self.track_ms else None,
                 "age_at_request_ms_median": round(float(np.median(self.age_ms)), 1) if self.age_ms else None,
                 "render_ms_median": round(float(np.median(self.render_ms)), 1) if self.render_ms else None,
+                "delivery_ms_median": round(float(np.median(self.delivery_ms)), 1) if self.delivery_ms else None,
                 "passes": dict(self.passes),
                 "on_screen": self.on_screen, "state": None if live is None else live.state}
 

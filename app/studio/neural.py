@@ -41,6 +41,8 @@ class Result:
     pass_name: str
     buffers: dict[str, np.ndarray]
     ms: float
+    arrived: float = 0.0
+    """When the window's side had it (time.perf_counter)."""
 
 
 @dataclass
@@ -205,7 +207,7 @@ class NeuralWorker:
                 _, rid, name, buffers, ms = msg
                 if rid == self._id:  # a pass of the newest request
                     self.due = None
-                    self.result = Result(rid, name, buffers, ms)
+                    self.result = Result(rid, name, buffers, ms, time.perf_counter())
                     self.error = ""
                     self.arrived.set()
             elif kind == "idle":
