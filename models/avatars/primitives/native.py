@@ -1,5 +1,6 @@
-"""The primitives' hot loops in C (native_march.c), for the CPU: built once with the system's C compiler into the
-user's cache, called through ctypes (which lets go of Python's lock for the call, so two threads run at once).
+"""The primitives' hot loops in C (native_march.c), for the CPU: built with the system's C compiler into the
+user's cache at set-up (`make native`, which finds the compiler and reports it; or at first use where the set-up
+did not run), called through ctypes (which lets go of Python's lock for the call, so two threads run at once).
 
 - `march`, display's march: the torch march (march.py) runs each wave as tens of small tensor operations,
   gathering and scattering every sample's values between them; on the demo avatar at 256 px its colour frame
@@ -20,6 +21,7 @@ import hashlib
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
 import threading
 from collections.abc import Callable
@@ -223,3 +225,19 @@ class TrilinearLookup(torch.autograd.Function):
 def trilinear(values: torch.Tensor, prim: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
     """(N,C): TrilinearLookup (in C, with gradients)."""
     return TrilinearLookup.apply(values, prim, local)
+
+
+def main() -> int:
+    """Build the library now, at set-up (`make native`), and say where, or why not: without it the torch march runs
+    (dispatch.py says so each time), so a machine without a C compiler still renders. Exit status 0 either way."""
+    try:
+        lib = build()
+    except (OSError, RuntimeError, subprocess.SubprocessError) as e:
+        print(f"the primitives' C march is not built ({e}); the torch march runs instead", file=sys.stderr)
+        return 0
+    print(f"the primitives' C march: {lib} (compiler {compiler()})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

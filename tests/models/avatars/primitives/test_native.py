@@ -161,3 +161,18 @@ def test_training_marches_with_c_lookups_as_with_grid_sample(monkeypatch):
     assert results[0][0].std() > 0.05
     for a, b in zip(*results, strict=True):
         torch.testing.assert_close(a, b, atol=2e-5 * max(1.0, float(b.abs().max())), rtol=1e-4)
+
+
+def test_the_set_up_builds_the_library_or_says_why_not(tmp_path, monkeypatch, capsys):
+    """`make native` runs main(): with a compiler it builds the library into the cache and names it; without one it
+    says the torch march runs instead, and exits 0 (set-up goes on)."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "with"))
+    assert native.main() == 0
+    built = list((tmp_path / "with" / "avatar-studio" / "native").glob("native_march-*.so"))
+    assert len(built) == 1 and str(built[0]) in capsys.readouterr().out
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "without"))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    assert native.main() == 0
+    assert "the torch march runs instead" in capsys.readouterr().err
+    assert not (tmp_path / "without" / "avatar-studio" / "native").exists() or \
+        not list((tmp_path / "without" / "avatar-studio" / "native").glob("*.so"))
