@@ -11,5 +11,5 @@ def kabsch(source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, to
     cs, ct = source.mean(0), target.mean(0)
     u, _, vh = torch.linalg.svd((source - cs).T.double() @ (target - ct).double())
     d = torch.sign(torch.linalg.det(vh.T @ u.T))
-    r = (vh.T @ torch.diag(torch.tensor([1.0, 1.0, float(d)], dtype=torch.float64)) @ u.T).float()
+    r = (vh.T @ torch.diag(torch.tensor([1.0, 1.0, float(d)], dtype=torch.float64, device=vh.device)) @ u.T).float()
     return r, ct - r @ cs
