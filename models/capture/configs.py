@@ -10,6 +10,8 @@ from typing import Annotated, Literal
 from models.ranges import Range
 
 SceneName = Literal["ambient", "studio", "sun"]
+HairStyle = Literal["none", "crop", "bob", "long"]
+HairColorName = Literal["black", "dark_brown", "brown", "blond", "auburn", "grey"]
 
 
 @dataclass(frozen=True)
@@ -30,6 +32,12 @@ class SynthConfig:
     components, built-in: its shape components), within +-2 standard deviations."""
     light_deg: tuple[float, float] | None = None
     """Key light azimuth and elevation in degrees (azimuth from the front towards the subject's left)."""
+    hair: HairStyle | None = None
+    """Hair style: crop (short, above the ears), bob (to the jaw), long (to the shoulders) or none (bald); left out,
+    the identity chooses (identity 0: crop)."""
+    hair_color: HairColorName | None = None
+    """Hair colour (brows and lashes take a darker shade of it); left out, the identity chooses (identity 0:
+    dark_brown)."""
     out: Path = Path("out/capture")
     """Dataset folder to create (must not exist or be empty)."""
     background: tuple[float, float, float] = (0.55, 0.58, 0.62)  # finite: checked as every float

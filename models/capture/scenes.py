@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from models.capture.configs import SceneName
+from models.capture.looks import IRIS_COLORS, Look, brow_albedo, hair_albedo, skin_albedo
 from models.head.model import HeadModel
 from render.gl.capture import Appearance, CaptureLighting
 
@@ -70,11 +71,8 @@ def lighting_record(scene: SceneName, lighting: CaptureLighting, light_deg: tupl
     }
 
 
-SKIN_TONES = np.array([[0.78, 0.57, 0.46], [0.66, 0.45, 0.34], [0.52, 0.35, 0.25], [0.84, 0.66, 0.56],
-                       [0.40, 0.26, 0.19]])
-
-
-def _landmarks68(head: HeadModel, canonical: np.ndarray) -> np.ndarray | None:
+def landmarks68(head: HeadModel, canonical: np.ndarray) -> np.ndarray | None:
+    """(68,3) the iBUG landmarks on the canonical head (FLAME's 51 with a NaN jaw line), or None."""
     ids, bary = head.landmarks.as_barycentric(head.triangles)
     lm = (canonical[ids] * bary[..., None]).sum(1)
     if len(lm) == 68:
@@ -84,25 +82,28 @@ def _landmarks68(head: HeadModel, canonical: np.ndarray) -> np.ndarray | None:
     return None
 
 
-def head_appearance(head: HeadModel, canonical: np.ndarray, identity: int) -> Appearance:
-    """Colours picked by the identity number; lips, brows, nose and forehead placed from the landmarks."""
-    rng = np.random.default_rng(1000 + identity)
-    skin = SKIN_TONES[identity % len(SKIN_TONES)] * rng.uniform(0.95, 1.05, 3)
-    lm = _landmarks68(head, canonical)
+def head_appearance(head: HeadModel, canonical: np.ndarray, look: Look) -> Appearance:
+    """The look's colours; lips, brows, cheeks, nose and forehead placed from the landmarks."""
+    skin = skin_albedo(look)
+    iris = np.asarray(IRIS_COLORS[look.iris])
+    lm = landmarks68(head, canonical)
     far = np.array([0.0, 0.0, -10.0])
     if lm is None:  # no landmarks: plain skin, a specular map without peaks
-        return Appearance(skin, skin, skin, np.array([0.3, 0.2, 0.1]), far, np.ones(2) * 1e-3,
+        return Appearance(skin, skin, skin, iris, far, np.ones(2) * 1e-3,
                           np.stack([far, far]), np.ones(2) * 1e-3, far, far + 1e-3, far, np.ones(3) * 1e-3,
-                          seed=float(identity))
+                          seed=look.seed, hair_color=hair_albedo(look))
     lips = lm[48:60]
     brows = [lm[17:22], lm[22:27]]
     brow_span = [np.ptp(b[:, 0]) for b in brows]
     forehead = 0.5 * (brows[0].mean(0) + brows[1].mean(0)) + [0.0, 0.035, -0.006]
+    # Cheeks: below the outer half of each eye, level with the nose's wings, a little behind them.
+    cheeks = np.stack([[0.5 * (lm[a, 0] + lm[b, 0]), 0.5 * (lm[lid, 1] + lm[wing, 1]), lm[wing, 2] - 0.012]
+                       for a, b, lid, wing in ((36, 37, 41, 31), (45, 44, 46, 35))])
     return Appearance(
         skin_color=skin,
         lip_color=skin * np.array([0.95, 0.55, 0.55]),
-        brow_color=np.array([0.16, 0.11, 0.08]) * rng.uniform(0.8, 1.4),
-        iris_color=np.array([[0.25, 0.35, 0.55], [0.35, 0.22, 0.10], [0.28, 0.40, 0.22]])[identity % 3],
+        brow_color=brow_albedo(look),
+        iris_color=iris,
         lip_center=lips.mean(0),
         lip_radii=np.array([0.55 * np.ptp(lips[:, 0]), 0.6 * np.ptp(lips[:, 1])]),
         brow_centers=np.stack([b.mean(0) + [0.0, 0.002, 0.0] for b in brows]),
@@ -111,7 +112,10 @@ def head_appearance(head: HeadModel, canonical: np.ndarray, identity: int) -> Ap
         nose_tip=lm[30],
         forehead_center=forehead,
         forehead_radii=np.array([0.045, 0.022, 0.03]),
-        seed=float(identity % 97) * 0.013,
+        seed=look.seed,
+        hair_color=hair_albedo(look),
+        cheek_centers=cheeks,
+        blush=look.blush,
     )
 
 

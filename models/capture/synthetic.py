@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -16,13 +16,15 @@ import torch
 
 from models.capture.configs import SynthConfig
 from models.capture.dataset import write_split
-from models.capture.scenes import eye_attribute, head_appearance, lighting_record, scene_lighting
+from models.capture.looks import Look, look_for_identity
+from models.capture.people import Person, dress
+from models.capture.scenes import head_appearance, lighting_record, scene_lighting
 from models.capture.script import FrameSpec, Rig, held_out_script, make_rig, training_script
 from models.head.controls import Controls, controls_to_dict
 from models.head.head import Head
 from models.head.model import HeadModel, portrait_vertices
 from render.camera import Camera, look_at
-from render.gl.capture import CaptureBuffers, CaptureMesh, CaptureRenderer
+from render.gl.capture import Appearance, CaptureBuffers, CaptureMesh, CaptureRenderer
 from render.gl.context import GLContext
 
 DEPTH_SCALE_M = 1e-4  # one unit of the 16-bit depth PNGs
@@ -130,6 +132,44 @@ def _project(camera: Camera, points: np.ndarray) -> np.ndarray:
     return np.stack([(ndc[:, 0] + 1) / 2 * camera.width_px, (1 - ndc[:, 1]) / 2 * camera.height_px], 1)
 
 
+@dataclass(frozen=True, eq=False)
+class Sitter:
+    """Everything a capture keeps fixed about its person: the head model with an identity, dressed for a look, and
+    where the cameras aim and stand."""
+
+    model: Head
+    rig: Rig
+    shape: np.ndarray  # (S,) identity coefficients
+    canonical: np.ndarray  # (V,3) the neutral head with its identity
+    person: Person
+    appearance: Appearance
+    center: np.ndarray  # (3,) what the cameras look at
+    distance_m: float
+
+    def frame(self, spec: FrameSpec, size: int, fov_y_deg: float) -> tuple[CaptureMesh, Camera, Controls, np.ndarray]:
+        """One frame of the script: the posed, dressed mesh, the camera, the controls and the (L,3) landmarks."""
+        controls = frame_controls(self.rig, spec, self.shape)
+        verts, _, lmks = self.model.pose(controls)
+        verts, lmks = verts[0].numpy(), lmks[0].numpy()
+        p = self.person
+        posed, tangent = p.pose(self.canonical, verts)
+        mesh = CaptureMesh(posed, p.triangles, p.canonical, p.material, tangent)
+        return mesh, frame_camera(self.center, self.distance_m, spec, size, fov_y_deg), controls, lmks
+
+
+def make_sitter(head: HeadModel, identity: int, look: Look, fov_y_deg: float) -> Sitter:
+    shape = identity_coefficients(head, identity)
+    model = Head(head)
+    with torch.inference_mode():
+        canonical = model.pose(Controls(shape=shape))[0][0].numpy()
+    portrait = portrait_vertices(head, canonical)  # the face frames the shot, whatever the hair
+    center = 0.5 * (portrait.min(0) + portrait.max(0))
+    radius = float(np.linalg.norm(portrait - center, axis=1).max())
+    return Sitter(model, make_rig(head), shape, canonical, dress(head, canonical, look),
+                  head_appearance(head, canonical, look), center,
+                  1.1 * radius / math.sin(math.radians(fov_y_deg) / 2))
+
+
 def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
                progress: Callable[[int, int], None] | None = None) -> dict:
     """Render and write the capture; returns a summary (frames per split, seconds)."""
@@ -144,16 +184,8 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
     script = training_script(cfg.frames - n_test, rng, cfg.turn_deg)
     val_ids = set(range(7, len(script), 20))
     test = held_out_script(n_test, [s for k, s in enumerate(script) if k not in val_ids], rng, turn_deg=cfg.turn_deg)
-    rig = make_rig(head)
-    shape = identity_coefficients(head, cfg.identity)
-    model = Head(head)
-    canonical = model.pose(Controls(shape=shape))[0][0].numpy()
-    look = head_appearance(head, canonical, cfg.identity)
-    eyes = eye_attribute(head, canonical)
-    portrait = portrait_vertices(head, canonical)
-    center = 0.5 * (portrait.min(0) + portrait.max(0))
-    radius = float(np.linalg.norm(portrait - center, axis=1).max())
-    distance = 1.1 * radius / math.sin(math.radians(cfg.fov_y_deg) / 2)
+    sitter = make_sitter(head, cfg.identity, look_for_identity(cfg.identity, cfg.hair, cfg.hair_color), cfg.fov_y_deg)
+    rig, shape = sitter.rig, sitter.shape
     renderer = CaptureRenderer(gl)
     bg = np.asarray(cfg.background, np.float64)
     f_px = 0.5 * cfg.size / math.tan(math.radians(cfg.fov_y_deg) / 2)
@@ -175,18 +207,14 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
             for off in view_offsets_deg(cfg.views)]
     with torch.inference_mode():
         for k, (split, spec) in enumerate(jobs):
-            controls = frame_controls(rig, spec, shape)
-            verts, _, lmks = model.pose(controls)
-            verts, lmks = verts[0].numpy(), lmks[0].numpy()
-            camera = frame_camera(center, distance, spec, cfg.size, cfg.fov_y_deg)
-            mesh = CaptureMesh(verts, head.triangles, canonical, eyes)
-            buf = renderer.render(mesh, camera, lighting, look)
+            mesh, camera, controls, lmks = sitter.frame(spec, cfg.size, cfg.fov_y_deg)
+            buf = renderer.render(mesh, camera, lighting, sitter.appearance)
             name = f"{k:04d}.png"
             image = buf.color + bg * (1 - buf.coverage[..., None])
             write_png8(out / "images" / name, image)
             extra = {}
             if lighting.shadows:  # the same frame with nothing in the key light's way: what "without" should show
-                lit = renderer.render(mesh, camera, replace(lighting, shadows=False), look)
+                lit = renderer.render(mesh, camera, replace(lighting, shadows=False), sitter.appearance)
                 write_png8(out / "unshadowed" / name, lit.color + bg * (1 - lit.coverage[..., None]))
                 extra["unshadowed_path"] = f"unshadowed/{name}"
             write_png8(out / "masks" / name, buf.coverage)

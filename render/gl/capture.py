@@ -3,7 +3,7 @@ and box-filtered so that images are anti-aliased and masks carry coverage."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import moderngl
 import numpy as np
@@ -46,6 +46,9 @@ class Appearance:
     forehead_radii: np.ndarray  # (3,)
     specular_range: tuple[float, float] = (0.04, 0.5)
     seed: float = 0.0
+    hair_color: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (3,)
+    cheek_centers: np.ndarray = field(default_factory=lambda: np.full((2, 3), -10.0))  # (2,3) blush centres
+    blush: float = 0.0  # 0..1
 
 
 @dataclass(frozen=True)
@@ -53,7 +56,8 @@ class CaptureMesh:
     vertices: np.ndarray  # (V,3) posed, world metres
     triangles: np.ndarray  # (F,3)
     canonical: np.ndarray  # (V,3) neutral with identity, metres
-    eye: np.ndarray  # (V,4) eyeball centre (canonical) and 1 on eyeballs, 0 on skin
+    material: np.ndarray  # (V,4) w: material id (0 skin, 1 eye, 2 hair, 3 teeth, 4 lashes); xyz its coordinates
+    tangent: np.ndarray | None = None  # (V,3) posed direction of the hair's strands; None: no hair
 
 
 @dataclass(frozen=True)
@@ -103,14 +107,15 @@ class CaptureRenderer:
             s = self.supersample
             W, H = camera.width_px * s, camera.height_px * s
             n = vertex_normals(mesh.vertices, mesh.triangles)
-            data = np.concatenate([mesh.vertices, n, mesh.canonical, mesh.eye], 1).astype("f4")
+            tangent = np.zeros_like(mesh.vertices) if mesh.tangent is None else mesh.tangent
+            data = np.concatenate([mesh.vertices, n, mesh.canonical, mesh.material, tangent], 1).astype("f4")
             vbo = ctx.buffer(data.tobytes())
             ibo = ctx.buffer(np.asarray(mesh.triangles, "i4").tobytes())
             light_dir = np.asarray(lighting.light_dir, np.float64) / np.linalg.norm(lighting.light_dir)
             center, radius = bounding_sphere(mesh.vertices)
             light_vp = light_view_projection(light_dir, center, radius).astype("f4")
             if lighting.shadows:
-                self._shadow.draw(vbo, "3f 40x", ibo, light_vp, lighting.shadow_map_px)  # 13 floats a vertex
+                self._shadow.draw(vbo, "3f 52x", ibo, light_vp, lighting.shadow_map_px)  # 16 floats a vertex
             fbo = self._framebuffer(W, H)
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -134,12 +139,15 @@ class CaptureRenderer:
             if lighting.shadows:
                 self._shadow.texture.use(location=0)
             prog["u_shadow_map"].value = 0
-            for name in ("skin_color", "lip_color", "brow_color", "iris_color", "lip_center", "lip_radii", "brow_radii",
-                         "nose_top", "nose_tip", "forehead_center", "forehead_radii", "specular_range"):
+            for name in ("skin_color", "lip_color", "brow_color", "iris_color", "hair_color", "lip_center", "lip_radii",
+                         "brow_radii", "nose_top", "nose_tip", "forehead_center", "forehead_radii", "specular_range"):
                 prog[f"u_{name}"].value = tuple(float(x) for x in np.ravel(getattr(look, name)))
             prog["u_brow_center"].write(np.asarray(look.brow_centers, "f4").tobytes())
+            prog["u_cheek_center"].write(np.asarray(look.cheek_centers, "f4").tobytes())
+            prog["u_blush"].value = float(look.blush)
             prog["u_seed"].value = float(look.seed)
-            vao = ctx.vertex_array(prog, [(vbo, "3f 3f 3f 4f", "in_position", "in_normal", "in_canonical", "in_eye")],
+            vao = ctx.vertex_array(prog, [(vbo, "3f 3f 3f 4f 3f", "in_position", "in_normal", "in_canonical",
+                                           "in_material", "in_tangent")],
                                    index_buffer=ibo)
             vao.render(moderngl.TRIANGLES)
             vao.release()

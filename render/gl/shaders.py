@@ -21,12 +21,13 @@ PROGRAMS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
                  "u_wire_color", "u_wire_width_px")),
     "depth": (("in_position",), ("u_view_projection",)),
     "raster": (("in_position",), ("u_view_projection", "u_view")),
-    "capture": (("in_position", "in_normal", "in_canonical", "in_eye"),
+    "capture": (("in_position", "in_normal", "in_canonical", "in_material", "in_tangent"),
                 ("u_view_projection", "u_view", "u_light_view_projection", "u_normal_offset", "u_camera_position",
                  "u_sh", "u_light_dir", "u_light_color", "u_use_diffuse", "u_use_specular", "u_use_shadows",
                  "u_shininess", "u_shadow_bias", "u_shadow_map", "u_skin_color", "u_lip_color", "u_brow_color",
-                 "u_iris_color", "u_lip_center", "u_lip_radii", "u_brow_center", "u_brow_radii", "u_nose_top",
-                 "u_nose_tip", "u_forehead_center", "u_forehead_radii", "u_specular_range", "u_seed")),
+                 "u_iris_color", "u_hair_color", "u_cheek_center", "u_blush", "u_lip_center", "u_lip_radii",
+                 "u_brow_center", "u_brow_radii", "u_nose_top", "u_nose_tip", "u_forehead_center", "u_forehead_radii",
+                 "u_specular_range", "u_seed")),
     "flat": (("in_position",), ("u_view_projection", "u_point_size_px", "u_color")),
 }
 

@@ -48,6 +48,18 @@ def interior(mask: np.ndarray) -> np.ndarray:
     return cv2.erode(full, np.ones((3, 3), np.uint8)).astype(bool)
 
 
+def one_surface(depth_m: np.ndarray, tolerance_m: float = 0.002) -> np.ndarray:
+    """Pixels whose 3x3 neighbourhood is one smooth surface: depth within tolerance of its 3x3 mean at every
+    neighbour. Elsewhere two surfaces share a pixel (hair over skin, lashes over an eye, teeth in the mouth), and
+    its mean colour is no longer the light model of its mean normal and albedo."""
+    kink = np.abs(depth_m - cv2.blur(depth_m, (3, 3)))
+    return cv2.dilate(kink, np.ones((3, 3), np.uint8)) < tolerance_m
+
+
+def read_depth(frame, scale_m: float) -> np.ndarray:
+    return cv2.imread(str(frame.extra["depth_path"]), cv2.IMREAD_UNCHANGED).astype(np.float64) * scale_m
+
+
 def sh_irradiance(sh: np.ndarray, n: np.ndarray) -> np.ndarray:
     x, y, z = n[..., 0:1], n[..., 1:2], n[..., 2:3]
     basis = [np.ones_like(x), y, z, x, x * y, y * z, 3 * z * z - 1, x * z, x * x - y * y]
@@ -72,7 +84,7 @@ def test_studio_intensity_follows_the_light_model(captures):
     light_dir, color = np.asarray(key["direction"]), np.asarray(key["color"])
     errors = []
     for f in frames[::4]:
-        inside = interior(read(f.extra["mask_path"]))
+        inside = interior(read(f.extra["mask_path"])) & one_surface(read_depth(f, s.depth_scale_m))
         n = read_png16(f.extra["normal_path"]) * 2 - 1
         albedo = read(f.extra["albedo_path"])
         predicted = albedo * (np.maximum(sh_irradiance(sh, n), 0) + color * np.maximum(n @ light_dir, 0)[..., None])
@@ -82,7 +94,8 @@ def test_studio_intensity_follows_the_light_model(captures):
           np.round(np.quantile(err, [0.5, 0.95, 0.99, 0.999]) * 255, 2))
     # 8-bit albedo and image: about 1/255 from rounding both. Images are 2x2 supersampled: where the shading
     # and the albedo both vary inside a pixel (lip and brow edges, the nostrils) the mean of products departs
-    # from the product of means, which the tail allows.
+    # from the product of means, which the tail allows. Where two surfaces share a pixel (one_surface) it departs
+    # by up to 30/255 (99.9%), so those pixels (a quarter of the head's) are left out.
     assert np.median(err) < 1.0 / 255
     assert np.quantile(err, 0.95) < 2.5 / 255
     assert np.quantile(err, 0.99) < 6 / 255
