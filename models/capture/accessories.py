@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from render.mesh import vertex_normals
+
 #: Material ids of the capture shader (the w of the material attribute).
 SKIN, EYE, HAIR, TEETH, LASHES = 0.0, 1.0, 2.0, 3.0, 4.0
 FOLLOW_HEAD, FOLLOW_JAW, FOLLOW_ANCHOR = 0, 1, 2
@@ -233,11 +235,13 @@ def lash_parts(frame: FaceFrame, canonical: np.ndarray, rigid_ids: np.ndarray) -
 
 def mouth_interior(canonical: np.ndarray, triangles: np.ndarray, frame: FaceFrame) -> np.ndarray:
     """(V,) 1 for the head's vertices inside the mouth (behind the closed lips: a ray from the vertex straight
-    ahead meets the lips), else 0."""
+    ahead meets the lips, and the vertex does not face backwards), else 0."""
     lm = frame.landmarks
     lips = lm[48:68]
     lo, hi = lips.min(0) - [0.02, 0.03, 0.12], lips.max(0) + [0.02, 0.02, 0.0]
-    cand = np.flatnonzero(((canonical > lo) & (canonical < hi)).all(1))
+    # The nape, behind the mouth, faces backwards; the mouth's walls face into it (forwards, up, down, sideways).
+    facing = vertex_normals(canonical, triangles)[:, 2] > -0.5
+    cand = np.flatnonzero(((canonical > lo) & (canonical < hi)).all(1) & facing)
     tri_pts = canonical[triangles]
     box_lo, box_hi = lips.min(0) - [0.012, 0.015, 0.02], lips.max(0) + [0.012, 0.015, 0.02]
     near = ((tri_pts.min(1) < box_hi) & (tri_pts.max(1) > box_lo)).all(1)
