@@ -109,12 +109,22 @@ def hair_part(style: str, frame: FaceFrame, head: np.ndarray, azimuths: int = 24
     taper = np.clip(above_line / 0.02, 0.0, 1.0)
     thickness = MIN_THICKNESS_M + (thick - MIN_THICKNESS_M) * taper * taper * (3 - 2 * taper)
     shell = surface + thickness[..., None] * normal
-    if style != "crop":  # hanging hair: no ring inside the one above it
+    if style != "crop":
+        # Hanging hair passes over the ears in one smooth swell: the horizontal radius smoothed, plus what sticks out
+        # of the smooth (the ears) spread and smoothed, blended in from 50 degrees of elevation to 30; and no ring
+        # of the curtain lies inside the one above it.
         rr = np.hypot(shell[..., 0] - c[0], shell[..., 2] - c[2])
+        mode = ("nearest", "wrap")
+        smooth = ndimage.gaussian_filter(rr, (3.0, 2.0), mode=mode)
+        bump = ndimage.maximum_filter(np.maximum(rr - smooth, 0.0), size=(9, 5), mode=mode)
+        swell = smooth + ndimage.gaussian_filter(bump, (3.0, 2.0), mode=mode)
+        elevation = np.degrees(np.concatenate([theta, np.zeros(rows - dome)]))
+        blend = np.clip((50.0 - elevation) / 20.0, 0.0, 1.0)[:, None]
+        rr = np.maximum(rr, rr + blend * (swell - rr))
         for k in range(dome, rows):
             rr[k] = np.maximum(rr[k], 0.995 * rr[k - 1])
-        shell[dome:, :, 0] = c[0] + rr[dome:] * flat[None, :, 0]
-        shell[dome:, :, 2] = c[2] + rr[dome:] * flat[None, :, 2]
+        shell[..., 0] = c[0] + rr * np.sin(phi)[None]
+        shell[..., 2] = c[2] + rr * np.cos(phi)[None]
     coverage = np.clip(0.5 + above_line / 0.012, 0.0, 1.0)
     # Strand coordinates: across = azimuth at 9 cm, along = distance down from the crown.
     along = np.concatenate([0.09 * (np.pi / 2 - theta), 0.09 * np.pi / 2 + (c[1] - ring_y)])
