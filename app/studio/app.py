@@ -221,6 +221,8 @@ class Studio:
         self.act(a.AvatarOpened(o.files))
         remember_recent(o.folder)
         self.worker.set_avatar(o.files.folder)
+        if self.live is not None:  # the source goes on driving the avatar now open, in its head model's terms
+            self.start_live(self.live.source)
         if after is not None:
             self.act(a.LoadAnimation(after))
 

@@ -110,9 +110,15 @@ LIVE_PASS_MS = 70.0
 coarsest."""
 
 
-def live_pass(passes: tuple[str, ...], timed: dict[tuple[str, int], float], size: int) -> tuple[str, ...]:
+LIVE_PROBE_EVERY = 30
+"""One live pose in this many renders the pass finer than live_pass chooses, so that a pass timed as too slow while
+the machine was busy is timed again (its last times would otherwise keep it out for good)."""
+
+
+def live_pass(passes: tuple[str, ...], timed: dict[tuple[str, int], float], size: int,
+              probe: bool = False) -> tuple[str, ...]:
     """The one pass a live pose renders (`timed` as passes_to_render takes it; a pass not timed yet counts as fast
-    enough: the presets' measurement at opening times them).
+    enough: the presets' measurement at opening times them); with `probe`, the next finer one.
 
     >>> live_pass(("draft", "preview", "final"), {("final", 256): 62.0, ("preview", 256): 30.0}, 256)
     ('final',)
@@ -121,9 +127,12 @@ def live_pass(passes: tuple[str, ...], timed: dict[tuple[str, int], float], size
     >>> live_pass(("draft", "preview", "final"), {("final", 256): 900.0, ("preview", 256): 300.0,
     ...                                           ("draft", 256): 90.0}, 256)
     ('draft',)
+    >>> live_pass(("draft", "preview", "final"), {("final", 256): 210.0, ("preview", 256): 65.0}, 256, probe=True)
+    ('final',)
     """
-    fitting = [name for name in passes if timed.get((name, size), 0.0) <= LIVE_PASS_MS]
-    return (fitting[-1] if fitting else passes[0],)
+    fitting = [i for i, name in enumerate(passes) if timed.get((name, size), 0.0) <= LIVE_PASS_MS]
+    chosen = fitting[-1] if fitting else 0
+    return (passes[min(chosen + probe, len(passes) - 1)],)
 
 
 def scaled(camera: Camera, scale: float) -> Camera:
@@ -250,6 +259,7 @@ def serve(pipe, results, latest) -> None:
     not yet taken stops the presets' measurement too (timed from `latest` as it began, a measurement that began
     between the two ran to its end, 0.4 s, while the request waited)."""
     requests: queue.Queue = queue.Queue()
+    live_renders = 0
 
     def take() -> None:
         while True:
@@ -293,7 +303,9 @@ def serve(pipe, results, latest) -> None:
             try:
                 if render is not None:
                     _, rid, request = render
-                    render_passes(avatar, raster, request, rid, stale, results, timed)
+                    live_renders += request.live
+                    render_passes(avatar, raster, request, rid, stale, results, timed,
+                                  probe=request.live and live_renders % LIVE_PROBE_EVERY == 0)
                     results.put(("idle", rid))
                 elif measure:
                     figures = measure_presets(avatar, raster, lambda since=taken: stale(since))
@@ -315,19 +327,19 @@ def serve(pipe, results, latest) -> None:
 
 
 def render_passes(avatar, raster, request: Request, rid: int, stale, results,
-                  timed: dict[tuple[str, int], list[float]]) -> None:
+                  timed: dict[tuple[str, int], list[float]], probe: bool = False) -> None:
     """Each pass of the request worth rendering (passes_to_render), coarse to fine, its pixels sent as soon as they
     are made; each pass's time goes into `timed` (its last TIMES_KEPT kept)."""
     size = request.camera.width_px
     recent = recent_ms(timed)
-    passes = live_pass(request.passes, recent, size) if request.live else passes_to_render(request.passes, recent,
-                                                                                            size)
-    qualities = [avatar.presets[name].quality for name in passes]
+    passes = live_pass(request.passes, recent, size, probe) if request.live else \
+        passes_to_render(request.passes, recent, size)
+    qualities = [avatar.card.presets[name].quality for name in passes]
     for i, name in enumerate(passes):
         if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:
             continue  # the bench may choose one setting for two presets: render it once, as the finer
         avatar.apply_preset(name, size)
-        cam = scaled(request.camera, avatar.presets[name].quality.scale)
+        cam = scaled(request.camera, avatar.card.presets[name].quality.scale)
         results.put(("started", rid, recent.get((name, size))))  # the window paces its frames by it
         t0 = time.perf_counter()
         options = RenderOptions(frame=request.frame, inspect=request.inspect, buffers=request.buffers,
@@ -345,9 +357,9 @@ def warm_up(avatar, raster) -> None:
     demo at 256 px the first final took 95 ms and the next ones 75-81 (one thread, alone), and with no other time
     yet the window's first slider move went by that one (the preview first, the final on screen 178 ms after
     the move); after this 56 ms render the first final takes 73."""
-    cam = framing_camera(avatar.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=32, height_px=32)
+    cam = framing_camera(avatar.card.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=32, height_px=32)
     avatar.apply_preset("draft", 32)
-    render_image(avatar, cam, avatar.at_rest(Controls()), RenderOptions(buffers=None, cores=CORES), raster)
+    render_image(avatar, cam, avatar.card.at_rest(Controls()), RenderOptions(buffers=None, cores=CORES), raster)
 
 
 def seed_times(timed: dict[tuple[str, int], list[float]], figures: PresetFigures) -> None:
@@ -369,19 +381,19 @@ def measure_presets(avatar, raster, should_stop) -> PresetFigures:
     the studio shows first (no optional buffers: render_image's buffers=())."""
     from models.training.metrics import psnr
 
-    size = min(avatar.capture_px or 128, 256)
-    cam = framing_camera(avatar.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
+    size = min(avatar.card.capture_px or 128, 256)
+    cam = framing_camera(avatar.card.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=size, height_px=size)
     figures = PresetFigures(size_px=size)
     images = {}
     for name in ("final", "preview", "draft"):
         avatar.apply_preset(name, size)
-        c = scaled(cam, avatar.presets[name].quality.scale)
+        c = scaled(cam, avatar.card.presets[name].quality.scale)
         times = []
         for _ in range(3):
             t0 = time.perf_counter()
             options = RenderOptions(buffers=(), chunk_rays=avatar.interactive_chunk_rays, should_stop=should_stop,
                                     cores=CORES)
-            images[name] = render_image(avatar, c, avatar.at_rest(Controls()), options, raster)["rgb"]
+            images[name] = render_image(avatar, c, avatar.card.at_rest(Controls()), options, raster)["rgb"]
             times.append(1e3 * (time.perf_counter() - t0))
         figures.ms[name] = float(np.median(times))
         reference = images["final"]
