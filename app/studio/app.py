@@ -248,9 +248,9 @@ class Studio:
         if not self.worker.busy or self.live is None or self.live.state != "running":
             self.worker.arrived.set()
 
-    def stop_live(self, message: str) -> None:
+    def stop_live(self, message: str, wait: bool = False) -> None:
         if self.live is not None:
-            self.live.close()
+            self.live.close(wait)
             self.live = None
         if self.session.live.running:
             self.act(a.LiveStopped(message))
@@ -482,7 +482,7 @@ class Studio:
     def close(self) -> None:
         """The window is gone, however it ended (closed, a script done or failed, an error): the renders stop,
         and so do the training jobs (checkpointed) unless the user chose to keep them."""
-        self.stop_live("")
+        self.stop_live("", wait=True)
         self.worker.close()
         self.exporter.cancel()
         if not self.keep_jobs:

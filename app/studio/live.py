@@ -337,11 +337,19 @@ class LiveWorker:
         with contextlib.suppress(OSError, ValueError, BrokenPipeError):
             self._commands.send(msg)
 
-    def close(self) -> None:
+    def close(self, wait: bool = True) -> None:
+        """End the live process (its source released); without `wait`, a thread waits for it (a camera's read may
+        hold it a moment), not the window."""
         self._send(("quit",))
+        if self.state in ("starting", "running"):
+            self.state = "stopped"
+        if wait:
+            self._end()
+        else:
+            threading.Thread(target=self._end, name="live-close", daemon=True).start()
+
+    def _end(self) -> None:
         self._proc.join(timeout=5)
         if self._proc.is_alive():
             self._proc.terminate()
             self._proc.join(timeout=5)
-        if self.state in ("starting", "running"):
-            self.state = "stopped"
