@@ -405,13 +405,14 @@ class ShowBuffer(Action):
 
 @dataclass(frozen=True)
 class SetDisplay(Action):
-    """Guide pass, wireframe, landmarks, layout, overlay opacity: the guide and the layout, not the render."""
+    """Guide pass, wireframe, landmarks, layout, overlay opacity: the guide and the layout, not the render; the
+    pass live poses render."""
 
     changes: dict[str, Any] = field(default_factory=dict)
 
     def apply(self, s: Session) -> None:
         for name, value in self.changes.items():
-            if name not in ("guide_pass", "wireframe", "landmarks", "layout", "overlay_alpha"):
+            if name not in ("guide_pass", "wireframe", "landmarks", "layout", "overlay_alpha", "live_pass"):
                 raise ValueError(f"no display setting {name!r}")
             setattr(s.display, name, value)
 

@@ -321,6 +321,8 @@ class Studio:
         frame = s.timeline_frame if s.timeline_frame >= 0 else None
         buffers, inspect = render_needs(s.display.buffer)
         live = s.live.stamp is not None
+        if live and s.display.live_pass != "auto":
+            passes = (s.display.live_pass,)
         self.last_submit_id = self.worker.submit(Request(s.controls(), cam, passes, frame, inspect=inspect,
                                                          buffers=buffers, live=live))
         self.last_submit_time = time.perf_counter()

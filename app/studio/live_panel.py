@@ -51,6 +51,13 @@ def draw(ctx: PanelContext) -> None:
         act(a.StopRecording(_record_path()))
     imgui.set_next_item_width(260)
     _, PanelState.record_to = imgui.input_text("save to##live_record", PanelState.record_to)
+    choices = ("auto", "draft", "preview", "final")
+    imgui.set_next_item_width(120)
+    changed, k = imgui.combo("live quality", choices.index(s.display.live_pass), list(choices))
+    if changed:
+        act(a.SetDisplay({"live_pass": choices[k]}))
+    if imgui.is_item_hovered():
+        imgui.set_tooltip("auto: the finest pass that keeps up with the camera; a preset: that one, however slow")
     f = ctx.live
     if f is not None:
         recent = f.latency_ms[-30:]

@@ -56,6 +56,7 @@ its value, the fields beside it); a step that cannot be done ends the run with o
   {"save_live": PNG}                      the live render on screen now (its source frame kept for the report's
                                           "live_log")
   {"live_neutral": true}                  the next face becomes the neutral one
+  {"live_pass": PASS}                     the pass live poses render: auto, draft, preview or final
   {"record": true}                        record the live performance
   {"stop_recording": JSON}                stop: the recording onto the timeline and into the file
   {"expect_error": TEXT}                  fail unless a message in the window contains TEXT
@@ -613,4 +614,10 @@ def _save_live(sc: Script, st: Driven, s: dict) -> bool:
     Image.fromarray(st.viewport.neural_image).save(path)
     sc.live_log.append({"file": str(path), "frame": st.live_figures.on_screen,
                         "sliders": sliders_json(st.session.sliders)})
+    return True
+
+
+@step("live_pass", one_of(("auto", *PRESET_NAMES)))
+def _live_pass(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.SetDisplay({"live_pass": s["live_pass"]}))
     return True

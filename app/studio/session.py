@@ -15,8 +15,9 @@ import numpy as np
 
 from app.animation import Animation
 from app.sliders import Sliders, View
-from models.avatars.base import Avatar
-from models.avatars.registry import load_avatar
+from models.avatars.card import AvatarCard
+from models.avatars.checkpoint import read_meta
+from models.avatars.registry import read_card
 from models.capture.dataset import CaptureSplit, DatasetError, load_split
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
@@ -52,15 +53,19 @@ class Display:
         return int(min(max(64, self.shown_px // 8 * 8), LIVE_MAX_PX))
     refine_to: str = "final"
     """The last pass the viewport refines to while the controls rest."""
+    live_pass: str = "auto"
+    """The pass a live pose renders: auto (the finest that keeps up: app/studio/neural.py, live_pass), or a preset's
+    name (that one, however long it takes)."""
 
 
 @dataclass
 class AvatarFiles:
-    """An avatar folder as read (off the window's thread): the avatar, avatar.json, its test metrics and the
-    capture it was trained on, where that is still there."""
+    """An avatar folder as read (off the window's thread): what it says of the avatar, avatar.json, its test metrics
+    and the capture it was trained on, where that is still there. The window reads no weights and builds no network
+    (the render process loads the avatar)."""
 
     folder: Path
-    avatar: Avatar
+    avatar: AvatarCard
     meta: dict
     metrics: dict | None = None
     capture: CaptureSplit | None = None
@@ -71,15 +76,14 @@ def read_avatar_folder(folder: str | Path) -> AvatarFiles:
     """Read an avatar folder (CheckpointError etc. propagate with the reason). It only reads, so the studio runs it
     off the window's thread."""
     folder = Path(folder)
-    avatar, meta = load_avatar(folder)
-    files = AvatarFiles(folder, avatar, meta)
+    files = AvatarFiles(folder, read_card(folder), read_meta(folder))
     metrics = folder / "eval" / "metrics.json"
     if metrics.is_file():
         try:
             files.metrics = json.loads(metrics.read_text()).get("metrics")
         except (OSError, json.JSONDecodeError):
             files.metrics = None
-    prov = meta.get("provenance", {})
+    prov = files.meta.get("provenance", {})
     for dataset in (prov.get("dataset"), prov.get("dataset_resolved")):  # as given, then absolute
         if not dataset:
             continue
@@ -206,7 +210,7 @@ class Session:
     live: Live = field(default_factory=Live)
 
     @property
-    def avatar(self) -> Avatar | None:
+    def avatar(self) -> AvatarCard | None:
         return None if self.files is None else self.files.avatar
 
     @property

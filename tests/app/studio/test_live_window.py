@@ -43,7 +43,8 @@ def mouth(image: np.ndarray) -> tuple[float, float]:
 
 def test_a_video_drives_the_avatar_and_its_mouth_opens_on_screen(display, tmp_path):
     closed, opened, perf = tmp_path / "closed.png", tmp_path / "open.png", tmp_path / "takes" / "perf.json"
-    steps = [{"wait_render": "draft"}, {"live": str(SHARED_VIDEO)}, {"record": True},
+    # The final pass whatever the machine's load (the live pass would fall to the draft's 64 px on a busy one).
+    steps = [{"wait_render": "draft"}, {"live_pass": "final"}, {"live": str(SHARED_VIDEO)}, {"record": True},
              {"wait_live": 240}, {"save_live": str(closed)},  # 8 s in: the mouth shut
              {"wait_live": 320}, {"save_live": str(opened)},  # 10.7 s: the mouth open
              {"wait_live_end": True, "timeout_s": 60}, {"stop_recording": str(perf)}]
@@ -54,10 +55,9 @@ def test_a_video_drives_the_avatar_and_its_mouth_opens_on_screen(display, tmp_pa
     # The sliders the poses set: the jaw shut, then open (jawOpen about 0.55 there: 0.55 x 20 degrees).
     assert shut["sliders"]["jaw_open_deg"] < 2.0 < 6.0 < wide["sliders"]["jaw_open_deg"], report["live_log"]
     a, b = (np.asarray(Image.open(p)) for p in (closed, opened))
-    assert a.shape == b.shape and a.shape[0] >= 64
+    assert a.shape == b.shape == (256, 256, 3) and report["live"]["passes"].keys() == {"final"}
     # The person turns between the two frames, so the face's pixels move everywhere; the mouth's own change is the
-    # opening: the lips' box taller (at 64 px 3 rows against 6, the face 55 rows), dark inside (4 pixels against 26
-    # of about 2,200 on the face).
+    # opening: the lips' box taller, dark inside.
     (h_shut, dark_shut), (h_open, dark_open) = mouth(a), mouth(b)
     print("lips' height / face's", h_shut, h_open, "dark inside / face's area", dark_shut, dark_open)
     assert h_open > 1.5 * h_shut and dark_open > max(2 * dark_shut, 0.005)
