@@ -7,6 +7,7 @@ it shows how far the load has slowed everything (about 100 ms on this one idle).
 
     .venv/bin/python -m benchmarks.bench_live [--avatar resources/demo_avatar --avatar out/real/d3_view_win]
         [--video ../shared/data/video/expressions_d3.mp4] [--size 1440x900] [--runs 1]
+        [--live-pass auto --live-pass final]
         [--out benchmarks/results/live.json]
 
 The first second of each run is left out (the tracker's process starts and its first frames queue behind the
@@ -55,6 +56,8 @@ def main() -> None:
     p.add_argument("--video", type=Path, default=REPO.parent / "shared" / "data" / "video" / "expressions_d3.mp4")
     p.add_argument("--size", default="1440x900", help="the window, WxH (1440x900 shows the render at 256 px or more)")
     p.add_argument("--runs", type=int, default=1, help="runs of the whole video for each avatar")
+    p.add_argument("--live-pass", action="append", choices=("auto", "draft", "preview", "final"),
+                   help="the pass live poses render (repeat: each measured); default auto, the finest that keeps up")
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "live.json")
     a = p.parse_args()
     if not a.video.is_file():
@@ -68,17 +71,20 @@ def main() -> None:
     load = os.getloadavg()[0]
     results: dict = {"machine": f"{os.cpu_count()} CPU cores, no GPU (Mesa llvmpipe)", "video": str(a.video),
                      "window": a.size, "load_average_1min_at_start": round(load, 2), "avatars": {}}
-    steps = [{"refine_to": "final"}, {"wait_render": "final"}, {"wait_frames": 60}, {"live": str(a.video)},
-             {"wait_live_end": True, "timeout_s": 120}]
+    steps = lambda live_pass: [{"refine_to": "final"}, {"wait_render": "final"}, {"wait_frames": 60},
+                               {"live_pass": live_pass}, {"live": str(a.video)},
+                               {"wait_live_end": True, "timeout_s": 120}]
     try:
         for avatar in avatars:
             avatar = avatar.resolve()
             key = str(avatar.relative_to(REPO) if avatar.is_relative_to(REPO) else avatar)
             runs = []
-            for _ in range(a.runs):
-                with tempfile.TemporaryDirectory() as tmp:
-                    runs.append(live_row(studio_run(display, avatar, steps, Path(tmp), size)))
-                print(f"{key}: {json.dumps(runs[-1])}", flush=True)
+            for live_pass in a.live_pass or ["auto"]:
+                for _ in range(a.runs):
+                    with tempfile.TemporaryDirectory() as tmp:
+                        row = live_row(studio_run(display, avatar, steps(live_pass), Path(tmp), size))
+                    runs.append({"live_pass": live_pass, **row})
+                    print(f"{key}: {json.dumps(runs[-1])}", flush=True)
             with tempfile.TemporaryDirectory() as tmp:
                 slider = summary(studio_run(display, avatar, latency_steps(5), Path(tmp), size)["latencies"], "final")
             print(f"{key}: slider to final pixels {json.dumps(slider)}", flush=True)

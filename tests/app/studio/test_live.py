@@ -182,6 +182,7 @@ def test_the_tracker_process_follows_a_real_video(files):
     assert math.isfinite(np.median([p.track_ms for p in poses]))
 
 
+@pytest.mark.gl
 def test_a_recording_is_an_animation_file_for_animate(tmp_path, session):
     """The file a recording leaves is one `animate` renders (its own checks pass)."""
     a.StartRecording().apply(session)
