@@ -261,6 +261,7 @@ class Studio:
         live = self.live
         if live is None:
             return
+        live.check()
         if live.received > self.live_applied and live.pose is not None:
             pose = live.pose
             self.live_applied = live.received

@@ -330,6 +330,13 @@ class LiveWorker:
             elif kind == "closed":
                 return
 
+    def check(self) -> None:
+        """A process that died without a word (a crash in the landmarker) fails live driving with its exit code."""
+        if self.state in ("starting", "running") and not self._proc.is_alive() and self._reader.is_alive():
+            time.sleep(0.05)  # its last messages may still be on their way
+            if self.state in ("starting", "running"):
+                self.state, self.message = "failed", f"live: the tracker stopped (exit code {self._proc.exitcode})"
+
     def set_neutral(self) -> None:
         self._send(("neutral",))
 

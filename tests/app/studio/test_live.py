@@ -194,3 +194,20 @@ def test_a_recording_is_an_animation_file_for_animate(tmp_path, session):
     assert main(["animate", str(DEMO), str(path), "--out", str(out), "--size", "32", "--preset", "draft"]) == 0
     assert cv2.VideoCapture(str(out)).get(cv2.CAP_PROP_FRAME_COUNT) == 16  # (0.5 + 1/30) s at 30 fps
     assert json.loads(path.read_text())["format"] == "avatar-studio/animation/1"
+
+
+def test_a_tracker_that_dies_fails_live_driving_with_its_exit_code(files, counter_video):
+    from app.user_config import find_landmarker
+
+    worker = LiveWorker(str(counter_video), find_landmarker(), files.avatar.head_model, lambda: None)
+    try:
+        deadline = time.monotonic() + 60
+        while worker.state == "starting" and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert worker.state == "running"
+        worker._proc.kill()  # as a crash in the landmarker would end it: no word sent
+        worker._proc.join(5)
+        worker.check()
+        assert worker.state == "failed" and worker.message == "live: the tracker stopped (exit code -9)"
+    finally:
+        worker.close()
