@@ -110,7 +110,7 @@ float brow_strands(vec3 p, vec3 center) {
     float inside = (1.0 - smoothstep(0.75, 1.05, abs(p.y - arch) / half_height + ragged))
                  * (1.0 - smoothstep(0.85, 1.08, abs(t) + ragged));
     float front = smoothstep(center.z - 0.03, center.z - 0.01, p.z);
-    return inside * front * mix(0.35, 1.0, smoothstep(0.3, 0.7, strands));
+    return inside * front * mix(0.55, 1.0, smoothstep(0.3, 0.7, strands));
 }
 
 vec3 skin_albedo(vec3 p, float inside_mouth) {

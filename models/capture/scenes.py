@@ -64,10 +64,13 @@ def lighting_record(scene: SceneName, lighting: CaptureLighting, light_deg: tupl
             "direction": np.round(lighting.light_dir, 6).tolist(), "azimuth_deg": az, "elevation_deg": el,
             "color": np.asarray(lighting.light_color).tolist()},
         "specular": {"model": "blinn-phong", "shininess": lighting.shininess,
-                     "map": "base 0.04, peak 0.5 on forehead and nose, 0.9 on the eyes"} if lighting.specular else None,
+                     "map": "base 0.04, peak 0.5 on forehead and nose, 0.9 on the eyes, 0.3 on the teeth",
+                     "hair": "Kajiya-Kay along the strands: 0.12 white (exponent 80) + 0.6 albedo (exponent 24, "
+                             "tangent tilted 0.25 towards the normal), scaled by the strand texture"}
+        if lighting.specular else None,
         "shadows": {"method": "shadow map", "size_px": lighting.shadow_map_px} if lighting.shadows else None,
         "model": "I = albedo * (SH(n) + key * max(n.l, 0) * visibility) + spec * key * max(n.h, 0)^shininess "
-                 "* visibility [n.l > 0]; terms absent from `effects` are zero",
+                 "* visibility [n.l > 0] (on hair, the Kajiya-Kay term instead); terms absent from `effects` are zero",
     }
 
 
