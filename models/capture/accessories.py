@@ -236,34 +236,29 @@ def lash_parts(frame: FaceFrame, canonical: np.ndarray, rigid_ids: np.ndarray) -
 def mouth_interior(canonical: np.ndarray, triangles: np.ndarray, frame: FaceFrame) -> np.ndarray:
     """(V,) 1 for the head's vertices inside the mouth (behind the closed lips: a ray from the vertex straight
     ahead meets the lips, and the vertex does not face backwards), else 0."""
-    lm = frame.landmarks
-    lips = lm[48:68]
+    lips = frame.landmarks[48:68]
+    box_lo, box_hi = lips.min(0) - [0.012, 0.015, 0.02], lips.max(0) + [0.012, 0.015, 0.02]
+    tri_pts = canonical[triangles]
+    tri_pts = tri_pts[((tri_pts.min(1) < box_hi) & (tri_pts.max(1) > box_lo)).all(1)]
+    # A ray along +z from (x, y, z) meets a triangle where (x, y) is inside its projection on the xy plane and the
+    # triangle's z there is ahead of z. The mouth reaches wider than the lips and 12 cm behind them; the nape,
+    # behind it, faces backwards, the mouth's walls face into it.
     lo, hi = lips.min(0) - [0.02, 0.03, 0.12], lips.max(0) + [0.02, 0.02, 0.0]
-    # The nape, behind the mouth, faces backwards; the mouth's walls face into it (forwards, up, down, sideways).
     facing = vertex_normals(canonical, triangles)[:, 2] > -0.5
     cand = np.flatnonzero(((canonical > lo) & (canonical < hi)).all(1) & facing)
-    tri_pts = canonical[triangles]
-    box_lo, box_hi = lips.min(0) - [0.012, 0.015, 0.02], lips.max(0) + [0.012, 0.015, 0.02]
-    near = ((tri_pts.min(1) < box_hi) & (tri_pts.max(1) > box_lo)).all(1)
-    tri_pts = tri_pts[near]
     out = np.zeros(len(canonical), np.float32)
     if not len(cand) or not len(tri_pts):
         return out
-    origin = canonical[cand] + [0.0, 0.0, 0.0005]
-    # Moller-Trumbore against every nearby triangle, for the ray direction +z.
-    e1, e2 = tri_pts[:, 1] - tri_pts[:, 0], tri_pts[:, 2] - tri_pts[:, 0]
-    d = np.array([0.0, 0.0, 1.0])
-    p = np.cross(d, e2)
-    det = (e1 * p).sum(1)
-    ok = np.abs(det) > 1e-12
-    e1, e2, p, det, v0 = e1[ok], e2[ok], p[ok], det[ok], tri_pts[ok, 0]
-    for k in range(0, len(cand), 256):
-        o = origin[k:k + 256, None, :]
-        s = o - v0[None]
-        u = (s * p[None]).sum(-1) / det
-        q = np.cross(s, e1[None])
-        v = (q * d).sum(-1) / det
-        t = (q * e2[None]).sum(-1) / det
-        hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-4)
-        out[cand[k:k + 256]] = hit.any(1)
+    a, b, c = tri_pts[:, 0], tri_pts[:, 1], tri_pts[:, 2]
+    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+    ok = np.abs(det) > 1e-14  # triangles seen edge-on from the front have no area to meet
+    a, b, c, det = a[ok], b[ok], c[ok], det[ok]
+    for k in range(0, len(cand), 512):
+        p = canonical[cand[k:k + 512], None, :]
+        dx, dy = p[..., 0] - a[:, 0], p[..., 1] - a[:, 1]
+        u = (dx * (c[:, 1] - a[:, 1]) - dy * (c[:, 0] - a[:, 0])) / det
+        v = (dy * (b[:, 0] - a[:, 0]) - dx * (b[:, 1] - a[:, 1])) / det
+        z = a[:, 2] + u * (b[:, 2] - a[:, 2]) + v * (c[:, 2] - a[:, 2])
+        hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (z > p[..., 2] + 0.0005)
+        out[cand[k:k + 512]] = hit.any(1)
     return out

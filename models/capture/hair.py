@@ -49,13 +49,13 @@ def _support(points: np.ndarray, directions: np.ndarray, cone_deg: float) -> np.
     """(G,) the furthest any point reaches along each unit direction, among points within cone_deg of it (0 where
     none). points: (V,3) relative to the centre; directions: (G,3)."""
     dist = np.linalg.norm(points, axis=1)
-    unit = points / np.maximum(dist, 1e-9)[:, None]
-    cos_cone = np.cos(np.radians(cone_deg))
+    unit = (points / np.maximum(dist, 1e-9)[:, None]).astype(np.float32)
+    cos_cone = np.float32(np.cos(np.radians(cone_deg)))
     out = np.zeros(len(directions))
     for k in range(0, len(directions), 256):
-        c = unit @ directions[k:k + 256].T  # (V,g)
-        reach = np.where(c > cos_cone, dist[:, None] * c, 0.0)
-        out[k:k + 256] = reach.max(0)
+        c = unit @ directions[k:k + 256].T.astype(np.float32)  # (V,g)
+        c[c <= cos_cone] = 0.0
+        out[k:k + 256] = (c * dist[:, None].astype(np.float32)).max(0)
     return out
 
 
