@@ -30,7 +30,7 @@ class FaceFrame:
     eye_y: float
     lip_y: float  # where the lips meet
     chin_y: float
-    tragus_azimuth_deg: float  # azimuth about the centre (0 ahead, 90 to the side) of the jaw line's top
+    ear_deg: tuple[float, float]  # azimuths about the centre (0 ahead, 90 to the side) of the ears' front and back
     scalp_ids: np.ndarray  # (S,) vertices that move only with the skull
     chin_ids: np.ndarray  # (C,) vertices that move with the jaw
 
@@ -49,8 +49,6 @@ def face_frame(canonical: np.ndarray, landmarks: np.ndarray, rigid_ids: np.ndarr
     skin = canonical[rigid_ids]
     midline = skin[(np.abs(skin[:, 0] - lm[27, 0]) < 0.02) & (skin[:, 1] > brow_y)]
     center = np.array([lm[36:48, 0].mean(), brow_y, 0.5 * (midline[:, 2].min() + midline[:, 2].max())])
-    top = lm[0] if np.isfinite(lm[0]).all() else np.array([-0.07, lm[30, 1], center[2] + 0.025])
-    tragus = float(np.degrees(np.arctan2(abs(top[0] - center[0]), top[2] - center[2])))
     d = skin - center
     height = float(brow_y - chin[1])
     up = np.degrees(np.arctan2(d[:, 1], np.hypot(d[:, 0], d[:, 2])))
@@ -58,7 +56,29 @@ def face_frame(canonical: np.ndarray, landmarks: np.ndarray, rigid_ids: np.ndarr
     jaw_point = 0.6 * chin + 0.4 * lm[57]
     near = np.linalg.norm(skin - jaw_point, axis=1) < 0.3 * height
     chin_ids = rigid_ids[near & (skin[:, 2] > jaw_point[2] - 0.02) & (skin[:, 1] < lm[57, 1])]
-    return FaceFrame(lm, center, brow_y, eye_y, lip_y, float(chin[1]), tragus, scalp, chin_ids)
+    ears = ear_azimuths(d, brow_y - center[1], eye_y - center[1])
+    return FaceFrame(lm, center, brow_y, eye_y, lip_y, float(chin[1]), ears, scalp, chin_ids)
+
+
+def ear_azimuths(d: np.ndarray, brow_dy: float, eye_dy: float, step_deg: float = 5.0) -> tuple[float, float]:
+    """Where the ears are round the head: the azimuths (both sides folded together, from 55 degrees back) at which
+    the head reaches more than 8 mm further out between eye and brow height than just above the brows. d: (V,3) skin
+    vertices about the skull's centre; brow_dy, eye_dy: the brows' and eyes' heights about it. (90, 112) where
+    nothing sticks out."""
+    azimuth = np.degrees(np.arctan2(np.abs(d[:, 0]), d[:, 2]))
+    radius = np.hypot(d[:, 0], d[:, 2])
+    band = (d[:, 1] > eye_dy - 0.01) & (d[:, 1] < brow_dy)
+    above = (d[:, 1] > brow_dy + 0.015) & (d[:, 1] < brow_dy + 0.035)
+    starts = np.arange(55.0, 150.0, step_deg)
+    out = []
+    for a in starts:
+        inside = (azimuth >= a) & (azimuth < a + step_deg)
+        if (band & inside).any() and (above & inside).any():
+            out.append(radius[band & inside].max() - radius[above & inside].max() > 0.008)
+        else:
+            out.append(False)
+    ear = starts[np.array(out, bool)]
+    return (float(ear.min()), float(ear.max() + step_deg)) if len(ear) else (90.0, 112.0)
 
 
 @dataclass(frozen=True)

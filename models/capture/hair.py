@@ -27,12 +27,14 @@ RING_M = 0.004  # the curtain's rings, metres apart
 
 def hairline_y(style: str, frame: FaceFrame, azimuth_deg: np.ndarray) -> np.ndarray:
     """The height (canonical metres) below which a style has no hair, at each |azimuth| (degrees, 0 ahead)."""
-    B, E, U, T = frame.brow_y, frame.eye_y, frame.face_height, frame.tragus_azimuth_deg
+    B, E, U = frame.brow_y, frame.eye_y, frame.face_height
+    F, K = frame.ear_deg  # the ears' front and back
+    T = F - 20.0  # where the hair beside the face starts to fall
     lip, chin = frame.lip_y, frame.chin_y
     if style == "crop":  # forehead, temples, a sideburn in front of the ear, over the ear, down to the nape
-        knots = [(0, B + 0.42 * U), (35, B + 0.38 * U), (T - 22, B + 0.26 * U), (T - 7, B + 0.08 * U),
-                 (T - 4, E - 0.06 * U), (T + 1, E - 0.06 * U), (T + 5, B + 0.02 * U), (T + 30, B - 0.02 * U),
-                 (T + 50, lip), (180, lip - 0.12 * U)]
+        knots = [(0, B + 0.42 * U), (35, B + 0.38 * U), (F - 42, B + 0.26 * U), (F - 27, B + 0.08 * U),
+                 (F - 24, E - 0.06 * U), (F - 19, E - 0.06 * U), (F - 15, B + 0.02 * U), (K - 10, B - 0.02 * U),
+                 (K + 10, lip), (180, lip - 0.12 * U)]
     elif style == "bob":  # a fringe, then straight down beside the face to the jaw
         knots = [(0, B + 0.16 * U), (30, B + 0.19 * U), (T - 22, B + 0.12 * U), (T - 14, chin + 0.05 * U),
                  (T, chin - 0.02 * U), (180, chin - 0.08 * U)]

@@ -69,7 +69,7 @@ def test_hair_covers_the_back_of_the_head(renderer, any_head, style):
     bald_back, _ = draw(renderer, make_sitter(head, 0, replace(BLACK_CROP, hair="none"), FOV_DEG), 180.0)
     print(style, "hair share from behind", round(hair_share(back), 3), "from above", round(hair_share(above), 3))
     # From behind the frame holds the head and the neck down to the shoulders: the hair must be most of it, more
-    # the longer it is (measured, built-in and ICT: crop 0.69 and 0.56, bob 0.82 and 0.71, long 1.0 and 1.0); from
+    # the longer it is (measured, built-in and ICT: crop 0.67 and 0.56, bob 0.82 and 0.71, long 1.0 and 1.0); from
     # above, with the forehead and nose in view, most of it (0.89-0.97 and 0.72-0.92). Bald, none of it is hair.
     assert hair_share(back) > {"crop": 0.45, "bob": 0.6, "long": 0.9}[style]
     assert hair_share(above) > 0.6
@@ -192,12 +192,12 @@ def test_hairlines_from_the_landmarks(ict_model):
     canonical = ict_model.template
     lm = landmarks68(ict_model, canonical)
     frame = face_frame(canonical, lm, np.arange(len(canonical)))
-    front, ear, back = hairline_y("crop", frame, np.array([0.0, frame.tragus_azimuth_deg + 15, 180.0]))
+    front, ear, back = hairline_y("crop", frame, np.array([0.0, sum(frame.ear_deg) / 2, 180.0]))
     assert front > frame.brow_y + 0.03 and ear > frame.brow_y - 0.01 and frame.chin_y < back < frame.lip_y
     assert hairline_y("bob", frame, np.array([180.0]))[0] < frame.chin_y
     assert hairline_y("long", frame, np.array([180.0]))[0] < frame.chin_y - 0.08
     no_jaw = lm.copy()
     no_jaw[:17] = np.nan
     frame51 = face_frame(canonical, no_jaw, np.arange(len(canonical)))
-    assert np.isfinite(frame51.center).all() and 40 < frame51.tragus_azimuth_deg < 90
+    assert np.isfinite(frame51.center).all() and frame51.ear_deg == frame.ear_deg
     assert len(teeth_parts(frame51)) == 2
