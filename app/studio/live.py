@@ -305,7 +305,10 @@ class LiveWorker:
         """The source's frame rate."""
         self._proc = ctx.Process(target=serve, args=(source, str(bundle), head, self._results, inbox),
                                  name="live-tracking", daemon=True)
-        self._proc.start()
+        # Started from a thread: starting sends the new interpreter its arguments, the head model among them (ICT's
+        # full model is 33 MB pickled), which the window's thread must not wait for.
+        self._starter = threading.Thread(target=self._proc.start, name="live-start", daemon=True)
+        self._starter.start()
         self._reader = threading.Thread(target=self._read, name="live-results", daemon=True)
         self._reader.start()
 
@@ -332,7 +335,7 @@ class LiveWorker:
 
     def check(self) -> None:
         """A process that died without a word (a crash in the landmarker) fails live driving with its exit code."""
-        if self.state in ("starting", "running") and not self._proc.is_alive() and self._reader.is_alive():
+        if self.state in ("starting", "running") and self._proc.exitcode is not None and self._reader.is_alive():
             time.sleep(0.05)  # its last messages may still be on their way
             if self.state in ("starting", "running"):
                 self.state, self.message = "failed", f"live: the tracker stopped (exit code {self._proc.exitcode})"
@@ -356,6 +359,7 @@ class LiveWorker:
             threading.Thread(target=self._end, name="live-close", daemon=True).start()
 
     def _end(self) -> None:
+        self._starter.join()
         self._proc.join(timeout=5)
         if self._proc.is_alive():
             self._proc.terminate()
