@@ -96,6 +96,6 @@ def test_a_video_drives_the_avatar_and_its_mouth_opens_on_screen(display, tmp_pa
 def test_a_missing_video_is_one_message_and_the_studio_goes_on(display, tmp_path):
     missing = tmp_path / "nothing.mp4"
     report = run_script(display, tmp_path, DEMO, [{"wait_render": "draft"}, {"live": str(missing)},
-                                                  {"wait_frames": 30}, {"expect_error": "no such video file"},
+                                                  {"wait_live_end": True}, {"expect_error": "no such video file"},
                                                   {"expression": 0, "value": 0.5}, {"wait_render": "draft"}])
     assert report["errors"] == [f"{missing}: no such video file (a camera is given by its index: --source 0)"]
