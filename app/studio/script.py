@@ -55,6 +55,7 @@ its value, the fields beside it); a step that cannot be done ends the run with o
   {"wait_live_end": true}                 until live driving stops (a video file ends)
   {"save_live": PNG}                      the live render on screen now (its source frame kept for the report's
                                           "live_log")
+  {"stop_live": true}                     stop live driving
   {"live_neutral": true}                  the next face becomes the neutral one
   {"live_pass": PASS}                     the pass live poses render: auto, draft, preview or final
   {"record": true}                        record the live performance
@@ -620,4 +621,10 @@ def _save_live(sc: Script, st: Driven, s: dict) -> bool:
 @step("live_pass", one_of(("auto", *PRESET_NAMES)))
 def _live_pass(sc: Script, st: Driven, s: dict) -> bool:
     st.act(a.SetDisplay({"live_pass": s["live_pass"]}))
+    return True
+
+
+@step("stop_live", TRUE)
+def _stop_live(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.StopLive())
     return True

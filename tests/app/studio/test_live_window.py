@@ -99,3 +99,16 @@ def test_a_missing_video_is_one_message_and_the_studio_goes_on(display, tmp_path
                                                   {"wait_live_end": True}, {"expect_error": "no such video file"},
                                                   {"expression": 0, "value": 0.5}, {"wait_render": "draft"}])
     assert report["errors"] == [f"{missing}: no such video file (a camera is given by its index: --source 0)"]
+
+
+def test_stopping_live_driving_gives_the_sliders_back(display, tmp_path):
+    """Stopped mid-video: no message, the poses stop coming, and a slider's move renders as before."""
+    steps = [{"wait_render": "draft"}, {"live": str(SHARED_VIDEO)}, {"wait_live": 30}, {"stop_live": True},
+             {"record_sliders": True}, {"wait_frames": 30}, {"record_sliders": True},
+             {"expression": 0, "value": 0.7}, {"wait_render": "draft"}, {"record_sliders": True}]
+    report = run_script(display, tmp_path, DEMO, steps)
+    stopped, later, moved = report["sliders_log"]
+    assert report["errors"] == [] and report["live"]["state"] is None
+    assert 30 <= report["live"]["on_screen"] < 200
+    assert stopped == later  # nothing drives the sliders once stopped
+    assert moved["expression"][0] == 0.7 and moved["expression"][1:] == later["expression"][1:]
