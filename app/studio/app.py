@@ -18,6 +18,7 @@ import numpy as np
 from imgui_bundle import hello_imgui, imgui, immapp
 from PIL import Image
 
+from app.animation import AnimationError
 from app.display import render_needs
 from app.errors import INPUT_ERRORS, UserInputError
 from app.jobs import JobQueue
@@ -266,7 +267,11 @@ class Studio:
             pose = live.pose
             self.live_applied = live.received
             self.live_figures.took(pose)
-            self.act(a.LivePose(pose.channels, pose.stamp, pose.index))
+            try:
+                self.act(a.LivePose(pose.channels, pose.stamp, pose.index))
+            except AnimationError as e:  # a channel the open avatar has not: said once, and live driving stops
+                self.stop_live(f"live: {e}")
+                return
         if live.state in ("ended", "failed"):
             message = live.message if live.state == "failed" else f"live: {live.source}: {live.message}"
             self.stop_live(message)
