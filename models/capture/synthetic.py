@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -184,7 +184,8 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
     script = training_script(cfg.frames - n_test, rng, cfg.turn_deg)
     val_ids = set(range(7, len(script), 20))
     test = held_out_script(n_test, [s for k, s in enumerate(script) if k not in val_ids], rng, turn_deg=cfg.turn_deg)
-    sitter = make_sitter(head, cfg.identity, look_for_identity(cfg.identity, cfg.hair, cfg.hair_color), cfg.fov_y_deg)
+    look = look_for_identity(cfg.identity, cfg.hair, cfg.hair_color)
+    sitter = make_sitter(head, cfg.identity, look, cfg.fov_y_deg)
     rig, shape = sitter.rig, sitter.shape
     renderer = CaptureRenderer(gl)
     bg = np.asarray(cfg.background, np.float64)
@@ -196,7 +197,8 @@ def synthesize(cfg: SynthConfig, head: HeadModel, gl: GLContext,
         "head_model": absolute_head_spec(cfg.head), "shape": shape.tolist(), "background": bg.tolist(),
         "lighting": lighting_record(cfg.scene, lighting, cfg.light_deg),
         "depth_scale_m": DEPTH_SCALE_M,
-        "protocol": {"frames": cfg.frames, "seed": cfg.seed, "identity": cfg.identity, "views": cfg.views,
+        "protocol": {"frames": cfg.frames, "seed": cfg.seed, "identity": cfg.identity, "look": asdict(look),
+                     "views": cfg.views,
                      "turn_deg": cfg.turn_deg,
                      "expression_channels": {c: d.tolist() for c, d in rig.directions.items()},
                      "jaw_joint": rig.jaw_joint},

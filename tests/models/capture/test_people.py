@@ -3,12 +3,15 @@ jaw opens and not before, for the built-in head and ICT's; read back from the ca
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
+from PIL import Image
 
+from app.cli import main
 from models.capture.accessories import FOLLOW_JAW, TEETH, clip_triangles, face_frame, pose_part, rigid_fit, teeth_parts
 from models.capture.hair import hairline_y
 from models.capture.looks import HAIR_COLORS, Look, look_for_identity
@@ -201,3 +204,21 @@ def test_hairlines_from_the_landmarks(ict_model):
     frame51 = face_frame(canonical, no_jaw, np.arange(len(canonical)))
     assert np.isfinite(frame51.center).all() and frame51.ear_deg == frame.ear_deg
     assert len(teeth_parts(frame51)) == 2
+
+
+def test_synth_records_the_look_and_its_default_has_hair(tmp_path):
+    """`synth` with no look named draws identity 0's (a dark brown crop) and names it in the dataset; --hair and
+    --hair-color override the identity's; the masks cover the hair (more of every frame than without it)."""
+    runs = {"default": [], "long": ["--identity", "4", "--hair", "long", "--hair-color", "auburn"],
+            "none": ["--hair", "none"]}
+    looks, covered = {}, {}
+    for name, extra in runs.items():
+        out = tmp_path / name
+        assert main(["synth", "--frames", "10", "--size", "32", "--scene", "ambient", "--out", str(out), *extra]) == 0
+        looks[name] = json.loads((out / "transforms_train.json").read_text())["protocol"]["look"]
+        covered[name] = np.array([np.asarray(Image.open(p), np.float64).sum() for p in sorted(out.glob("masks/*.png"))])
+    assert (looks["default"]["hair"], looks["default"]["hair_color"]) == ("crop", "dark_brown")
+    assert (looks["long"]["hair"], looks["long"]["hair_color"]) == ("long", "auburn")
+    assert looks["long"]["skin_tone"] == look_for_identity(4).skin_tone  # the rest of identity 4's look
+    assert looks["none"]["hair"] == "none"
+    assert (covered["default"] > covered["none"]).all()
