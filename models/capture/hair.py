@@ -40,7 +40,7 @@ def hairline_y(style: str, frame: FaceFrame, azimuth_deg: np.ndarray) -> np.ndar
                  (T, chin - 0.02 * U), (180, chin - 0.08 * U)]
     elif style == "long":  # parted over the forehead, to the shoulders
         knots = [(0, B + 0.30 * U), (30, B + 0.25 * U), (T - 22, B + 0.10 * U), (T - 14, chin - 0.15 * U),
-                 (T, chin - 0.55 * U), (T + 30, chin - 0.85 * U), (180, chin - 0.95 * U)]
+                 (T, chin - 0.45 * U), (T + 30, chin - 0.62 * U), (180, chin - 0.68 * U)]
     else:
         raise ValueError(f"hair style {style!r}: expected crop, bob or long")
     x, y = np.array(knots, np.float64).T
