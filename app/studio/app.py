@@ -333,6 +333,8 @@ class Studio:
                                                          buffers=buffers, live=live))
         self.last_submit_time = time.perf_counter()
         self.live_figures.submitted(self.last_submit_id, s.live.index, s.live.stamp)
+        if live and self.live is not None:  # the next pose, tracked to be ready when this render should be done
+            self.live.want(self.last_submit_time + self.live_figures.render_s())
         s.live.stamp = None
         self.latency_from = "slider" if self.worker.result is not None else "opening"
         s.dirty = False

@@ -155,9 +155,29 @@ class Pose:
     """Frames that came and were never tracked, so far (a newer one was there when the tracker was free)."""
 
 
+UNASKED_S = 0.25
+"""Where the window has not asked for a pose for this long (its frames are slow, a request was lost), the tracker
+tracks one anyway."""
+
+
+def track_from(asked_for: float | None, last_pose: float, track_s: float, now: float) -> float:
+    """When to track the next frame (time.perf_counter): so that its pose is ready when the window asked for it
+    (`asked_for`: when the renderer should be free), tracking taking `track_s`; unasked, UNASKED_S after the last
+    pose. Tracking sooner would only make a pose that waits, older, on the sliders, and take the cores the render
+    needs.
+
+    >>> track_from(10.100, 9.9, 0.012, 10.0)  # the renderer free at 10.100: track at 10.088
+    10.088
+    >>> track_from(None, 9.9, 0.012, 10.0)  # not asked: 0.25 s after the last pose
+    10.15
+    """
+    return round(asked_for - track_s if asked_for is not None else last_pose + UNASKED_S, 9)
+
+
 def serve(source: str, bundle: str, head: HeadModel, results, commands) -> None:
-    """The live process: open the source, then track its newest frame whenever the tracker is free, sending each
-    pose; ("neutral",) makes the next face the neutral one, ("quit",) ends it."""
+    """The live process: open the source, then track its newest frame when the window will want a pose (track_from),
+    sending each pose; ("want", T) asks for one at T (time.perf_counter), ("neutral",) makes the next face the
+    neutral one, ("quit",) ends it."""
     import cv2
 
     from models.tracking.landmarker import Landmarker
@@ -177,14 +197,23 @@ def serve(source: str, bundle: str, head: HeadModel, results, commands) -> None:
     feed = Feed(cap, is_camera(source))
     results.put(("started", feed.fps, is_camera(source)))
     last, tracked, no_face = -1, 0, 0
+    asked_for: float | None = time.perf_counter()  # the first pose at once
+    last_pose, track_times = time.perf_counter(), [0.010]
     try:
         while True:
-            while commands.poll():
+            # The pose a little before it is due (8 ms): one that comes just after the window's frame began waits
+            # for the whole frame.
+            track_s = float(np.median(track_times[-9:])) + 0.008
+            wait = track_from(asked_for, last_pose, track_s, time.perf_counter()) - time.perf_counter()
+            if commands.poll(max(wait, 0.0)):
                 msg = commands.recv()
                 if msg[0] == "quit":
                     return
                 if msg[0] == "neutral":
                     retarget.set_neutral()
+                if msg[0] == "want":
+                    asked_for = msg[1]
+                continue
             frame = feed.next_after(last)
             if frame is None:
                 if feed.ended:
@@ -199,6 +228,8 @@ def serve(source: str, bundle: str, head: HeadModel, results, commands) -> None:
                 results.put(("no_face", frame.index))
                 continue
             channels = retarget(faces[0], frame.stamp)
+            asked_for, last_pose = None, time.perf_counter()
+            track_times.append(last_pose - t0)
             tracked += 1
             dropped = frame.index + 1 - tracked - no_face
             results.put(("pose", Pose(frame.index, frame.stamp, channels, 1e3 * (time.perf_counter() - t0),
@@ -249,6 +280,17 @@ class LiveFigures:
             self.pending = {rid: v for rid, v in self.pending.items() if rid > request_id - 4}
             self.pending[request_id] = (index, stamp)
             self.age_ms.append(1e3 * (time.perf_counter() - stamp))
+
+    def render_s(self) -> float:
+        """The median of the last 5 live renders' times, seconds (0 before the first): when the renderer should be
+        free again after a request. (Timing the next pose by the interval between requests instead, which includes
+        the wait for that pose, slowed the renders shown from 10.8 to 5.5 a second on the demo: a late pose makes
+        the next one later.)
+
+        >>> LiveFigures(render_ms=[70.0, 90.0, 64.0, 200.0, 66.0, 68.0]).render_s()  # the median of the last five
+        0.068
+        """
+        return float(np.median(self.render_ms[-5:])) / 1e3 if self.render_ms else 0.0
 
     def drawing(self, request_id: int, render_ms: float, pass_name: str = "", arrived: float | None = None) -> None:
         """The frame being drawn shows a pass of this request, rendered in render_ms, its pixels in the window's
@@ -342,6 +384,10 @@ class LiveWorker:
 
     def set_neutral(self) -> None:
         self._send(("neutral",))
+
+    def want(self, at: float) -> None:
+        """Ask for a pose at `at` (time.perf_counter: when the renderer should be free for it)."""
+        self._send(("want", at))
 
     def _send(self, msg: tuple) -> None:
         with contextlib.suppress(OSError, ValueError, BrokenPipeError):

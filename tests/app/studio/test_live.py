@@ -177,11 +177,12 @@ def test_the_tracker_process_follows_a_real_video(files):
             if worker.received > seen and worker.pose is not None:
                 seen = worker.received
                 poses.append(worker.pose)
+                worker.want(time.perf_counter())  # the next pose as soon as it can be had
     finally:
         worker.close()
     assert worker.state == "ended" and worker.message == "the video ended", worker.message
     by_frame = {p.index: p for p in poses}
-    assert len(by_frame) > 0.5 * 354, len(by_frame)  # frames are dropped only where the tracker falls behind
+    assert len(by_frame) > 0.5 * 354, len(by_frame)  # asked at once each time: most frames are tracked
     # How open the mouth is: the jaw (degrees over 20) where the head model has a jaw joint, else its jawOpen
     # expression (ICT's); the landmarker's jawOpen is about 0.55 from 10 s on, 0.35 rad (20 degrees) a unit.
     opening = lambda c: c.get("jaw.open", 0.0) / 20.0 + c.get("expression.jawOpen", 0.0)
@@ -222,3 +223,25 @@ def test_a_tracker_that_dies_fails_live_driving_with_its_exit_code(files, counte
         assert worker.state == "failed" and worker.message == "live: the tracker stopped (exit code -9)"
     finally:
         worker.close()
+
+
+@pytest.mark.skipif(not SHARED_VIDEO.is_file(), reason=f"{SHARED_VIDEO} is not on this machine (../shared)")
+def test_unasked_the_tracker_makes_a_pose_every_quarter_second(files):
+    """Where the window asks for no pose, the tracker makes one only every UNASKED_S (0.25 s): about 47 in the
+    11.8 s video (against more than 177 where each is asked for at once, above); the other frames are dropped."""
+    from app.studio.live import UNASKED_S
+    from app.user_config import find_landmarker
+
+    worker = LiveWorker(str(SHARED_VIDEO), find_landmarker(), files.avatar.head_model, lambda: None)
+    stamps: list[float] = []
+    try:
+        deadline = time.monotonic() + 60
+        while worker.state in ("starting", "running") and time.monotonic() < deadline:
+            time.sleep(0.01)
+            if worker.pose is not None and (not stamps or worker.pose.stamp != stamps[-1]):
+                stamps.append(worker.pose.stamp)
+    finally:
+        worker.close()
+    assert worker.state == "ended" and 30 <= worker.received <= 50, worker.received
+    gaps = np.diff(stamps[1:])  # after the first pose, which comes at once
+    assert np.median(gaps) == pytest.approx(UNASKED_S, abs=0.05), np.median(gaps)
