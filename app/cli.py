@@ -1,4 +1,4 @@
-"""`avatar-studio`: one entry point, a subcommand per task (DESIGN 7); options come from config dataclasses.
+"""`avatar-studio`: one entry point, a subcommand per task (docs/commands.md); options come from config dataclasses.
 
 Exit status 0 on success, 2 on bad arguments or input files (one line naming the file and the problem),
 1 on anything else.

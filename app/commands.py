@@ -65,8 +65,8 @@ COMMANDS = (
             TrackConfig, "app.track:run_track", positional=("video",)),
     Command("train", "Train an avatar on a capture (in the background of a terminal: a progress bar).",
             TrainConfig, "app.avatar_commands:run_train", positional=("dataset",)),
-    Command("prior-train", "Train the universal prior (paper 002) on a corpus of identity captures; under torchrun, "
-            "on every process it starts (gloo on CPUs, NCCL on GPUs).", PriorTrainConfig,
+    Command("prior-train", "Train the universal prior (Cao et al. 2022) on a corpus of identity captures; under "
+            "torchrun, on every process it starts (gloo on CPUs, NCCL on GPUs).", PriorTrainConfig,
             "app.avatar_commands:run_prior_train", positional=("corpus",), research=True),
     Command("personalize", "Make a person's avatar from a short scan with the universal prior: neutral maps, "
             "then minutes of fine-tuning.", PersonalizeConfig, "app.avatar_commands:run_personalize",

@@ -148,7 +148,7 @@ class RenderCommandConfig:
     out: Path = Path("out/render.png")
     """The PNG to write."""
     controls: Path | None = None
-    """JSON controls (DESIGN 2.1); neutral when left out."""
+    """JSON controls (docs/formats.md); neutral when left out."""
     yaw_deg: float = 0.0
     """Camera orbit about the vertical axis, degrees; positive moves the camera to the subject's left."""
     pitch_deg: float = 0.0

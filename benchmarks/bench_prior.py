@@ -1,4 +1,4 @@
-"""What the universal prior buys (paper 002, Fig. 14 and Section 4.2): on a held-out person's scan, the held-out
+"""What the universal prior buys (Cao et al. 2022, Fig. 14 and Section 4.2): on a held-out person's scan, the held-out
 PSNR of the prior's avatar after 0, 1, 3 ... minutes of personalisation, beside a person-specific primitives
 avatar trained from scratch on the same frames for the same minutes; one run at a time, nothing else running.
 

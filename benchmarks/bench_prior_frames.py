@@ -1,4 +1,4 @@
-"""How few frames a scan may have (paper 002, Fig. 14): a held-out person's scan cut to its first 1, 3, 9, 33
+"""How few frames a scan may have (Cao et al. 2022, Fig. 14): a held-out person's scan cut to its first 1, 3, 9, 33
 training frames (the same test frames for all), the prior personalised on each and a primitives avatar trained
 from scratch on each, the same minutes; held-out PSNR against the frames the scan had. One run at a time, nothing
 else running.

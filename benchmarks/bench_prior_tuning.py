@@ -1,4 +1,4 @@
-"""Which parts of the prior to fine-tune, and at which learning rate (paper 002, Table 2 and Section 4.2.5: the
+"""Which parts of the prior to fine-tune, and at which learning rate (Cao et al. 2022, Table 2 and Section 4.2.5: the
 seed fine-tunes at 1e-3): on a held-out person's scan, `personalize` for the same minutes with every weight or
 the decoder alone (the encoders kept), at several learning rates; held-out PSNR on the scan's test frames and
 from cameras all round the head.

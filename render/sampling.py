@@ -1,6 +1,6 @@
 """Where samples go along each ray: a shell around the rasterized surface for rays that see the head
 mesh, the head's box for rays that miss it (hair, shoulders, silhouettes), nothing for rays that miss both
-(DESIGN 5: spend samples only where the head is)."""
+(spend samples only where the head is)."""
 
 from __future__ import annotations
 

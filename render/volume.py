@@ -1,4 +1,4 @@
-"""Volume rendering along rays as pure functions of tensors (NeRF, paper 000 Eq. 1).
+"""Volume rendering along rays as pure functions of tensors (NeRF; CoDyNeRF's Eq. 1).
 
 Shapes: R rays, S samples per ray. Samples are intervals [t_start, t_end) along each ray, in metres.
 Every function is finite, with finite gradients, for densities from 0 to 1e6 and intervals of any length.

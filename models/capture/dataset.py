@@ -1,4 +1,4 @@
-"""Capture datasets (DESIGN 2.2): our transforms_{train,val,test}.json format, validated on load, and
+"""Capture datasets (docs/formats.md): our transforms_{train,val,test}.json format, validated on load, and
 importers for NerFACE's transforms files and IMavatar's flame_params.json.
 
 Every error names the file, the frame and the field (DatasetError; the CLI exits with status 2).

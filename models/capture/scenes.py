@@ -1,4 +1,4 @@
-"""Lighting scenes and the head's made-up appearance for synthetic captures (DESIGN 3.1): each scene
+"""Lighting scenes and the head's made-up appearance for synthetic captures (docs/training.md): each scene
 simulates only its effects."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from models.capture.looks import IRIS_COLORS, Look, brow_albedo, hair_albedo, sk
 from models.head.model import HeadModel
 from render.gl.capture import Appearance, CaptureLighting
 
-#: The effects each scene simulates (DESIGN 3.1): ambient none, studio diffuse shading, sun all three.
+#: The effects each scene simulates (docs/training.md): ambient none, studio diffuse shading, sun all three.
 SCENE_EFFECTS: dict[str, tuple[str, ...]] = {
     "ambient": (),
     "studio": ("shading",),

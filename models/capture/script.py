@@ -1,4 +1,4 @@
-"""The synthetic capture protocol (paper 000, Section 4): in the first half the camera pans around a nearly
+"""The synthetic capture protocol (CoDyNeRF, Section 4): in the first half the camera pans around a nearly
 still head while the expression varies; in the second the camera is fixed at head height and the head
 turns (yaw to +-45 degrees, pitch +-20) while expressing. Held-out test frames combine expressions and
 poses that no training frame has."""

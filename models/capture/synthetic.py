@@ -1,4 +1,4 @@
-"""Synthetic captures (DESIGN 2.2, 3.1): a head model performing the capture protocol under one lighting
+"""Synthetic captures (docs/captures.md): a head model performing the capture protocol under one lighting
 scene, drawn through render/gl, written as a dataset with its ground truth (masks, normals, cast-shadow
 masks, depth, albedo, and for scenes with cast shadows the image without them)."""
 

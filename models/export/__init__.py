@@ -1,4 +1,4 @@
-"""Avatars written for other tools (DESIGN 9, "Export"): one module per concern.
+"""Avatars written for other tools (docs/export.md): one module per concern.
 
 - chart.py: the texture chart (the head model's own UVs, else an xatlas atlas), vertices split along its seams;
 - skeleton.py: the head model's joints as a glTF skin (rest joints, inverse bind matrices, four weights a vertex);

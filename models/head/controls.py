@@ -1,4 +1,4 @@
-"""Controls: the one description of a head's state used by sliders, datasets and renderers (DESIGN 2.1)."""
+"""Controls: the one description of a head's state used by sliders, datasets and renderers (docs/formats.md)."""
 
 from __future__ import annotations
 
@@ -91,7 +91,7 @@ _KEYS = {"shape", "expression", "pose", "gaze", "translation"}
 
 
 def controls_from_dict(data: object, head: HeadModel | None = None) -> Controls:
-    """Controls from the JSON form of DESIGN 2.1; every key optional, missing means neutral.
+    """Controls from the JSON form of docs/formats.md; every key optional, missing means neutral.
 
     A named expression dict needs the head model to map names to indices.
     """

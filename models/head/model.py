@@ -1,4 +1,4 @@
-"""The one in-memory form of a morphable head model (DESIGN 2.1), whatever file it came from."""
+"""The one in-memory form of a morphable head model (docs/head-models.md), whatever file it came from."""
 
 from __future__ import annotations
 

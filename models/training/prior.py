@@ -1,4 +1,4 @@
-"""Training the universal prior (paper 002, Section 3.3) on a corpus of identities, in one process or several
+"""Training the universal prior (Cao et al. 2022, Section 3.3) on a corpus of identities, in one process or several
 through torch.distributed (DistributedDataParallel; `torchrun --nproc-per-node N avatar-studio prior-train ...`:
 CPU processes talk over gloo, GPUs over NCCL).
 

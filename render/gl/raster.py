@@ -1,5 +1,5 @@
 """Per-pixel geometry of a mesh seen by a camera, in milliseconds on llvmpipe: which triangle each pixel
-sees, where along its ray, and the barycentric coordinates of that point (DESIGN 5: a sampler starts here). The
+sees, where along its ray, and the barycentric coordinates of that point (a sampler starts here). The
 ray math that reads a Raster is in render/rays.py."""
 
 from __future__ import annotations

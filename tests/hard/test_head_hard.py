@@ -1,4 +1,4 @@
-"""Hard cases for the head models (DESIGN 6), on every kind of head model (the built-in head, a generated FLAME
+"""Hard cases for the head models, on every kind of head model (the built-in head, a generated FLAME
 file, ICT-FaceKit where ../shared has it): rotations at 0, 1e-8, pi - 1e-6, pi, 2 pi about every joint (both
 eyes); expression weights of +-10; random controls swept by hypothesis (finite outputs and gradients, small
 changes move vertices a little); NaN and huge controls refused where they come in."""

@@ -1,4 +1,4 @@
-"""Hard cases for the volumetric primitives (DESIGN 6), swept by hypothesis: primitives collapsed to zero size or
+"""Hard cases for the volumetric primitives, swept by hypothesis: primitives collapsed to zero size or
 flat, densities of 0 and 1e6, rays from kilometres away, along the boxes' faces and from inside a box, decoder
 offsets far beyond their range: every output finite, opacity within [0, 1], and the gradients training takes
 finite too; the display march in C (native.py) finite on the same cases."""

@@ -1,4 +1,4 @@
-"""Hard cases for rendering (DESIGN 6), swept by hypothesis: the sampler (rays that miss, graze or start inside
+"""Hard cases for rendering, swept by hypothesis: the sampler (rays that miss, graze or start inside
 the head's box, surfaces at 0 or far away), compositing (densities up to 1e6, zero-length intervals), the
 fields (points metres and kilometres from the mesh, zero density gradients) and a whole CoDyNeRF and NerFACE
 ray batch: every output finite, and every gradient training takes finite too."""

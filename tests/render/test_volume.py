@@ -1,4 +1,4 @@
-"""Volume rendering: hand-worked values, float64 gradcheck, and the hard cases of DESIGN 6."""
+"""Volume rendering: hand-worked values, float64 gradcheck, and the hard cases of docs/architecture.md."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The deformation prior: hand-worked values, gradients, and points far from the mesh (DESIGN 6)."""
+"""The deformation prior: hand-worked values, gradients, and points far from the mesh (docs/architecture.md)."""
 
 from __future__ import annotations
 
