@@ -237,8 +237,8 @@ def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, o
     px = avatar.apply_preset(preset, size)
     for k, (sliders, view) in enumerate(animation_poses(anim, rest_sliders(avatar.head_model), View(),
                                                         avatar.head_model)):
-        cam = view.camera(avatar.rest_vertices(), px, px)
-        controls = avatar.at_rest(sliders.controls())
+        cam = view.camera(avatar.card.rest_vertices(), px, px)
+        controls = avatar.card.at_rest(sliders.controls())
         if on_pose:
             on_pose(k, controls)
         options = RenderOptions(should_stop=should_stop, buffers=())

@@ -226,9 +226,9 @@ def capture_mismatch(model, meta: dict, split) -> str | None:
 
 def run_render(cfg: RenderCommandConfig) -> int:
     avatar, _ = open_avatar(cfg.avatar, cfg.device)
-    controls = avatar.at_rest(load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls())
+    controls = avatar.card.at_rest(load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls())
     size = avatar.apply_preset(cfg.preset, cfg.size)
-    cam = framing_camera(avatar.rest_vertices(), cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
+    cam = framing_camera(avatar.card.rest_vertices(), cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
                          height_px=size)
     offered = avatar.inspection_buffers()
     if cfg.buffer in INSPECT and INSPECT[cfg.buffer] not in offered:

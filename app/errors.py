@@ -10,6 +10,7 @@ from models.head.model import HeadModelError
 from models.ranges import OptionError
 from models.tracking.canonical import BundleError
 from models.tracking.fit import FitError
+from models.tracking.pipeline import TrackingError
 from models.tracking.video import VideoError
 
 
@@ -19,4 +20,4 @@ class UserInputError(ValueError):
 
 #: Exceptions that are the user's input being wrong, not the program failing.
 INPUT_ERRORS = (UserInputError, HeadModelError, ControlsError, DatasetError, CheckpointError, DeviceError,
-                BundleError, VideoError, OptionError, FitError)
+                BundleError, VideoError, OptionError, FitError, TrackingError)

@@ -41,12 +41,12 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
     """(size,size,3) uint8 frames of the turntable (the preset may render fewer pixels: scaled up); on_frame(k)
     after each."""
     size = avatar.apply_preset(cfg.preset, cfg.size)
-    controls = avatar.at_rest(controls or Controls())
-    sweep = avatar.turntable_sweep_deg() if cfg.sweep_deg is None else cfg.sweep_deg
+    controls = avatar.card.at_rest(controls or Controls())
+    sweep = avatar.card.turntable_sweep_deg() if cfg.sweep_deg is None else cfg.sweep_deg
     for k in range(cfg.frames):
         phase = 2 * math.pi * k / cfg.frames
         yaw = sweep * math.sin(phase) if sweep else math.degrees(phase)
-        cam = turntable_camera(avatar.rest_vertices(), yaw, cfg.elevation_deg, fov_y_deg=18.0,
+        cam = turntable_camera(avatar.card.rest_vertices(), yaw, cfg.elevation_deg, fov_y_deg=18.0,
                                width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
         options = RenderOptions(should_stop=should_stop, buffers=())

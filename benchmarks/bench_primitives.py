@@ -36,7 +36,7 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int, buffers: 
     """One size's row: the parts' median times and the lookups, making `buffers` (render_image's: () the colour
     alone, None every buffer), the march in C (native.py) or in torch (its lookups timed apart)."""
     os.environ["AVATAR_STUDIO_NATIVE"] = "1" if in_c else "0"
-    cam = framing_camera(avatar.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=size, height_px=size)
+    cam = framing_camera(avatar.card.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=size, height_px=size)
     geo = avatar.frame_geometry(controls, raster)
     rays, _ = pixel_rays_of(avatar, geo, cam, raster)
     eye = rays.origins[0]
@@ -88,7 +88,7 @@ def main() -> None:
     except CheckpointError as e:
         raise SystemExit(str(e)) from None
     raster = Rasterizer(GLContext.headless())
-    controls = avatar.at_rest(Controls())
+    controls = avatar.card.at_rest(Controls())
     rows = []
     marches = (True, False) if native.library() is not None else (False,)
     if not marches[0]:

@@ -49,8 +49,8 @@ def main() -> int:
     except CheckpointError as e:
         print(e, file=sys.stderr)
         return 2
-    controls = avatar.at_rest(Controls())
-    cam = framing_camera(avatar.rest_vertices(), args.yaw, 5.0, fov_y_deg=18.0, width_px=args.size,
+    controls = avatar.card.at_rest(Controls())
+    cam = framing_camera(avatar.card.rest_vertices(), args.yaw, 5.0, fov_y_deg=18.0, width_px=args.size,
                          height_px=args.size)
     raster = Rasterizer(GLContext.headless())
     image = render_image(avatar, cam, controls, rasterizer=raster)["rgb"]

@@ -82,9 +82,10 @@ def main() -> None:
             avatar.note_views(training_views(avatar, args.dataset, raster))
         row = []
         for yaw in (0.0, 45.0, 90.0):
-            cam = framing_camera(avatar.rest_vertices(), yaw, -15.0, fov_y_deg=18.0, width_px=256, height_px=256,
+            cam = framing_camera(avatar.card.rest_vertices(), yaw, -15.0, fov_y_deg=18.0, width_px=256, height_px=256,
                                  margin=1.4)
-            row.append(render_image(avatar, cam, avatar.at_rest(Controls()), RenderOptions(buffers=()), raster)["rgb"])
+            rest = avatar.card.at_rest(Controls())
+            row.append(render_image(avatar, cam, rest, RenderOptions(buffers=()), raster)["rgb"])
         edges.append(np.concatenate(row, 1))
     save_png(args.out / "edges.png", to_bytes(np.concatenate(edges, 0)))
     (args.out / "normals.json").write_text(json.dumps(report, indent=1))

@@ -14,7 +14,7 @@ from app.studio import actions as a
 from app.studio.context import PanelContext
 from app.studio.neural import Result
 from app.studio.session import Session, views_warning
-from models.avatars.base import Avatar
+from models.avatars.card import AvatarCard
 from models.head.head import posed_mesh
 from render.gl.context import GLContext
 from render.gl.preview import PreviewRenderer, PreviewSettings
@@ -34,7 +34,7 @@ the factor existed) has no render without cast shadows: its buffers are the coun
 head's shadow inputs, and say so."""
 
 
-def buffer_label(name: str, avatar: Avatar | None) -> str:
+def buffer_label(name: str, avatar: AvatarCard | None) -> str:
     """An avatar that offers a render without cast shadows but not the light reaching the surface has no shadow
     factor: its render without them is the neutral head's counterfactual, labelled so."""
     offered = avatar.inspection_buffers() if avatar is not None else ()
@@ -42,7 +42,7 @@ def buffer_label(name: str, avatar: Avatar | None) -> str:
     return LEGACY_LABELS.get(name, BUFFER_LABELS[name]) if legacy else BUFFER_LABELS[name]
 
 
-def buffer_available(name: str, avatar: Avatar | None) -> bool:
+def buffer_available(name: str, avatar: AvatarCard | None) -> bool:
     """A buffer every render has, or one the avatar offers (a render makes it once it is shown)."""
     if name in INSPECT:
         return avatar is not None and INSPECT[name] in avatar.inspection_buffers()

@@ -14,16 +14,17 @@ from __future__ import annotations
 
 import contextlib
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 import torch
 from torch import nn
 
+from models.avatars.card import AvatarCard
 from models.avatars.components.kept import keep_weight_names
 from models.avatars.mesh import MeshField
-from models.avatars.quality import BUILTIN_PRESETS, Preset, Quality
+from models.avatars.quality import Quality
 from models.head.controls import Controls
 from models.head.head import Head
 from models.head.model import HeadModel
@@ -103,45 +104,9 @@ class Avatar(nn.Module, ABC):
         self.head = Head(head_model)
         self.register_buffer("background", torch.as_tensor(np.asarray(background, np.float32)))
         keep_weight_names(self)  # what a model keeps of its capture (components/kept.py) saved under its old names
-        self.presets: dict[str, Preset] = {k: Preset(q) for k, q in BUILTIN_PRESETS.items()}
-        """draft/preview/final: those `bench` measured on this avatar (presets.json), else the built-in ones."""
-        self.presets_measured: dict = {}
-        self.capture_px: int | None = None
-        """The width of the capture's images it was trained on (avatar.json's "image_px"; None: not recorded)."""
-        self.rest_translation = np.zeros(3, np.float32)
-        """Where its capture held the head (avatar.json "rest_pose": the training frames' mean translation): the
-        field reads world positions, so new controls (sliders, turntables, `render`) place the head there."""
-        self.view_range: dict[str, list[float]] | None = None
-        """The directions its capture saw the head from (avatar.json's "view_range": yaw_deg and pitch_deg, least
-        and most); None: not recorded."""
-
-    def at_rest(self, controls: Controls) -> Controls:
-        """New controls (the sliders', a turntable's) placed where the capture held the head (rest_translation
-        added): a capture frame's own controls are already placed and do not come through here."""
-        return replace(controls, translation=np.asarray(controls.translation, np.float32) + self.rest_translation)
-
-    def rest_vertices(self) -> np.ndarray:
-        """The template where at_rest places it (what cameras frame)."""
-        return self.head_model.template + self.rest_translation
-
-    def views_beyond(self, yaw_deg: float, margin_deg: float = 10.0) -> bool:
-        """Whether a camera at this yaw (about the head, 0: in front) looks from farther round than the capture
-        did (by more than margin_deg): the avatar has not seen that side."""
-        if self.view_range is None:
-            return False
-        lo, hi = self.view_range["yaw_deg"]
-        if hi - lo >= 300:
-            return False
-        yaw = (yaw_deg + 180.0) % 360.0 - 180.0
-        return yaw < lo - margin_deg or yaw > hi + margin_deg
-
-    def turntable_sweep_deg(self, margin_deg: float = 10.0) -> float:
-        """How far a turntable may swing each side of the front: the captured yaws and a margin (0: a full turn,
-        where the capture went round the head or did not record its views)."""
-        if self.view_range is None or np.ptp(self.view_range["yaw_deg"]) >= 300:
-            return 0.0
-        lo, hi = self.view_range["yaw_deg"]
-        return float(min(max(abs(lo), abs(hi)) + margin_deg, 180.0))
+        self.card = AvatarCard(self.name, head_model)
+        """What its folder says of it beside the weights (card.py: rest pose, views, presets; registry.load_avatar
+        reads it)."""
 
     def ray_background(self, rays: Rays) -> torch.Tensor:
         """What each ray sees behind the avatar: the plate's pixel where the rays carry one, else the colour."""
@@ -245,9 +210,20 @@ class Avatar(nn.Module, ABC):
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
         """The training losses on one frame's rays: named scalars, each already weighted."""
 
+    @classmethod
+    def buffer_names(cls, meta: dict) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """The optional buffers render_image makes besides rgb, opacity and depth (render_rays gives them, but for
+        the normals of a model whose normals_from_surface is set), and the inspection buffers its effects make
+        meaningful, of the avatar this avatar.json describes: told without building it (the studio's window
+        offers them; AvatarCard)."""
+        del meta
+        return (), ()
+
+    def default_buffers(self) -> tuple[str, ...]:
+        return self.buffer_names(self.meta())[0]
+
     def inspection_buffers(self) -> tuple[str, ...]:
-        """The inspection buffers this avatar's effects make meaningful (beyond BASE_LAYOUT and `layout`)."""
-        return ()
+        return self.buffer_names(self.meta())[1]
 
     def inspect(self, out: RayOutput, geometry: Any, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
         """The named inspection buffers (R,...) of rays already rendered, from their internals."""
@@ -271,7 +247,7 @@ class Avatar(nn.Module, ABC):
 
     def apply_preset(self, preset: str, size: int) -> int:
         """Set the render settings of one of the avatar's presets; returns the image size it renders at."""
-        quality = self.presets[preset].quality
+        quality = self.card.presets[preset].quality
         self.set_quality(quality)
         return quality.size(size)
 
@@ -289,11 +265,6 @@ class Avatar(nn.Module, ABC):
     def before_save(self, geometry: Any) -> None:
         """Called before each checkpoint with the first training frame's geometry (display caches follow the
         weights)."""
-
-    def default_buffers(self) -> tuple[str, ...]:
-        """The buffers render_image makes besides rgb, opacity and depth (render_rays gives them, but for the normals
-        of a model whose normals_from_surface is set)."""
-        return ()
 
     @property
     def chunk_rays(self) -> int:

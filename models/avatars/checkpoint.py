@@ -77,7 +77,9 @@ def save_checkpoint(folder: str | Path, meta: dict, weights: dict[str, torch.Ten
     return folder / "avatar.json"
 
 
-def load_checkpoint(folder: str | Path, with_train_state: bool = False) -> Checkpoint:
+def read_meta(folder: str | Path) -> dict:
+    """An avatar folder's avatar.json, checked for the fields every one has (CheckpointError names what is wrong);
+    nothing else is read."""
     folder = Path(folder)
     path = folder / "avatar.json"
     if not folder.is_dir():
@@ -92,6 +94,13 @@ def load_checkpoint(folder: str | Path, with_train_state: bool = False) -> Check
         raise CheckpointError(f"{path}: field 'format' must be {FORMAT!r}")
     if not isinstance(meta.get("step"), int) or not isinstance(meta.get("files"), dict):
         raise CheckpointError(f"{path}: fields 'step' (integer) and 'files' (object) are required")
+    return meta
+
+
+def load_checkpoint(folder: str | Path, with_train_state: bool = False) -> Checkpoint:
+    folder = Path(folder)
+    path = folder / "avatar.json"
+    meta = read_meta(folder)
 
     def read(kind: str) -> dict[str, torch.Tensor]:
         name = meta["files"].get(kind)

@@ -61,7 +61,7 @@ def avatar_mesh(avatar, controls: Controls | None = None, resolution: int = 96, 
     colours (V,3) uint8 and the level used: its density's iso-surface at `level` (default: surface_level) on a
     grid of `resolution` points along the longest side of its field's box. ValueError where there is no surface
     (or the model has no field to export)."""
-    field = avatar.mesh_field(avatar.at_rest(controls or Controls()), rasterizer)
+    field = avatar.mesh_field(avatar.card.at_rest(controls or Controls()), rasterizer)
     lo, hi = np.asarray(field.lo, np.float64), np.asarray(field.hi, np.float64)
     spacing = float((hi - lo).max()) / (resolution - 1)
     axes = [lo[i] + spacing * np.arange(int(np.ceil((hi[i] - lo[i]) / spacing)) + 2) for i in range(3)]

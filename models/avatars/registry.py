@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from models.avatars.base import Avatar
-from models.avatars.checkpoint import CheckpointError, load_checkpoint
+from models.avatars.card import AvatarCard, card_of
+from models.avatars.checkpoint import CheckpointError, load_checkpoint, read_meta
 from models.avatars.codynerf.avatar import CoDyNeRFAvatar
 from models.avatars.nerface.avatar import NerfaceAvatar
 from models.avatars.primitives.avatar import PrimitivesAvatar
@@ -69,22 +70,24 @@ def load_avatar(folder: str | Path, device: str = "cpu", model: str | None = Non
         raise CheckpointError(f"{Path(folder) / 'avatar.json'}: does not describe these weights ({first})") from None
     avatar.eval()
     # draft/preview/final, chosen and measured by `bench` (and where: machine, image size), else built in
-    avatar.presets, avatar.presets_measured = load_presets(folder)
-    size = meta.get("image_px")
-    width = size[0] if isinstance(size, list) and size else None
-    avatar.capture_px = width if isinstance(width, int) and width >= 16 else None  # else not recorded
-    rest = meta.get("rest_pose", {}).get("translation") if isinstance(meta.get("rest_pose"), dict) else None
-    try:
-        t = np.asarray(rest if rest is not None else [0.0, 0.0, 0.0], np.float32)
-        avatar.rest_translation = t if t.shape == (3,) and np.isfinite(t).all() else np.zeros(3, np.float32)
-    except (TypeError, ValueError):
-        avatar.rest_translation = np.zeros(3, np.float32)
-    views = meta.get("view_range")
-    try:
-        avatar.view_range = {k: [float(views[k][0]), float(views[k][1])] for k in ("yaw_deg", "pitch_deg")}
-    except (TypeError, KeyError, IndexError, ValueError):
-        avatar.view_range = None  # an older avatar: its views unknown
+    avatar.card = card_of(name, meta, head, avatar.effects, avatar.default_buffers(), avatar.inspection_buffers(),
+                          *load_presets(folder))
     return avatar.to(device_of(device)), meta
+
+
+def read_card(folder: str | Path) -> AvatarCard:
+    """What an avatar folder says of its avatar (avatar.json, presets.json) without building it or reading its
+    weights: the studio's window needs no more (its render process loads the avatar)."""
+    meta = read_meta(folder)
+    name = meta.get("model", DEFAULT_MODEL)
+    try:
+        head = load_head(meta["head_model"])
+        cls = avatar_class(name)
+        buffers, inspection = cls.buffer_names(meta)
+        return card_of(name, meta, head, tuple(meta.get("effects", ())), buffers, inspection,
+                       *load_presets(folder))
+    except (KeyError, TypeError, ValueError) as e:
+        raise CheckpointError(f"{Path(folder) / 'avatar.json'}: {e}") from None
 
 
 def check_meta(meta: dict) -> None:

@@ -184,14 +184,14 @@ def bake_views(avatar: Avatar, n_yaws: int) -> list[tuple[float, float]]:
     avatar can show (a turntable's sweep, those views_beyond left out; all round where it went all round) at the
     height of the head, and every other one of them again from as high and as low as its capture's cameras went
     (30 degrees where it did not record them), for the crown and under the chin."""
-    sweep = avatar.turntable_sweep_deg()
+    sweep = avatar.card.turntable_sweep_deg()
     if sweep == 0.0:
         yaws = sorted((360.0 * k / n_yaws + 180.0) % 360.0 - 180.0 for k in range(n_yaws))  # the front among them
     else:
-        while sweep > 0 and (avatar.views_beyond(sweep) or avatar.views_beyond(-sweep)):
+        while sweep > 0 and (avatar.card.views_beyond(sweep) or avatar.card.views_beyond(-sweep)):
             sweep -= 0.5  # the turntable's sweep reaches as far as the farther side: keep both sides in view
         yaws = [float(y) for y in np.linspace(-sweep, sweep, n_yaws)] if n_yaws > 1 else [0.0]
-    pitch = (avatar.view_range or {}).get("pitch_deg", [-30.0, 30.0])
+    pitch = (avatar.card.view_range or {}).get("pitch_deg", [-30.0, 30.0])
     return ([(y, 0.0) for y in yaws] + [(y, float(pitch[1])) for y in yaws[::2]]
             + [(y, float(pitch[0])) for y in yaws[1::2]])
 
@@ -228,7 +228,7 @@ def bake_texture(avatar: Avatar, chart: Chart, size: int, render_px: int, n_yaws
     """The avatar's colour at rest on the chart's texture (size x size): its renders of render_px from bake_views'
     cameras, at the preset's render settings (samples, passes; a preset's smaller image is left out: the texture's
     detail is the renders'); on_view(done, total) after each render."""
-    controls = avatar.at_rest(Controls())
+    controls = avatar.card.at_rest(Controls())
     posed = np.asarray(avatar.frame_geometry(controls, rasterizer).posed.detach().cpu(), np.float64)
     triangles = np.asarray(avatar.head_model.triangles)
     surface = texel_surface(chart.uv, chart.triangles, size)
@@ -239,12 +239,12 @@ def bake_texture(avatar: Avatar, chart: Chart, size: int, render_px: int, n_yaws
     normals = (vertex_normals(posed, triangles)[corners] * b).sum(1)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     views = bake_views(avatar, n_yaws)
-    avatar.set_quality(avatar.presets[preset].quality)  # its samples and passes; not its scale: render_px it is
+    avatar.set_quality(avatar.card.presets[preset].quality)  # its samples and passes; not its scale: render_px it is
     px = render_px
     background = avatar.background.detach().cpu().numpy().astype(np.float32)
     blend = ViewBlend(len(points))
     for k, (yaw, pitch) in enumerate(views):
-        camera = turntable_camera(avatar.rest_vertices(), yaw, pitch, width_px=px, height_px=px)
+        camera = turntable_camera(avatar.card.rest_vertices(), yaw, pitch, width_px=px, height_px=px)
         images = render_image(avatar, camera, controls, RenderOptions(buffers=()), rasterizer)
         raster = rasterizer.rasterize(posed.astype(np.float32), triangles, camera)
         blend.add(k, *seen_from(camera, raster, images, background, points, normals))

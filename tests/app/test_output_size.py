@@ -42,8 +42,8 @@ def test_render_writes_the_size_asked_for(demo, tmp_path, gl):
     img = Image.open(out)
     assert img.size == (SIZE, SIZE)
     px = demo.apply_preset("preview", SIZE)
-    cam = framing_camera(demo.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=px, height_px=px)
-    small = render_image(demo, cam, demo.at_rest(Controls()), RenderOptions(buffers=()), Rasterizer(gl))["rgb"]
+    cam = framing_camera(demo.card.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=px, height_px=px)
+    small = render_image(demo, cam, demo.card.at_rest(Controls()), RenderOptions(buffers=()), Rasterizer(gl))["rgb"]
     small = (np.clip(small, 0, 1) * 255).round().astype(np.uint8)
     assert psnr(np.asarray(img.convert("RGB").resize((px, px), Image.Resampling.BOX)), small) > 27
 

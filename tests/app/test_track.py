@@ -150,9 +150,9 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     # New controls are placed where the video held the head (the field reads world positions): the rest pose is the
     # training frames' mean translation, half a metre in front of the camera.
     mean_t = np.mean([f.controls.translation for f in load_split(d3_dataset, "train").frames], 0)
-    np.testing.assert_allclose(avatar.rest_translation, mean_t, atol=1e-4)
-    assert -1.0 < avatar.rest_translation[2] < -0.2
-    np.testing.assert_allclose(avatar.at_rest(Controls()).translation, avatar.rest_translation)
+    np.testing.assert_allclose(avatar.card.rest_translation, mean_t, atol=1e-4)
+    assert -1.0 < avatar.card.rest_translation[2] < -0.2
+    np.testing.assert_allclose(avatar.card.at_rest(Controls()).translation, avatar.card.rest_translation)
     # Held-out controls take the nearest training frames' codes: a training frame's own controls give its own
     # code the largest share.
     train = load_split(d3_dataset, "train")

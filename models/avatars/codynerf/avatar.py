@@ -392,13 +392,16 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
         return losses.mesh_normal_consistency(out.normal, geo.meshes.normals[idx])
 
     # ---- inspection ------------------------------------------------------------------------------------
-    def inspection_buffers(self) -> tuple[str, ...]:
-        """The render without cast shadows (for an avatar without a shadow factor: with the neutral head's
-        shadow inputs), the key light's visibility (with a factor), and the render with every normal turned to
-        the viewer (with normals)."""
-        shadows = ("rgb_no_shadows", "rgb_light") if self.field.shadow_net is not None else ("rgb_no_shadows",)
-        return (shadows if "shadows" in self.field_cfg.effects else ()) + (
-            ("rgb_flat",) if self.field_cfg.needs_normals else ())
+    @classmethod
+    def buffer_names(cls, meta: dict) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """With normals, the predicted and the density-gradient normals; to inspect, the render without cast
+        shadows (for an avatar without a shadow factor: with the neutral head's shadow inputs), the key light's
+        visibility (with a factor), and the render with every normal turned to the viewer (with normals)."""
+        cfg = field_config(meta)
+        shadows = ("rgb_no_shadows", "rgb_light") if cfg.shadow_factor else ("rgb_no_shadows",)
+        normals = cfg.needs_normals
+        return ("normals", "grad_normals") if normals else (), \
+            (shadows if "shadows" in cfg.effects else ()) + (("rgb_flat",) if normals else ())
 
     def inspect(self, out: RayOutput, geometry: FrameGeometry, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
         r: render.CoDyNeRFRays = out.internals
@@ -432,9 +435,6 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
     def layout(self) -> dict[str, tuple[int, float | str]]:
         return super().layout() | {"normals": (3, 0.0), "grad_normals": (3, 0.0), "rgb_no_shadows": (3, BACKGROUND),
                                    "rgb_light": (3, 1.0), "rgb_flat": (3, BACKGROUND)}
-
-    def default_buffers(self) -> tuple[str, ...]:
-        return ("normals", "grad_normals") if self.field_cfg.needs_normals else ()
 
     def display_mode(self) -> contextlib.AbstractContextManager:
         """No gradients, except that density-gradient normals need autograd (no_grad, not inference_mode);

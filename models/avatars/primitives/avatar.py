@@ -327,13 +327,15 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     def layout(self) -> dict[str, tuple[int, float | str]]:
         return super().layout() | {"normals": (3, 0.0), "rgb_light": (3, 1.0), "rgb_no_shadows": (3, BACKGROUND)}
 
-    def default_buffers(self) -> tuple[str, ...]:
-        return ("normals",) if self.needs_normals else ()
-
-    def inspection_buffers(self) -> tuple[str, ...]:
-        """rgb_light: the key light's visibility (1: no cast shadow), grey, composited as the colour is;
-        rgb_no_shadows: the render decoded with every texel lit (the shadow map's input at 1)."""
-        return ("rgb_no_shadows", "rgb_light") if self.casts_shadows else ()
+    @classmethod
+    def buffer_names(cls, meta: dict) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """The normals with shading or specular; where the avatar casts shadows, rgb_light: the key light's
+        visibility (1: no cast shadow), grey, composited as the colour is, and rgb_no_shadows: the render decoded
+        with every texel lit (the shadow map's input at 1)."""
+        effects = meta.get("effects", ())
+        normals = ("normals",) if "shading" in effects or "specular" in effects else ()
+        shadows = "shadows" in effects and meta.get("light_dir") is not None  # casts_shadows
+        return normals, ("rgb_no_shadows", "rgb_light") if shadows else ()
 
     def inspect(self, out: RayOutput, geometry: PrimitivesGeometry, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
         unknown = set(names) - set(self.inspection_buffers())

@@ -180,7 +180,8 @@ def test_timeline_shows_a_capture_frame_and_moves_the_sliders_to_it(session, fil
 def test_a_capture_frame_never_warns_that_it_is_beyond_the_captured_views(session, files, monkeypatch):
     """The warning weighs the orbit camera's yaw about the head (the camera's less the head's) against the captured
     yaws and a 10 degree margin; a capture frame is shown from its own camera, whatever the orbit camera holds."""
-    monkeypatch.setattr(files.avatar, "view_range", {"yaw_deg": [-5.0, 5.0], "pitch_deg": [-5.0, 5.0]})
+    narrow = {"yaw_deg": [-5.0, 5.0], "pitch_deg": [-5.0, 5.0]}
+    monkeypatch.setattr(files, "avatar", dataclasses.replace(files.avatar, view_range=narrow))
     a.SetView(yaw_deg=14.0).apply(session)  # 14 - 0 = 14 <= 5 + 10
     assert views_warning(session) == ""
     a.SetView(yaw_deg=40.0).apply(session)  # 40 > 15
@@ -198,7 +199,7 @@ def test_a_capture_frame_never_warns_that_it_is_beyond_the_captured_views(sessio
     a.ShowFrame(-1).apply(session)
     a.SetAngles("head", (0.0, 0.0, 0.0)).apply(session)  # the sliders again: the orbit camera is weighed again
     assert views_warning(session) != ""
-    monkeypatch.setattr(files.avatar, "view_range", None)  # an older avatar: its views unknown, no warning
+    monkeypatch.setattr(files, "avatar", dataclasses.replace(files.avatar, view_range=None))  # views unknown
     assert views_warning(session) == ""
 
 

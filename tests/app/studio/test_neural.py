@@ -21,8 +21,8 @@ from tests.conftest import DEMO
 def test_a_fast_final_pass_leaves_the_coarse_passes_out(gl):
     avatar, _ = load_avatar(DEMO)
     raster = Rasterizer(gl)
-    cam = framing_camera(avatar.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=48, height_px=48)
-    request = Request(avatar.at_rest(Controls()), cam, ("draft", "preview", "final"))
+    cam = framing_camera(avatar.card.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=48, height_px=48)
+    request = Request(avatar.card.at_rest(Controls()), cam, ("draft", "preview", "final"))
     results, timed = queue.Queue(), {}
     sent = lambda: [results.get_nowait() for _ in range(results.qsize())]
     shown = lambda: [m[2] for m in sent() if m[0] == "result"]
@@ -55,7 +55,7 @@ def test_the_quality_panels_figures_compare_every_preset_at_the_final_size(gl):
     raster = Rasterizer(gl)
     figures = measure_presets(avatar, raster, lambda: False)
     raster.release()
-    assert figures.size_px == avatar.capture_px == 256
+    assert figures.size_px == avatar.card.capture_px == 256
     assert set(figures.ms) == {"draft", "preview", "final"} and all(ms > 0 for ms in figures.ms.values())
     assert figures.psnr_vs_final["final"] == float("inf")
     assert figures.march == avatar.describe_display() != ""  # the primitives' march, C or torch
@@ -71,10 +71,10 @@ def test_the_quality_panel_says_which_march_displays(gl, monkeypatch):
 
     avatar, _ = load_avatar(DEMO)
     raster = Rasterizer(gl)
-    cam = framing_camera(avatar.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=16, height_px=16)
+    cam = framing_camera(avatar.card.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=16, height_px=16)
 
     def shown() -> str:
-        render_image(avatar, cam, avatar.at_rest(Controls()), RenderOptions(buffers=()), raster)
+        render_image(avatar, cam, avatar.card.at_rest(Controls()), RenderOptions(buffers=()), raster)
         return avatar.describe_display()
 
     assert avatar.describe_display() == ""

@@ -62,15 +62,15 @@ def test_a_fixed_camera_gives_the_colour_the_way_to_it(gl):
     density reads no view). A capture whose camera moved records no position."""
     avatar, _ = load_avatar(CODYNERF_DEMO)
     r = Rasterizer(gl)
-    controls = avatar.at_rest(Controls())
-    cam = turntable_camera(avatar.rest_vertices(), 25.0, 5.0, width_px=32, height_px=32)
+    controls = avatar.card.at_rest(Controls())
+    cam = turntable_camera(avatar.card.rest_vertices(), 25.0, 5.0, width_px=32, height_px=32)
     plain = render_image(avatar, cam, controls, rasterizer=r)
     eye = torch.as_tensor(cam.position, dtype=torch.float32)
     avatar.note_views(SimpleNamespace(origins=eye.expand(4, 3)))
     assert torch.equal(avatar.views.eye, eye)
     same = render_image(avatar, cam, controls, rasterizer=r)
     np.testing.assert_allclose(same["rgb"], plain["rgb"], atol=2e-5)
-    front = turntable_camera(avatar.rest_vertices(), 0.0, 5.0, width_px=32, height_px=32)
+    front = turntable_camera(avatar.card.rest_vertices(), 0.0, 5.0, width_px=32, height_px=32)
     avatar.note_views(SimpleNamespace(origins=torch.as_tensor(front.position, dtype=torch.float32).expand(4, 3)))
     held = render_image(avatar, cam, controls, rasterizer=r)
     np.testing.assert_allclose(held["opacity"], plain["opacity"], atol=1e-6)
@@ -87,9 +87,9 @@ def test_primitives_decode_new_views_as_the_nearest_seen(gl):
     before one camera, a camera 40 degrees round decodes what a camera on the cone's rim (12 degrees) decodes."""
     avatar, _ = load_avatar(DEMO)
     r = Rasterizer(gl)
-    geo = avatar.frame_geometry(avatar.at_rest(Controls()), r)
+    geo = avatar.frame_geometry(avatar.card.at_rest(Controls()), r)
     eye = geo.translation + torch.tensor([0.0, 0.0, 1.0])  # in front of the head, on its forward axis
-    geos = [avatar.frame_geometry(avatar.at_rest(Controls(root=np.array([0.0, math.radians(y), 0.0],
+    geos = [avatar.frame_geometry(avatar.card.at_rest(Controls(root=np.array([0.0, math.radians(y), 0.0],
                                                                           np.float32))), r) for y in (-10, 0, 10)]
     avatar.note_views(SimpleNamespace(origins=eye.expand(3, 3), geometry=geos))
     # 10 degrees each side and the margin (the root turns about the head's centre, not its origin: a little more)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -37,10 +38,10 @@ def test_view_range_hand_worked():
 
 def test_the_avatar_knows_which_views_it_saw():
     avatar, _ = load_avatar(DEMO)
-    assert avatar.view_range is not None and avatar.views_beyond(180.0)  # the demo's capture saw its front half
-    avatar.view_range = None  # an older avatar: its views unknown
-    assert not avatar.views_beyond(150.0) and avatar.turntable_sweep_deg() in (0.0, pytest.approx(0.0))
-    avatar.view_range = {"yaw_deg": [-20.0, 15.0], "pitch_deg": [-5.0, 5.0]}
-    assert avatar.turntable_sweep_deg() == 30.0  # the farther side, 20, and 10 more
-    assert not avatar.views_beyond(24.0) and avatar.views_beyond(26.0) and avatar.views_beyond(-31.0)
-    assert avatar.views_beyond(180.0) and not avatar.views_beyond(360.0 + 5.0)
+    assert avatar.card.view_range is not None and avatar.card.views_beyond(180.0)  # its capture saw its front
+    avatar.card = replace(avatar.card, view_range=None)  # an older avatar: its views unknown
+    assert not avatar.card.views_beyond(150.0) and avatar.card.turntable_sweep_deg() in (0.0, pytest.approx(0.0))
+    avatar.card = replace(avatar.card, view_range={"yaw_deg": [-20.0, 15.0], "pitch_deg": [-5.0, 5.0]})
+    assert avatar.card.turntable_sweep_deg() == 30.0  # the farther side, 20, and 10 more
+    assert not avatar.card.views_beyond(24.0) and avatar.card.views_beyond(26.0) and avatar.card.views_beyond(-31.0)
+    assert avatar.card.views_beyond(180.0) and not avatar.card.views_beyond(360.0 + 5.0)

@@ -75,8 +75,8 @@ def test_bilinear_lookup_matches_opencvs():
 
 
 def test_a_surface_point_projects_to_the_pixel_whose_ray_met_it(demo_avatar, raster):
-    camera = turntable_camera(demo_avatar.rest_vertices(), 30.0, 10.0, width_px=48, height_px=48)
-    r = raster.rasterize(demo_avatar.rest_vertices(), demo_avatar.head_model.triangles, camera)
+    camera = turntable_camera(demo_avatar.card.rest_vertices(), 30.0, 10.0, width_px=48, height_px=48)
+    r = raster.rasterize(demo_avatar.card.rest_vertices(), demo_avatar.head_model.triangles, camera)
     origin, dirs = pixel_rays(camera)
     i, j = np.nonzero(r.hit)
     points = origin + dirs[i, j] * r.distance[i, j][:, None]
@@ -105,7 +105,7 @@ def test_the_bake_looks_only_where_the_avatar_has_seen(demo_avatar):
     past the captured -46.5 - 10 on one side, so the bake keeps to 56 each side."""
     assert bake_views(demo_avatar, 3) == [(-56.0, 0.0), (0.0, 0.0), (56.0, 0.0), (-56.0, 20.5), (56.0, 20.5),
                                           (0.0, -18.5)]
-    assert not any(demo_avatar.views_beyond(y) for y, _ in bake_views(demo_avatar, 9))
+    assert not any(demo_avatar.card.views_beyond(y) for y, _ in bake_views(demo_avatar, 9))
 
 
 def test_an_avatar_seen_all_round_is_baked_all_round():
@@ -118,9 +118,9 @@ def test_an_avatar_seen_all_round_is_baked_all_round():
 def textured_psnr(avatar, raster, chart, image: np.ndarray, yaw_deg: float, pitch_deg: float, px: int = 128) -> float:
     """PSNR (dB) of the guide mesh drawn with the texture (over the background as far as the render is background)
     against the avatar's own render at rest, over the pixels where both show the head."""
-    camera = turntable_camera(avatar.rest_vertices(), yaw_deg, pitch_deg, width_px=px, height_px=px)
-    ref = render_image(avatar, camera, avatar.at_rest(Controls()), RenderOptions(buffers=()), raster)
-    r = raster.rasterize(avatar.rest_vertices()[chart.vertex_of], chart.triangles, camera)
+    camera = turntable_camera(avatar.card.rest_vertices(), yaw_deg, pitch_deg, width_px=px, height_px=px)
+    ref = render_image(avatar, camera, avatar.card.at_rest(Controls()), RenderOptions(buffers=()), raster)
+    r = raster.rasterize(avatar.card.rest_vertices()[chart.vertex_of], chart.triangles, camera)
     o = ref["opacity"][..., None]
     drawn = o * texture_image(r, chart.uv, chart.triangles, image) + (1 - o) * avatar.background.numpy()
     face = r.hit & (ref["opacity"] > 0.5)

@@ -64,7 +64,7 @@ def test_codynerf_exports_its_soft_field_and_nerface_says_it_cannot(tmp_path, ca
     assert np.all(m.bounds[0] > template.min(0) - shell - 0.01) and np.all(m.bounds[1] < template.max(0) + shell + 0.01)
     assert np.all(m.bounds[1] - m.bounds[0] > 0.8 * np.ptp(template, 0))
     # the field at the vertices is at the level (to the grid's linear interpolation, 1 cm cells: within a quarter)
-    field = avatar.mesh_field(avatar.at_rest(Controls()), Rasterizer(gl))
+    field = avatar.mesh_field(avatar.card.at_rest(Controls()), Rasterizer(gl))
     at = field.density(torch.as_tensor(m.vertices[::50], dtype=torch.float32)).numpy()
     assert np.median(np.abs(at - level)) < 0.25 * level
     nerface = untrained_avatar("nerface", avatar.head_model)

@@ -115,8 +115,8 @@ def demo_avatar_and_raster():
     avatar, _ = load_avatar(DEMO)
     gl = GLContext.headless()
     raster = Rasterizer(gl)
-    cam = framing_camera(avatar.rest_vertices(), 20.0, 5.0, fov_y_deg=18.0, width_px=96, height_px=96)
-    yield avatar, raster, avatar.at_rest(Controls()), cam
+    cam = framing_camera(avatar.card.rest_vertices(), 20.0, 5.0, fov_y_deg=18.0, width_px=96, height_px=96)
+    yield avatar, raster, avatar.card.at_rest(Controls()), cam
     raster.release()
     gl.release()
 

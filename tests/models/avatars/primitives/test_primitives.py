@@ -209,8 +209,8 @@ def test_a_newer_request_stops_a_frame_within_its_one_batch(gl):
     which asks it between waves (in every group), so a newer request need not wait for the whole frame."""
     avatar, _ = load_avatar(DEMO)
     raster = Rasterizer(gl)
-    cam = framing_camera(avatar.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=96, height_px=96)
-    controls = avatar.at_rest(Controls())
+    cam = framing_camera(avatar.card.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=96, height_px=96)
+    controls = avatar.card.at_rest(Controls())
     asked = []
 
     def after_three() -> bool:
@@ -265,9 +265,9 @@ def test_opacity_fades_where_the_capture_never_looked(synth_capture, tmp_path, g
     fade = avatar.seen_fade
     assert float(fade.min()) == 0.0 and float(fade.max()) == 1.0
     assert bool(((fade > 0.05) & (fade < 0.95)).any())  # a ramp, not a cut
-    cam = framing_camera(avatar.rest_vertices(), fov_y_deg=18.0, width_px=48, height_px=48)
+    cam = framing_camera(avatar.card.rest_vertices(), fov_y_deg=18.0, width_px=48, height_px=48)
     r = Rasterizer(gl)
-    controls = avatar.at_rest(Controls())
+    controls = avatar.card.at_rest(Controls())
     faded = render_image(avatar, cam, controls, RenderOptions(buffers=()), r)
     del avatar.seen_fade
     whole = render_image(avatar, cam, controls, RenderOptions(buffers=()), r)

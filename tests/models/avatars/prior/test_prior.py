@@ -285,7 +285,7 @@ def test_corpus_prior_and_personalize_from_the_command_line(tmp_path, capsys):
     from render.gl.context import GLContext
 
     gl = GLContext.headless()
-    img = render_image(avatar, framing_camera(avatar.rest_vertices(), width_px=32, height_px=32), Controls(),
+    img = render_image(avatar, framing_camera(avatar.card.rest_vertices(), width_px=32, height_px=32), Controls(),
                        rasterizer=Rasterizer(gl))["rgb"]
     gl.release()
     assert np.isfinite(img).all() and img.shape == (32, 32, 3)
