@@ -8,6 +8,11 @@ rays it gives named buffers (`render_rays`: rgb, opacity, depth, and what its ef
 for a training batch (`loss_terms`: named, weighted), and after the hot path the inspection buffers it
 declares (`inspect`). Images are the same for every model: rendering.py's `render_image` sends a camera's rays
 through `render_rays` in batches, with a frozen RenderOptions.
+
+The core a model implements is the abstract methods (for_capture, from_meta, meta, frame_geometry, image_pixels,
+note_views, render_rays, loss_terms) and, where it has them, its buffers (buffer_names, layout, inspect); the rest
+are hooks with defaults. What it keeps of its capture beside its weights is components it holds (the plate, the
+views, the code keys: components/); what its folder says beside the weights is its card (card.py).
 """
 
 from __future__ import annotations
@@ -147,6 +152,7 @@ class Avatar(nn.Module, ABC):
         return ()
 
     def describe_effects(self) -> str:
+        """The effects in a few words (reports): "none" without any."""
         return ", ".join(self.effects) or "none"
 
     def describe_rendering(self) -> str:
@@ -220,9 +226,11 @@ class Avatar(nn.Module, ABC):
         return (), ()
 
     def default_buffers(self) -> tuple[str, ...]:
+        """The optional buffers render_image makes (buffer_names of this avatar's meta)."""
         return self.buffer_names(self.meta())[0]
 
     def inspection_buffers(self) -> tuple[str, ...]:
+        """The inspection buffers it can make (buffer_names of this avatar's meta)."""
         return self.buffer_names(self.meta())[1]
 
     def inspect(self, out: RayOutput, geometry: Any, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
