@@ -11,7 +11,7 @@ import pytest
 
 from app.animation import Animation, AnimationError, channel_value, load_animation, rest_sliders, save_animation
 from app.sliders import View
-from models.head.sources import load_builtin
+from models.head.sources import load_builtin, load_head
 from tests.conftest import DEMO
 
 
@@ -60,7 +60,9 @@ def test_the_file_round_trips_and_bad_files_name_the_problem(tmp_path):
 def test_animate_writes_the_keyed_motion(tmp_path, capsys):
     from app.cli import main
 
-    anim = Animation(fps=4, duration_s=0.75, interpolation="linear", tracks={"jaw.open": ((0.0, 0.0), (0.5, 25.0))})
+    # the demo (ICT) opens its mouth through the jawOpen expression; a head with a jaw joint keys jaw.open
+    anim = Animation(fps=4, duration_s=0.75, interpolation="linear",
+                     tracks={"expression.jawOpen": ((0.0, 0.0), (0.5, 1.0))})
     save_animation(anim, tmp_path / "jaw.json")
     out = tmp_path / "jaw.mp4"
     assert main(["animate", str(DEMO), str(tmp_path / "jaw.json"), "--out", str(out), "--size", "48",
@@ -68,7 +70,7 @@ def test_animate_writes_the_keyed_motion(tmp_path, capsys):
     import trimesh
 
     meshes = sorted((tmp_path / "jaw_meshes").glob("frame_*.obj"))
-    head = load_builtin()
+    head = load_head(json.loads((DEMO / "avatar.json").read_text())["head_model"])
     first, last = (trimesh.load(m, process=False) for m in (meshes[0], meshes[-1]))
     assert len(meshes) == 3 and len(first.vertices) == head.num_vertices
     assert np.abs(last.vertices - first.vertices).max() > 0.005  # the guide's jaw opened too

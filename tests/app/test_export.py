@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pygltflib
@@ -21,6 +22,11 @@ from tests.models.export.reading import accessor, cubic_spline, validator_report
 TALK = {"format": "avatar-studio/animation/1", "fps": 10, "duration_s": 2.0, "interpolation": "smooth",
         "tracks": {"expression.smile_L": [[0, 0], [0.8, 0.9], [2, 0.2]], "expression.blink_R": [[0.4, 0], [0.6, 1]],
                    "jaw.open": [[0, 0], [1, 15]], "head.yaw": [[0, -10], [2, 10]], "camera.yaw": [[0, 20], [2, -20]]}}
+#: The same talk in the demo's head model's terms (ICT's names; its mouth opens through jawOpen, it has no jaw joint).
+TALK_ICT = {**TALK, "tracks": {"expression.mouthSmile_L": TALK["tracks"]["expression.smile_L"],
+                               "expression.eyeBlink_R": TALK["tracks"]["expression.blink_R"],
+                               "expression.jawOpen": [[0, 0], [1, 0.6]], "head.yaw": TALK["tracks"]["head.yaw"],
+                               "camera.yaw": TALK["tracks"]["camera.yaw"]}}
 
 
 def write(tmp_path, data: dict, name: str = "talk.json"):
@@ -30,27 +36,36 @@ def write(tmp_path, data: dict, name: str = "talk.json"):
 
 
 def test_export_writes_a_valid_glb_whose_animation_carries_the_files_keys(tmp_path, capsys):
+    """The demo (an ICT-FaceKit identity): every vertex of its head model once and the texture's seam copies again,
+    a morph target per expression, the joints ICT has (root and the eyes); the file's keys, in morph weights, at
+    the file's times; the head's turn on the root."""
+    from models.head.sources import load_head
+
+    head = load_head(json.loads((DEMO / "avatar.json").read_text())["head_model"])
     out = tmp_path / "demo.glb"
     argv = ["export", str(DEMO), "--out", str(out), "--texture-size", "64", "--render-size", "64", "--views", "1",
-            "--animation", str(write(tmp_path, TALK))]
+            "--animation", str(write(tmp_path, TALK_ICT))]
     assert main(argv) == 0
     said = capsys.readouterr().out
-    assert "15069 vertices of which 237 seam copies" in said and "16 morph targets" in said
-    assert "camera.yaw left out" in said
+    vertices, seams = map(int, re.search(r"(\d+) vertices of which (\d+) seam copies", said).groups())
+    E = head.num_expression
+    assert vertices - seams == len(head.template) and 0 < seams < len(head.template) // 10
+    assert f"{E} morph targets" in said and "camera.yaw left out" in said
     gltf = pygltflib.GLTF2.load(str(out))
     (anim,) = gltf.animations
     assert anim.name == "talk"
     weights = next(c for c in anim.channels if c.target.path == "weights")
     sampler = anim.samplers[weights.sampler]
     t = accessor(gltf, sampler.input)[:, 0]
-    np.testing.assert_array_equal(t, np.float32([0, 0.4, 0.6, 0.8, 2]))  # the keys' times, both channels'
-    out3 = accessor(gltf, sampler.output).reshape(len(t), 3, 16)
+    np.testing.assert_array_equal(t, np.float32([0, 0.4, 0.6, 0.8, 1, 2]))  # the keys' times, every channel's
+    out3 = accessor(gltf, sampler.output).reshape(len(t), 3, E)
     names = gltf.meshes[0].extras["targetNames"]
-    smile, blink = names.index("smile_L"), names.index("blink_R")
-    np.testing.assert_allclose(out3[[0, 3, 4], 1, smile], [0, 0.9, 0.2], atol=1e-7)  # the file's values at its keys
+    smile, blink, jaw = names.index("mouthSmile_L"), names.index("eyeBlink_R"), names.index("jawOpen")
+    np.testing.assert_allclose(out3[[0, 3, 5], 1, smile], [0, 0.9, 0.2], atol=1e-7)  # the file's values at its keys
     np.testing.assert_allclose(out3[[1, 2], 1, blink], [0, 1], atol=1e-7)
+    np.testing.assert_allclose(out3[[0, 4], 1, jaw], [0, 0.6], atol=1e-7)
     turning = {gltf.nodes[c.target.node].name for c in anim.channels if c.target.path == "rotation"}
-    assert turning == {"root", "jaw"}
+    assert turning == {"root"}
     report = validator_report(out)
     assert report["numErrors"] == 0 and report["numWarnings"] == 0, report["messages"]
 

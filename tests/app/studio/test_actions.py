@@ -102,16 +102,16 @@ def test_undo_and_redo_step_through_whole_changes(session):
 
 def test_resets_per_group(session):
     head = session.avatar.head_model
-    for name in ("browRaise_L", "smile_L", "blink_R", "noseSneer"):
+    for name in ("browOuterUp_L", "mouthSmile_L", "eyeBlink_R", "noseSneer_L"):
         a.SetExpression(head.expression_index(name), 0.5).apply(session)
     a.SetAngles("head", (10.0, 5.0, 0.0)).apply(session)
     a.SetAngles("neck", (4.0, 0.0, 0.0)).apply(session)
     a.SetJaw(8.0).apply(session)
     a.ResetGroup("expression:brows").apply(session)
     e = lambda name: session.sliders.expression[head.expression_index(name)]
-    assert e("browRaise_L") == 0 and e("smile_L") == 0.5 and e("blink_R") == 0.5
+    assert e("browOuterUp_L") == 0 and e("mouthSmile_L") == 0.5 and e("eyeBlink_R") == 0.5
     a.ResetGroup("expression:mouth").apply(session)
-    assert e("smile_L") == 0 and e("blink_R") == 0.5 and e("noseSneer") == 0.5
+    assert e("mouthSmile_L") == 0 and e("eyeBlink_R") == 0.5 and e("noseSneer_L") == 0.5
     a.ResetGroup("head").apply(session)
     assert not session.sliders.head.any() and session.sliders.neck[0] == 4.0
     a.ResetGroup("jaw").apply(session)
@@ -129,18 +129,18 @@ def test_named_poses_are_kept_per_avatar(session, tmp_path, monkeypatch):
 
     monkeypatch.setattr(poses, "POSES_FILE", tmp_path / "poses.json")
     head = session.avatar.head_model
-    a.SetExpression(head.expression_index("smile_L"), 0.8).apply(session)
+    a.SetExpression(head.expression_index("mouthSmile_L"), 0.8).apply(session)
     a.SetJaw(14.0).apply(session)
     a.SavePose("grin").apply(session)
     saved = __import__("json").loads((tmp_path / "poses.json").read_text())
     pose = saved["avatars"][str(DEMO.resolve())]["grin"]
-    assert pose["expression.smile_L"] == pytest.approx(0.8) and pose["jaw.open"] == 14.0
+    assert pose["expression.mouthSmile_L"] == pytest.approx(0.8) and pose["jaw.open"] == 14.0
     assert not any(c.startswith("camera.") for c in pose)  # a pose is the face, not the view
     a.ResetExpression().apply(session)
     a.ResetGroup("jaw").apply(session)
     a.SetView(yaw_deg=-40.0).apply(session)
     a.RecallPose("grin").apply(session)
-    assert session.sliders.expression[head.expression_index("smile_L")] == pytest.approx(0.8)
+    assert session.sliders.expression[head.expression_index("mouthSmile_L")] == pytest.approx(0.8)
     assert session.sliders.jaw_open_deg == 14.0 and session.view.yaw_deg == -40.0
     other = Session()  # the same avatar opened again finds its pose
     a.AvatarOpened(session.files).apply(other)
