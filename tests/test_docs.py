@@ -186,3 +186,20 @@ def test_the_readme_command_table_lists_exactly_the_subcommands():
     assert set(listed) == set(_subcommands()), (
         f"missing from the README's table: {sorted(set(_subcommands()) - set(listed))}; "
         f"listed but not commands: {sorted(set(listed) - set(_subcommands()))}")
+
+
+OUTSIDE_CITATION = re.compile(r"\bDESIGN\s+\d|\bDESIGN\.md\b|\bpapers?\s+00\d|shared/papers")
+"""A citation of a file the repository does not hold: the design file's numbered sections, the numbered papers."""
+
+
+def test_code_and_docs_cite_the_repository_and_papers_by_name():
+    """Comments, help and docs cite the repository's own docs and the papers by their names (docs/models.md lists
+    them with their titles), never a design file's sections or a numbered paper that only this project's machines
+    have."""
+    assert OUTSIDE_CITATION.search("a sampler starts here (DESIGN 5)") and OUTSIDE_CITATION.search("(paper 002)")
+    assert not OUTSIDE_CITATION.search("(Cao et al. 2022, Eq. 1; docs/architecture.md)")
+    files = [*PAGES, *(p for d in ("app", "models", "render", "shaders", "scripts", "benchmarks", "tests", "web")
+                      for p in sorted((REPO / d).rglob("*")) if p.suffix in (".py", ".glsl", ".sh", ".js", ".html"))]
+    found = [f"{p.relative_to(REPO)}:{n}" for p in files if p != Path(__file__)
+             for n, line in enumerate(p.read_text().splitlines(), 1) if OUTSIDE_CITATION.search(line)]
+    assert found == []

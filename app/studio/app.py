@@ -1,4 +1,4 @@
-"""The studio window (DESIGN 4): glfw + Dear ImGui (imgui-bundle) + moderngl, on the CPU. The window's thread
+"""The studio window (docs/studio.md): glfw + Dear ImGui (imgui-bundle) + moderngl, on the CPU. The window's thread
 only draws; the neural render, exports and training run elsewhere (a thread, a thread, processes), so
 the interface keeps its frame rate.
 

@@ -1,4 +1,4 @@
-"""The avatar interface (DESIGN 1): what every model implements, and all that the rest of the program (the
+"""The avatar interface (docs/architecture.md): what every model implements, and all that the rest of the program (the
 trainer, eval, bench, the quality presets, turntables, the studio) asks of an avatar.
 
 An avatar is built for a capture (`for_capture`) or from its avatar.json (`from_meta`), and describes itself

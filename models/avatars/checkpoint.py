@@ -1,4 +1,4 @@
-"""Avatar checkpoints (DESIGN 2.3): a folder with `avatar.json` (config, head-model reference, effects,
+"""Avatar checkpoints (docs/formats.md): a folder with `avatar.json` (config, head-model reference, effects,
 provenance, the training step) and the tensors in safetensors files. No pickle anywhere.
 
 Crash safety: tensors go to a new file named by the step (`weights-000123.safetensors`), written to a

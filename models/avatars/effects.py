@@ -1,4 +1,4 @@
-"""Lighting effects an avatar models (DESIGN 3.1): simulate only what the scene calls for; and the key light a
+"""Lighting effects an avatar models (docs/training.md): simulate only what the scene calls for; and the key light a
 capture's lighting record gives the models that cast its shadows."""
 
 from __future__ import annotations

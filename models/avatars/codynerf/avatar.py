@@ -1,4 +1,4 @@
-"""The CoDyNeRF avatar (DESIGN 3): a head model, the CoDyNeRF fields and per-frame codes, rendered along rays.
+"""The CoDyNeRF avatar (docs/models.md): a head model, the CoDyNeRF fields and per-frame codes, rendered along rays.
 
 Rendering a frame: the posed mesh is rasterized (GL) for the distance to its surface along each pixel's ray;
 rays near the head's silhouette sample a shell about the surface (or the head's box where they miss the

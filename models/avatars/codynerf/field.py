@@ -1,5 +1,5 @@
-"""The CoDyNeRF fields (paper 000, Eq. 2, 5, 7, 8): residual deformation, density, normals, dynamic
-appearance. The effect set decides the inputs and which networks exist (DESIGN 3.1):
+"""The CoDyNeRF fields (CoDyNeRF, Eq. 2, 5, 7, 8): residual deformation, density, normals, dynamic
+appearance. The effect set decides the inputs and which networks exist (docs/training.md):
 
 | effects   | inputs to the appearance T                 | normals network, density gradients |
 |-----------|--------------------------------------------|------------------------------------|

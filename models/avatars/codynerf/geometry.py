@@ -1,4 +1,4 @@
-"""One frame's head as CoDyNeRF's rays need it (DESIGN 3, step 1): the canonical, expressed and posed meshes
+"""One frame's head as CoDyNeRF's rays need it (docs/models.md): the canonical, expressed and posed meshes
 for the 3DMM prior, a k-d tree for nearest-vertex queries, the landmarks the appearance reads, the head's box,
 and, for avatars whose shadow factor reads it, the posed mesh's depth map from the key light."""
 

@@ -1,4 +1,4 @@
-"""An occupancy grid in canonical space (DESIGN 5): which cells of the canonical head's box hold any density.
+"""An occupancy grid in canonical space (docs/models.md): which cells of the canonical head's box hold any density.
 Display rendering skips the density and appearance networks for samples whose canonical position (after the
 deformation, Eq. 2) falls in an empty cell. (Looking up before the learned residual deformation is cheaper
 but wrong for posed frames: the prior fades with distance from the mesh, so the prior-deformed point is not

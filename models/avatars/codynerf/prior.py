@@ -1,4 +1,4 @@
-"""The 3DMM deformation prior (paper 000, Eq. 3-4; RigNeRF): each sample is pulled towards canonical space
+"""The 3DMM deformation prior (CoDyNeRF, Eq. 3-4; RigNeRF): each sample is pulled towards canonical space
 by the deformation of its nearest point on the posed head mesh, weakened with distance from the mesh.
 
     x_hat = argmin_{v in posed mesh} |x - v|,   DistToMesh(x) = |x - x_hat|

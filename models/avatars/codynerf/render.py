@@ -1,4 +1,4 @@
-"""Rendering CoDyNeRF's rays in small steps (DESIGN 3, 5): where the samples go (the mesh shell, the head's box
+"""Rendering CoDyNeRF's rays in small steps (docs/models.md): where the samples go (the mesh shell, the head's box
 beyond the silhouette, the fine pass), the density at them (all of them, or with the early stop), the colour
 where they show (all of them, or skipping those below a weight), compositing. Each shortcut sits beside its
 exact reference; training always takes the exact path."""

@@ -1,4 +1,4 @@
-"""CoDyNeRF's training losses (paper 000, Eq. 10-14) on rendered rays, with their weights and schedules (Eq. 9, on the
+"""CoDyNeRF's training losses (CoDyNeRF, Eq. 10-14) on rendered rays, with their weights and schedules (Eq. 9, on the
 mesh's vertices, is the avatar's mesh_normal_term)."""
 
 from __future__ import annotations

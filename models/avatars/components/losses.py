@@ -1,4 +1,4 @@
-"""Training losses (paper 000, Eq. 9-14), each a pure function of tensors."""
+"""Training losses (CoDyNeRF, Eq. 9-14), each a pure function of tensors."""
 
 from __future__ import annotations
 

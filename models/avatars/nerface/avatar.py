@@ -1,4 +1,4 @@
-"""The NerFACE baseline (paper 001): a radiance field in head-canonical space conditioned on the expression
+"""The NerFACE baseline (Gafni et al. 2021): a radiance field in head-canonical space conditioned on the expression
 and a learned per-frame latent code, rendered by dense coarse-to-fine sampling, in the same harness as the
 avatar (same datasets, trainer, checkpoints, eval and render commands).
 

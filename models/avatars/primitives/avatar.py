@@ -1,4 +1,4 @@
-"""The volumetric-primitives avatar (paper 002 Section 3.1, after MVP, Lombardi et al. 2021), behind the avatar
+"""The volumetric-primitives avatar (Cao et al. 2022 Section 3.1, after MVP, Lombardi et al. 2021), behind the avatar
 interface: `train --model primitives`.
 
 Per frame: the head model's controls pose the guide mesh; the primitives take their places on it (layout.py: a
@@ -108,8 +108,8 @@ class PrimitivesConfig:
     expression_maps: bool = False
     """The decoder also reads the frame's expression as the guide mesh shows it, in its own layout: each texel's
     surface point (chart.py) with the head's rigid pose taken out, less the neutral face's, in centimetres (the
-    seed's Delta G, paper 002 Eq. 1), joined at every level from K x K up. A mouth's change then reaches the mouth's
-    slabs where it is, where the global condition spreads every expression weight over the whole head."""
+    seed's Delta G, Cao et al. 2022 Eq. 1), joined at every level from K x K up. A mouth's change then reaches the
+    mouth's slabs where it is, where the global condition spreads every expression weight over the whole head."""
     global_expression: bool = True
     """The decoder reads the controls (expression weights, jaw and neck rotations) as one vector that reaches every
     slab. False (with expression_maps): they reach it only as the maps do, where the mesh moves, as the prior's

@@ -1,4 +1,4 @@
-"""The primitives' decoder (MVP, Lombardi et al. 2021; paper 002, Section 3.1.1 and Fig. 3): once per frame, the
+"""The primitives' decoder (MVP, Lombardi et al. 2021; Cao et al. 2022, Section 3.1.1 and Fig. 3): once per frame, the
 frame's condition (expression and pose from the head model's controls, a per-frame code, the view direction)
 becomes a 4x4 feature map, upsampled by transposed convolutions with LeakyReLU to the slab image: K M x K M pixels
 whose channels are the M depth layers of opacity (and of colour, 3 M) of the K x K grid's primitives, one M x M
@@ -28,7 +28,7 @@ class SlabDecoder(nn.Module):
                  width: int = 64, min_width: int = 16, map_channels: int = 0, latent_channels: int = 0,
                  geometry_channels: int = 0, code_channels: int = 0):
         """latent_channels > 0: the frame's expression is a spatial 4x4 code of that many channels (the prior's,
-        paper 002 Section 3.1.1), joined by the condition vector (view, light) at every cell through a 1x1
+        Cao et al. 2022 Section 3.1.1), joined by the condition vector (view, light) at every cell through a 1x1
         convolution, instead of the condition vector alone through a linear layer. code_channels > 0: the per-frame
         code joins apart from the condition, at the K x K level, weighted by a mask (forward's code_mask)."""
         super().__init__()

@@ -1,4 +1,4 @@
-"""Where the volumetric primitives sit on the guide mesh (MVP, Lombardi et al. 2021; paper 002, Section 3.1): one
+"""Where the volumetric primitives sit on the guide mesh (MVP, Lombardi et al. 2021; Cao et al. 2022, Section 3.1): one
 primitive per cell of a K x K grid over a 2D layout of the head's surface, at the surface point of the cell's
 centre, turned to the surface (tangent, bitangent, normal) and sized to the cell. The decoder writes its slabs in
 the same grid, so neighbouring primitives are neighbouring pixels of its convolutions.

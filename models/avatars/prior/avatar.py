@@ -1,4 +1,4 @@
-"""The universal prior model (paper 002, Section 3.1, Eq. 1-3) on the volumetric primitives of
+"""The universal prior model (Cao et al. 2022, Section 3.1, Eq. 1-3) on the volumetric primitives of
 models/avatars/primitives: the same layout, march and effects; the decoder takes a spatial 4x4x16 expression code
 from the expression encoder and adds the bias maps the identity encoder makes from a person's neutral texture and
 geometry. One class is both the prior (trained on many identities, each frame's geometry carrying its identity's

@@ -1,4 +1,4 @@
-"""The universal prior's two encoders (paper 002, Section 3.1, Eq. 1-2 and Fig. 3).
+"""The universal prior's two encoders (Cao et al. 2022, Section 3.1, Eq. 1-2 and Fig. 3).
 
 - The identity encoder E_id: a person's neutral texture and geometry maps (3,S,S each), each through a 1x1
   convolution to 8 channels and strided 4x4 convolutions with LeakyReLU that halve the size and double the

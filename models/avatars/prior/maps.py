@@ -1,4 +1,4 @@
-"""The prior's conditioning maps (paper 002, Section 3.1, Eq. 1-2): a head's geometry (an xyz position image) and
+"""The prior's conditioning maps (Cao et al. 2022, Section 3.1, Eq. 1-2): a head's geometry (an xyz position image) and
 texture (RGB) in the primitives' chart (models/avatars/primitives/layout.py), S x S texels, so that the identity
 encoder's maps line up pixel for pixel with the decoder's slabs (S = K M). Every head model gets the same chart.
 
