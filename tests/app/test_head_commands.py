@@ -100,7 +100,7 @@ def _bad_inputs(tmp: Path, ict_dir: Path | None) -> dict[str, tuple[list[str], s
         "obj folder without neutral": (["--head", f"ict:{no_neutral}"], "generic_neutral_mesh.obj is missing"),
         "malformed controls json": (["--controls", str(bad_json)], "bad.json: not valid JSON"),
         "controls of the wrong shape": (["--controls", str(wrong_json)], "wrong.json: pose.jaw must be 3 numbers"),
-        "unknown head kind": (["--head", "smpl:x.pkl"], "expected builtin, ict:PATH or flame:PATH"),
+        "unknown head kind": (["--head", "smpl:x.pkl"], "expected builtin, demo, ict:PATH or flame:PATH"),
     }
 
 

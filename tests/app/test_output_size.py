@@ -57,7 +57,7 @@ def test_turntable_writes_the_size_asked_for(tmp_path):
 
 
 def test_animate_writes_the_size_asked_for(tmp_path):
-    jaw = Animation(fps=4, duration_s=0.5, tracks={"jaw.open": ((0.0, 0.0), (0.5, 20.0))})
+    jaw = Animation(fps=4, duration_s=0.5, tracks={"expression.jawOpen": ((0.0, 0.0), (0.5, 0.8))})
     save_animation(jaw, tmp_path / "a.json")
     out = tmp_path / "a.mp4"
     assert main(["animate", str(DEMO), str(tmp_path / "a.json"), "--size", str(SIZE), "--preset", "draft",

@@ -18,7 +18,7 @@ from models.export.bake import texture_image
 from render.camera import project, turntable_camera
 from render.gl.raster import Rasterizer
 from tests.browser import player_page, show_through, snapshot, three_or_skip
-from tests.conftest import DEMO
+from tests.conftest import BUILTIN_AVATAR as DEMO  # the built-in head: a skeleton with jaw and neck
 from tests.models.export.reading import accessor, texture
 
 PX = 256

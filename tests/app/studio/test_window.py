@@ -314,7 +314,7 @@ def test_undo_reset_poses_and_a_performance_on_the_timeline(display, tmp_path, f
     """Through the window, on the demo: a pose saved and recalled, group resets, undo and redo; then a second and
     a half of a real video reenacted as a job, whose animation lands on the timeline when it is done."""
     from app.animation import load_animation
-    from tests.conftest import DEMO
+    from tests.conftest import BUILTIN_AVATAR as DEMO  # the built-in head's names and jaw joint
 
     mp4 = tmp_path / "perf.mp4"
     report = run_script(display, tmp_path, DEMO, [

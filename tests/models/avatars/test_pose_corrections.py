@@ -18,7 +18,8 @@ from models.avatars.registry import load_avatar
 from models.head.controls import Controls
 from render.gl.raster import Rasterizer
 from render.rays import Rays
-from tests.conftest import CODYNERF_DEMO, DEMO
+from tests.conftest import BUILTIN_AVATAR as DEMO  # a head with a jaw joint
+from tests.conftest import CODYNERF_DEMO
 
 AVATARS = pytest.mark.parametrize("folder", [CODYNERF_DEMO, DEMO], ids=["codynerf", "primitives"])
 

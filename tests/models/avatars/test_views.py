@@ -18,7 +18,8 @@ from models.avatars.rendering import render_image
 from models.head.controls import Controls
 from render.camera import turntable_camera
 from render.gl.raster import Rasterizer
-from tests.conftest import CODYNERF_DEMO, DEMO
+from tests.conftest import BUILTIN_AVATAR as DEMO  # its capture's views are the numbers below
+from tests.conftest import CODYNERF_DEMO
 
 
 def unit(deg_from_z: float, azimuth_deg: float = 0.0) -> list[float]:

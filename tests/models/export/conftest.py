@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.conftest import DEMO
+from tests.conftest import BUILTIN_AVATAR as DEMO  # the built-in head: a skeleton with jaw and neck
 
 SMALL = dict(texture_px=256, render_px=128, yaws=3)
 """The bake's settings in these tests: 6 renders of 128 px onto a 256 px texture."""
