@@ -32,8 +32,11 @@ def save(out: Path, folders: list[Path]) -> None:
         head = avatar.head_model
         expr = np.zeros(head.num_expression, np.float32)
         expr[:3] = 0.6
-        cases = [Controls(), Controls(expression=expr, root=np.array([0.1, 0.4, 0.0], np.float32),
-                                      jaw=np.array([0.2, 0, 0], np.float32))]
+        # the jaw opened by its joint where the head has one, else by its jawOpen blend shape (ICT)
+        jaw = np.array([0.2, 0, 0], np.float32) if "jaw" in head.joint_names else np.zeros(3, np.float32)
+        if "jaw" not in head.joint_names and "jawOpen" in head.expr_names:
+            expr[head.expression_index("jawOpen")] = 0.6
+        cases = [Controls(), Controls(expression=expr, root=np.array([0.1, 0.4, 0.0], np.float32), jaw=jaw)]
         for ci, controls in enumerate(cases):
             for yaw in (20.0, -35.0):
                 cam = framing_camera(head.template, yaw, 5.0, fov_y_deg=18.0, width_px=64, height_px=64)

@@ -12,7 +12,7 @@ sleep 1
 work=$(mktemp -d)
 cat > "$work/script.json" <<JSON
 {"report": "$work/report.json", "steps": [
-  {"refine_to": "final"}, {"wait_render": "final"}, {"expression": "smile_L", "value": 0.6}, {"expression": "smile_R", "value": 0.6},
+  {"refine_to": "final"}, {"wait_render": "final"}, {"expression": "mouthSmile_L", "value": 0.6}, {"expression": "mouthSmile_R", "value": 0.6},
   {"head": [12, -4, 0]}, {"gaze": [14, 0]}, {"wait_render": "final"}, {"wait_frames": 30}, {"screenshot": "$OUT"}]}
 JSON
 DISPLAY=$display .venv/bin/avatar-studio studio --script "$work/script.json" --width 1440 --height 900

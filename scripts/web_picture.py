@@ -22,10 +22,10 @@ from render.camera import turntable_camera
 REPO = Path(__file__).resolve().parents[1]
 WIDTH, HEIGHT, PANEL = 900, 640, 230
 ANIMATION = {"format": "avatar-studio/animation/1", "fps": 30, "duration_s": 4.0, "interpolation": "smooth",
-             "tracks": {"jaw.open": [[0, 0], [1.5, 18]], "expression.smile_L": [[0, 0], [2, 0.8]],
+             "tracks": {"expression.jawOpen": [[0, 0], [1.5, 0.5]], "expression.mouthSmile_L": [[0, 0], [2, 0.8]],
                         "head.yaw": [[0, -20], [4, 20]]}}
 AT_S = 1.5
-BROWS = {"browRaise_L": 0.4, "browRaise_R": 0.4}
+BROWS = {"browOuterUp_L": 0.4, "browOuterUp_R": 0.4}
 
 
 def main() -> None:
