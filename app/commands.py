@@ -41,6 +41,8 @@ class Command:
     positional: tuple[str, ...] = ()
     research: bool = False
     """Listed apart in `--help`: for work on the models (the prior's corpus and training, benchmarks)."""
+    window: bool = False
+    """Opens the studio's window: its process ends as soon as the command returns (app/cli.py end_window_process)."""
 
     def runner(self) -> Callable[[object], int | None]:
         """The function that runs the command, its module imported now."""
@@ -50,7 +52,7 @@ class Command:
 
 COMMANDS = (
     Command("studio", "Open the studio window on an avatar (the shipped demo avatar by default).",
-            StudioConfig, "app.studio.app:run_studio", positional=("avatar",)),
+            StudioConfig, "app.studio.app:run_studio", positional=("avatar",), window=True),
     Command("preview", "Render a head model with given controls to a PNG, headless.",
             PreviewConfig, "app.head_commands:run_preview"),
     Command("mesh", "Write the posed guide mesh as OBJ or PLY, in the head model's vertex order.",
@@ -83,7 +85,8 @@ COMMANDS = (
             "turns (relative to the driver's neutral frame) onto the avatar; an mp4 side by side and the animation.",
             ReenactConfig, "app.reenact:run_reenact", positional=("avatar", "video")),
     Command("live", "Drive an avatar live in the studio from a camera or a video played in real time; record the "
-            "performance as an animation.", LiveConfig, "app.studio.app:run_live", positional=("avatar",)),
+            "performance as an animation.", LiveConfig, "app.studio.app:run_live", positional=("avatar",),
+            window=True),
     Command("export-mesh", "Write an avatar as a coloured mesh (PLY or OBJ with vertex colours) for "
             "Blender and game engines.", ExportMeshConfig, "app.avatar_commands:run_export_mesh",
             positional=("avatar",)),
