@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse(build_parser(), sys.argv[1:] if argv is None else argv)
     cmd = args._command
     code = run_command(cmd, args)
-    if cmd.window:
+    if cmd.window and code == 0:  # the window opened and closed (bad input returns 2 before it opens)
         end_window_process(code)
     return code
 
