@@ -91,9 +91,39 @@ def atlas_corner_uv(vertices: np.ndarray, triangles: np.ndarray, texture_px: int
     return np.asarray(uvs, np.float32)[indices]
 
 
+MAX_UV_LAYERS = 1.5
+"""How many times over a head model's UV triangles may cover the texture they lie on and still serve as its one
+texture's chart: an atlas covers it once (rasterized edges make the union a little larger); the built-in head's
+layout 1.15; ICT's 2.9 (its mouth and eye sockets and its eyeballs lie on the face's texels), which then gets an
+xatlas atlas of its own."""
+
+
+def uv_layers(corner_uv: np.ndarray, grid_px: int = 1024) -> float:
+    """The triangles' summed UV area over the area of their union (rasterized on a grid_px grid): 1 where no two
+    share a texel, 2 where every texel is covered twice.
+
+    >>> two = np.array([[[0, 0], [0.5, 0], [0, 0.5]], [[0.5, 0.5], [1, 0.5], [0.5, 1]]])
+    >>> round(uv_layers(two), 1), round(uv_layers(np.concatenate([two, two])), 1)
+    (1.0, 2.0)
+    """
+    import cv2
+
+    uv = np.asarray(corner_uv, np.float64)
+    area = 0.5 * np.abs((uv[:, 1, 0] - uv[:, 0, 0]) * (uv[:, 2, 1] - uv[:, 0, 1])
+                        - (uv[:, 2, 0] - uv[:, 0, 0]) * (uv[:, 1, 1] - uv[:, 0, 1]))
+    union = np.zeros((grid_px, grid_px), np.uint8)
+    for tri in np.round(uv * grid_px - 0.5).astype(np.int32):
+        cv2.fillConvexPoly(union, tri, 1)
+    covered = union.mean()
+    return float(area.sum() / covered) if covered > 0 else 0.0
+
+
 def head_chart(head: HeadModel, texture_px: int) -> Chart:
-    """The head model's own UVs where it has them, else an xatlas atlas of its template."""
+    """The head model's own UVs where they lay its surfaces side by side (MAX_UV_LAYERS), else an xatlas atlas of its
+    template."""
     if head.uv is not None and head.triangles_uv is not None and len(head.triangles_uv) == len(head.triangles):
-        return split_seams(head.triangles, model_corner_uv(head), head.num_vertices, "head model")
+        corner_uv = model_corner_uv(head)
+        if uv_layers(corner_uv) <= MAX_UV_LAYERS:
+            return split_seams(head.triangles, corner_uv, head.num_vertices, "head model")
     return split_seams(head.triangles, atlas_corner_uv(head.template, head.triangles, texture_px),
                        head.num_vertices, "xatlas")
