@@ -36,7 +36,7 @@ def write(tmp_path, data: dict, name: str = "talk.json"):
 
 
 def test_export_writes_a_valid_glb_whose_animation_carries_the_files_keys(tmp_path, capsys):
-    """The demo (an ICT-FaceKit identity): every vertex of its head model once and the texture's seam copies again,
+    """The demo (an ICT-FaceKit identity): every vertex of its head model once and its chart's seam copies again,
     a morph target per expression, the joints ICT has (root and the eyes); the file's keys, in morph weights, at
     the file's times; the head's turn on the root."""
     from models.head.sources import load_head
@@ -49,7 +49,7 @@ def test_export_writes_a_valid_glb_whose_animation_carries_the_files_keys(tmp_pa
     said = capsys.readouterr().out
     vertices, seams = map(int, re.search(r"(\d+) vertices of which (\d+) seam copies", said).groups())
     E = head.num_expression
-    assert vertices - seams == len(head.template) and 0 < seams < len(head.template) // 10
+    assert vertices - seams == len(head.template) and 0 < seams < len(head.template) // 2  # xatlas's seams: 5356
     assert f"{E} morph targets" in said and "camera.yaw left out" in said
     gltf = pygltflib.GLTF2.load(str(out))
     (anim,) = gltf.animations
