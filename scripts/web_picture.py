@@ -1,6 +1,7 @@
 """The docs' picture of the demo avatar in the browser (docs/img/export_web.png): the demo exported with
-`--format web` (default bake settings) and the animation of docs/formats.md (its camera channel left out), its
-player opened in headless Chromium, the animation at 1.5 s and the brows raised a little on their sliders, a camera
+`--format web` (default bake settings) and a short animation in its head model's terms (ICT's jawOpen and
+mouthSmile_L, the head turning), its player opened in headless Chromium, the animation at 1.5 s and the outer brows
+raised a little on their sliders, a camera
 a little to the side, the page captured.
 
     .venv/bin/python scripts/web_picture.py [OUT.png] [WEB_FOLDER]
