@@ -9,7 +9,6 @@ import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
-import imageio_ffmpeg
 import numpy as np
 from PIL import Image
 
@@ -36,6 +35,8 @@ def write_video(frames: Iterable[np.ndarray], mp4: str | Path, fps: float = 30.0
             if writer is None:
                 if h % 2 or w % 2:
                     raise ValueError(f"{mp4}: H.264 (yuv420p) needs even frame sizes, got {w}x{h}")
+                import imageio_ffmpeg  # where a video is written: `train` imports this module and writes none
+
                 writer = imageio_ffmpeg.write_frames(str(tmp), (w, h), fps=fps, codec="libx264",
                                                      pix_fmt_out="yuv420p", quality=None,
                                                      output_params=["-crf", "18"], macro_block_size=1)
