@@ -105,13 +105,18 @@ def draw(ctx: PanelContext) -> None:
                 if imgui.small_button(group):
                     act(a.ResetGroup(f"expression:{group}"))
         needle = PanelState.filter_text.lower()
-        for i in range(head.num_expression):
-            name = head.expr_names[i] if i < len(head.expr_names) else f"expression {i}"
+        names = [head.expr_names[i] if i < len(head.expr_names) else f"expression {i}"
+                 for i in range(head.num_expression)]
+        # the sliders leave room for the longest name beside them (ICT's "mouthShrugLower" was cut at 1440x900)
+        label_px = max((imgui.calc_text_size(n).x for n in names), default=0.0) + imgui.get_style().item_inner_spacing.x
+        imgui.push_item_width(max(80.0, imgui.get_content_region_avail().x - label_px))
+        for i, name in enumerate(names):
             if needle and needle not in name.lower():
                 continue
             c, v = imgui.slider_float(name, float(sl.expression[i]), *SLIDER_RANGES["expression"], "%.2f")
             if c:
                 act(a.SetExpression(i, v))
+        imgui.pop_item_width()
     if imgui.collapsing_header("Head and neck", imgui.TreeNodeFlags_.default_open):
         if imgui.button("Reset pose"):
             act(a.ResetPose())
