@@ -107,7 +107,7 @@ def draw(ctx: PanelContext) -> None:
         needle = PanelState.filter_text.lower()
         names = [head.expr_names[i] if i < len(head.expr_names) else f"expression {i}"
                  for i in range(head.num_expression)]
-        # the sliders leave room for the longest name beside them (ICT's "mouthShrugLower" was cut at 1440x900)
+        # the sliders leave room for the longest name beside them (at 1440x900 browInnerUp_L showed as browInnerUp_)
         label_px = max((imgui.calc_text_size(n).x for n in names), default=0.0) + imgui.get_style().item_inner_spacing.x
         imgui.push_item_width(max(80.0, imgui.get_content_region_avail().x - label_px))
         for i, name in enumerate(names):
