@@ -7,6 +7,7 @@ import shlex
 import signal
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +19,9 @@ from app.errors import UserInputError
 from app.head_commands import save_png
 from app.progress import Progress, progress_callback
 from app.turntable import TurntableConfig, turntable_frames
+from models.avatars.checkpoint import CheckpointError
 from models.avatars.effects import parse_effects
-from models.avatars.registry import load_avatar
+from models.avatars.registry import load_avatar, starting_prior
 from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import check_images, is_capture, load_split
 from models.capture.frames import background_plate, frame_camera, load_rgb
@@ -27,6 +29,7 @@ from models.capture.synthetic import read_png16
 from models.device import device_of
 from models.files import FolderBusy, WriterLock, atomic_write_bytes, foreign_files
 from models.head.controls import Controls, load_controls
+from models.training.configs import PERSONALIZE_LR
 from models.training.metrics import face_mse, luminance, normal_angles_deg, pearson, psnr, ssim
 from models.training.prior import PriorTrainConfig, corpus_folders, distributed_from_env, prepare_prior
 from models.training.trainer import PROGRESS_SECONDS, TrainConfig, prepare_training
@@ -67,7 +70,7 @@ def train_locked(cfg: TrainConfig) -> int:
     if not cfg.resume and (cfg.out / "avatar.json").exists():
         raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
     gl = GLContext.headless()
-    trainer = prepare_training(cfg, gl, on_frame=progress_callback("reading the frames"))
+    trainer = start_training(cfg, gl)
     tty = sys.stderr.isatty()
     last_line = [0.0]
 
@@ -105,6 +108,26 @@ def train_locked(cfg: TrainConfig) -> int:
     out, dataset = shlex.quote(str(cfg.out)), shlex.quote(str(cfg.dataset))
     print(f"next: avatar-studio studio {out}  (or: avatar-studio turntable {out}; avatar-studio eval {out} {dataset})")
     return 0
+
+
+def start_training(cfg: TrainConfig, gl: GLContext):
+    """The trainer `train` runs: the universal prior personalised on the capture where the capture is a tracked
+    video and a prior of its head model is at hand (registry.starting_prior), else a model from nothing (or the
+    checkpoint resumed); the line that says which goes to the terminal."""
+    reading = progress_callback("reading the frames")
+    if cfg.resume:
+        return prepare_training(cfg, gl, on_frame=reading)
+    try:
+        split = load_split(cfg.dataset, "train")
+        prior, why = starting_prior(split.head_model, split.tracked, cfg.model, cfg.from_scratch, cfg.prior)
+    except CheckpointError as e:
+        raise UserInputError(f"--prior: {e}") from None
+    print(f"training {cfg.out} {why}", flush=True)
+    if prior is None:
+        return prepare_training(cfg, gl, on_frame=reading)
+    lr = PERSONALIZE_LR if cfg.lr == TrainConfig.lr else cfg.lr
+    trainer, _ = personalizing_trainer(replace(cfg, model="prior", lr=lr), prior, gl, on_frame=reading)
+    return trainer
 
 
 def face_mask_of(frame, image_shape) -> np.ndarray:
@@ -273,7 +296,7 @@ def run_prior_train(cfg: PriorTrainConfig) -> int:
     device_of(cfg.device)
     try:
         parse_effects(cfg.effects)
-        corpus_folders(cfg.corpus)
+        corpus_folders(cfg.corpus, cfg.people)
     except (ValueError, FileNotFoundError) as e:
         raise UserInputError(str(e)) from None
     if not cfg.resume and (cfg.out / "avatar.json").exists():
@@ -297,21 +320,39 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
     """`personalize`: the prior's avatar of one person: the neutral maps from the scan (the head model's fitted shape,
     the colours of its least expressive frames unprojected), the identity encoder's bias maps from them, then
     fine-tuning on the scan's frames. The result is an ordinary avatar folder."""
+    device_of(cfg.device)
+    if cfg.out.exists() and (not cfg.out.is_dir() or any(cfg.out.iterdir())):
+        raise UserInputError(f"{cfg.out}: already exists and is not empty; choose a new folder")
+    tcfg = TrainConfig(dataset=cfg.scan, out=cfg.out, model="prior", minutes=cfg.minutes or None,
+                       steps=cfg.steps or (None if cfg.minutes else 1), device=cfg.device, seed=cfg.seed, lr=cfg.lr)
+    gl = GLContext.headless()
+    trainer, maps_s = personalizing_trainer(tcfg, cfg.prior, gl, cfg.tune)
+    if cfg.minutes or cfg.steps:
+        trainer.run(gl)
+    else:
+        trainer.save()
+    print(f"wrote {cfg.out}: maps in {maps_s:.1f} s, then {trainer.step} fine-tuning steps in "
+          f"{trainer.elapsed / 60:.1f} min ({cfg.tune}, lr {cfg.lr:g}) from the prior {cfg.prior}")
+    print(f"next: avatar-studio studio {shlex.quote(str(cfg.out))}")
+    return 0
+
+
+def personalizing_trainer(tcfg: TrainConfig, prior: Path, gl: GLContext, tune: str = "all", on_frame=None):
+    """The trainer that fine-tunes a copy of the universal prior in `prior` on the capture tcfg.dataset (its
+    neutral maps made first: the head model's fitted shape, the colours of its least expressive frames), and the
+    seconds the maps took. `personalize` runs it, and `train` where it starts from the prior."""
     from models.training.data import build_frames, validation_frame
     from models.training.prior import neutral_texture
     from models.training.trainer import Trainer
 
-    device_of(cfg.device)
-    if cfg.out.exists() and (not cfg.out.is_dir() or any(cfg.out.iterdir())):
-        raise UserInputError(f"{cfg.out}: already exists and is not empty; choose a new folder")
-    split = load_split(cfg.scan, "train")
+    split = load_split(tcfg.dataset, "train")
     check_images(split)
-    avatar, meta = load_avatar(cfg.prior)
+    avatar, meta = load_avatar(prior, tcfg.device)
     if not avatar.personalizes:
-        raise UserInputError(f"{cfg.prior}: a {avatar.name} avatar, not a universal prior (`prior-train` makes one)")
+        raise UserInputError(f"{prior}: a {avatar.name} avatar, not a universal prior (`prior-train` makes one)")
     if (split.head_model or "").split(":")[0] != str(meta["head_model"]).split(":")[0]:
-        raise UserInputError(f"{cfg.scan}: its head model is {split.head_model!r}, the prior's {meta['head_model']!r}")
-    gl = GLContext.headless()
+        raise UserInputError(f"{tcfg.dataset}: its head model is {split.head_model!r}, the prior's "
+                             f"{meta['head_model']!r}")
     t0 = time.perf_counter()
     plate = background_plate(split)  # a tracked video's room: composited behind the person, as `train` does
     with torch.no_grad():
@@ -321,27 +362,20 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
             avatar.plate.note(*plate, avatar.background.device)
         shape = split.frames[0].controls.shape
         avatar.personalize(neutral_texture(split, avatar, gl), avatar.neutral_geometry_of(shape))
-    if cfg.tune == "decoder":
+    if tune == "decoder":
         for module in (avatar.identity_encoder, avatar.expression_encoder):
             module.requires_grad_(False)
     maps_s = time.perf_counter() - t0
-    tcfg = TrainConfig(dataset=cfg.scan, out=cfg.out, model="prior", minutes=cfg.minutes or None,
-                       steps=cfg.steps or (None if cfg.minutes else 1), device=cfg.device, seed=cfg.seed, lr=cfg.lr)
     avatar.train()
-    frames = build_frames(split, avatar, gl)
-    val = load_split(cfg.scan, "val")
+    frames = build_frames(split, avatar, gl, on_frame)
+    if split.tracked:  # a video's frame cuts the neck and shoulders: they fade out where it stopped seeing them
+        avatar.note_reach(frames)
+    val = load_split(tcfg.dataset, "val")
     trainer = Trainer(tcfg, avatar, frames, validation_frame(val, avatar.background.numpy()) if val.frames else None)
     # The scan saw the face; the prior saw heads from every side (its corpus's cameras go round them): turntables and
     # the studio's orbit go all the way round.
     trainer.view_range = {"yaw_deg": [-180.0, 180.0], "pitch_deg": trainer.view_range["pitch_deg"]}
-    if cfg.minutes or cfg.steps:
-        trainer.run(gl)
-    else:
-        trainer.save()
-    print(f"wrote {cfg.out}: maps in {maps_s:.1f} s, then {trainer.step} fine-tuning steps in "
-          f"{trainer.elapsed / 60:.1f} min ({cfg.tune}, lr {cfg.lr:g}) from the prior {cfg.prior}")
-    print(f"next: avatar-studio studio {shlex.quote(str(cfg.out))}")
-    return 0
+    return trainer, maps_s
 
 
 def check_video_size(size: int) -> None:

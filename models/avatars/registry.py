@@ -33,6 +33,44 @@ the last 10% held out) the primitives reach 25 dB on each (25.6-26.4 on d3 and t
 CoDyNeRF's 1.0-5.4 s (README, Real people)."""
 
 
+SHIPPED_PRIOR = Path(__file__).resolve().parents[2] / "resources" / "prior"
+"""The universal prior that ships (`scripts/make_prior.sh` rebuilds it), for the head model it was trained on."""
+VIDEO_START = "prior"
+"""How `train` starts a tracked video's avatar when no model is named: "prior", personalising the universal prior
+for the capture's head model where there is one (a video sees the front; the prior has seen heads all round), or
+"scratch", VIDEO_MODEL from nothing (docs/results.md, Beyond the captured views)."""
+
+
+def starting_prior(capture_head: str | None, tracked: bool, model: str | None, from_scratch: bool,
+                   prior: Path | None) -> tuple[Path | None, str]:
+    """The prior `train` personalises (None: it trains `model` from nothing) and the line that says why.
+    prior: the one asked for (an error where it is not a prior for the capture's head model); None: SHIPPED_PRIOR,
+    where it is the capture's head model's."""
+    if from_scratch or model not in (None, PriorAvatar.name):
+        return None, "from scratch" + (" (--from-scratch)" if from_scratch else "")
+    if model is None and (not tracked or VIDEO_START != "prior"):
+        return None, "from scratch"
+    folder = Path(prior) if prior is not None else SHIPPED_PRIOR
+    kind = (capture_head or "none").split(":")[0]
+    try:
+        meta = read_meta(folder)
+    except CheckpointError as e:
+        if prior is None and model is None:
+            return None, f"from scratch (no universal prior: {e})"
+        raise
+    prior_kind = str(meta.get("head_model", "")).split(":")[0]
+    if meta.get("model") != PriorAvatar.name or prior_kind != kind:
+        what = f"a {meta.get('model')} avatar" if meta.get("model") != PriorAvatar.name else \
+            f"the universal prior of the {prior_kind} head model"
+        if prior is None and model is None:
+            return None, f"from scratch ({folder} is {what}; the capture is tracked with the {kind} head)"
+        raise CheckpointError(f"{folder}: is {what}, and the capture is tracked with the {kind} head model")
+    people = len(meta.get("corpus", {}).get("identities", ())) or "its"
+    return folder, (f"from the universal prior {folder} ({people} people of the {kind} head): personalising it, "
+                    "so the sides and back the video never showed come from the heads it has seen "
+                    "(--from-scratch trains from nothing)")
+
+
 def default_model(tracked: bool) -> str:
     """The model `train` makes when none is named: VIDEO_MODEL for a tracked video, else DEFAULT_MODEL."""
     return VIDEO_MODEL if tracked else DEFAULT_MODEL

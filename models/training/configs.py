@@ -21,9 +21,15 @@ class TrainConfig:
     """Lighting effects to model: none, all, or a comma list of shading, specular, shadows (default: all; with
     --resume the checkpoint's, and another set is an error)."""
     model: ModelName | None = None
-    """The avatar model (models/avatars/registry.py): codynerf, the NerFACE baseline, or primitives (volumetric
-    primitives on the guide mesh, decoded once a frame); default: primitives for a tracked video, codynerf for a
-    synthetic capture."""
+    """The avatar model (models/avatars/registry.py): codynerf, the NerFACE baseline, primitives (volumetric
+    primitives on the guide mesh, decoded once a frame) or prior (the universal prior personalised); default: a
+    tracked video's avatar starts from the universal prior of its head model where there is one (else
+    primitives), a synthetic capture's is codynerf."""
+    from_scratch: bool = False
+    """Train a tracked video's avatar from nothing (primitives) instead of personalising the universal prior."""
+    prior: Path | None = None
+    """The universal prior a video's avatar starts from (`prior-train`); default: the one that ships, where it is
+    of the capture's head model."""
     minutes: Annotated[float, Range(0, 1e6, above=True)] | None = None
     """Time budget; training stops when it is spent (checkpointed)."""
     steps: Annotated[int, Range(1)] | None = None
@@ -46,17 +52,25 @@ class TrainConfig:
     """On a tracked video, learn each training frame's head pose correction (and the primitives' expression
     correction) with the avatar; default: the model's (codynerf on, primitives off: README, Real people)."""
     lr: Annotated[float, Range(0, 1, above=True)] = 5e-3
-    """Adam learning rate at the start; it decays tenfold over the run."""
+    """Adam learning rate at the start; it decays tenfold over the run (personalising the prior, left at the
+    default: the phone-scan paper's 1e-3, PERSONALIZE_LR)."""
     checkpoint_seconds: Annotated[float, Range(0, above=True)] = 60.0
     """How often to checkpoint."""
     grad_clip: Annotated[float, Range(0, above=True)] = 1.0
     """Largest gradient norm of a step."""
 
 
+PERSONALIZE_LR = 1e-3
+"""Fine-tuning the universal prior on one person (the phone-scan paper's Section 4.2.5)."""
+
+
 @dataclass(frozen=True)
 class PriorTrainConfig:
     corpus: Path
-    """A folder of captures, one folder per identity, all of one head model (`avatar-studio synth --identity K`)."""
+    """A folder of captures, one folder per identity, all of one head model (`avatar-studio corpus`)."""
+    people: tuple[Path, ...] = ()
+    """More people, a capture each, joining the corpus's: real people's videos through `track` (their rooms are
+    composited behind them as `train` does), tracked with the corpus's head model."""
     out: Path = Path("out/prior")
     """The prior's folder: avatar.json, weights, progress.jsonl."""
     minutes: Annotated[float, Range(0, 1e6, above=True)] | None = None

@@ -11,10 +11,11 @@ checkpoints (safetensors + JSON, atomic, resumable, as every avatar's)."""
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -25,11 +26,12 @@ from torch import nn
 
 from models.avatars.base import TrainingBatch
 from models.avatars.checkpoint import load_checkpoint, save_checkpoint
+from models.avatars.components.plate import Plate
 from models.avatars.effects import parse_effects
 from models.avatars.prior.avatar import PriorAvatar, PriorConfig
 from models.avatars.prior.maps import average_texture, texture_map, texture_tensor
 from models.capture.dataset import CaptureSplit, load_split
-from models.capture.frames import frame_camera, load_rgb
+from models.capture.frames import background_plate, frame_camera, load_rgb
 from models.device import DeviceError, device_of
 from models.head.sources import load_head
 from models.training.configs import PriorTrainConfig
@@ -83,8 +85,14 @@ def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, fra
 
 
 def load_identity(folder: Path, avatar: PriorAvatar, gl: GLContext) -> Identity:
+    """One person's training frames and neutral maps. A tracked video's frames composite over its own room (its
+    background plate, kept in the frames), as `train` composites them; the prior keeps no one's room."""
     split = load_split(folder, "train")
+    plate = background_plate(split)
+    if plate is not None:
+        avatar.plate.note(*plate)
     frames = build_frames(split, avatar, gl)
+    avatar.plate = Plate()
     shape = split.frames[0].controls.shape
     ident = Identity(folder.name, frames, neutral_texture(split, avatar, gl),
                      avatar.neutral_geometry_of(shape).detach())
@@ -93,12 +101,36 @@ def load_identity(folder: Path, avatar: PriorAvatar, gl: GLContext) -> Identity:
     return ident
 
 
-def corpus_folders(corpus: Path) -> list[Path]:
+def corpus_folders(corpus: Path, people: Sequence[Path] = ()) -> list[Path]:
+    """The captures of a corpus folder (one folder per identity, `corpus`) and the further people given one
+    capture each (a tracked video's, `track`); all of one head model (the prior's chart is that model's)."""
     found = sorted(p for p in Path(corpus).iterdir() if (p / "transforms_train.json").is_file()) \
         if Path(corpus).is_dir() else []
     if not found:
         raise FileNotFoundError(f"{corpus}: no captures (folders with transforms_train.json) in it")
-    return found
+    for p in people:
+        if not (Path(p) / "transforms_train.json").is_file():
+            raise FileNotFoundError(f"{p}: not a capture (no transforms_train.json in it; `track VIDEO` makes one)")
+    folders = found + [Path(p) for p in people]
+    names = [f.name for f in folders]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"{', '.join(twice)}: more than one person of that name in the corpus (the prior names "
+                         "its people by their folders)")
+    kinds = {f: head_kind(f) for f in folders}
+    first = kinds[folders[0]]
+    other = next((f for f in folders if kinds[f] != first), None)
+    if other is not None:
+        raise ValueError(f"{other}: its head model is {kinds[other]}, the corpus's ({folders[0]}) {first}; a prior "
+                         f"is trained on people of one head model (track the video with --head {first})")
+    return folders
+
+
+def head_kind(capture: Path) -> str:
+    """The kind of a capture's head model (builtin, demo, ict, flame), as its transforms_train.json names it."""
+    with open(Path(capture) / "transforms_train.json") as f:
+        head = json.load(f).get("head_model") or "none"
+    return str(head).split(":")[0]
 
 
 class PriorLoss(nn.Module):
@@ -267,7 +299,7 @@ def prepare_prior(cfg: PriorTrainConfig, gl: GLContext, rank: int = 0, world: in
                   on_identity: Callable[[int, int], None] | None = None) -> PriorTrainer:
     """The prior and its corpus read from disk (every process reads it all); on_identity(done, total) after each
     identity's frames and maps are ready (a corpus of 24 takes minutes)."""
-    folders = corpus_folders(cfg.corpus)
+    folders = corpus_folders(cfg.corpus, cfg.people)
     first = load_split(folders[0], "train")
     head = load_head(first.head_model)
     torch.manual_seed(cfg.seed)

@@ -363,3 +363,75 @@ def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker
     image = render_image(avatar, camera, split.frames[0].controls, rasterizer=None)["rgb"]
     corner = image[:4, :4].reshape(-1, 3)  # no person up there: the room shows as the plate has it
     np.testing.assert_allclose(corner, plate.reshape(64, 64, 3)[:4, :4].reshape(-1, 3).numpy(), atol=0.02)
+
+
+def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_path, corpus, face_video, landmarker,
+                                                                          gl, capsys):
+    """A real person (a second of video tracked with the built-in head) joins the synthetic corpus with
+    `prior-train --people`: their frames composite over their own room (the plate kept in their frames, none kept
+    by the prior); a person of another head model is refused by name; `train` on a tracked video personalises the
+    prior and says so, `--from-scratch` trains the primitives from nothing."""
+    from app.cli import main
+    from models.avatars.registry import load_avatar
+    from models.capture.dataset import load_split
+    from models.capture.frames import background_plate
+    from models.training.configs import PriorTrainConfig
+    from models.training.prior import prepare_prior
+
+    scan, prior, other = tmp_path / "real_person", tmp_path / "prior", tmp_path / "demo_person"
+    assert main(["track", str(face_video), "--out", str(scan), "--size", "64", "--seconds", "1",
+                 "--landmarker", str(landmarker), "--no-overlay"]) == 0
+    small = ["--grid", "8", "--voxels", "2", "--width", "16", "--rays-per-frame", "64", "--frames-per-step", "2"]
+    assert main(["prior-train", str(corpus), "--people", str(scan), "--out", str(prior), "--steps", "2", *small]) == 0
+    meta = json.loads((prior / "avatar.json").read_text())
+    assert meta["corpus"]["identities"] == ["id0001", "id0002", "real_person"]
+    trainer = prepare_prior(PriorTrainConfig(corpus=corpus, people=(scan,), out=tmp_path / "p2", grid=8, voxels=2,
+                                             width=16), gl)
+    room, _ = background_plate(load_split(scan, "train"))
+    real = trainer.identities[-1].frames
+    assert real.plate is not None and torch.equal(real.plate, torch.as_tensor(room, dtype=torch.float32).reshape(-1, 3))
+    assert trainer.identities[0].frames.plate is None and trainer.avatar.plate.image is None  # no one's room kept
+
+    assert main(["synth", "--head", "demo", "--frames", "10", "--size", "32", "--out", str(other)]) == 0
+    capsys.readouterr()
+    assert main(["prior-train", str(corpus), "--people", str(other), "--out", str(tmp_path / "p3"), "--steps", "1",
+                 *small]) == 2
+    err = capsys.readouterr().err
+    assert f"{other}: its head model is demo" in err and "builtin" in err and not (tmp_path / "p3").exists()
+
+    assert main(["train", str(scan), "--prior", str(prior), "--out", str(tmp_path / "a"), "--steps", "1"]) == 0
+    out = capsys.readouterr().out
+    assert f"from the universal prior {prior} (3 people of the builtin head)" in out
+    personal, meta = load_avatar(tmp_path / "a")
+    assert meta["model"] == "prior" and float(personal.neutral_texture.abs().sum()) > 0
+    assert meta["provenance"]["config"]["lr"] == "0.001"  # the prior's fine-tuning rate, not from scratch's
+    assert main(["train", str(scan), "--prior", str(prior), "--from-scratch", "--out", str(tmp_path / "b"),
+                 "--steps", "1"]) == 0
+    assert "from scratch (--from-scratch)" in capsys.readouterr().out
+    assert json.loads((tmp_path / "b" / "avatar.json").read_text())["model"] == "primitives"
+    assert main(["train", str(other), "--model", "prior", "--prior", str(prior), "--out", str(tmp_path / "c"),
+                 "--steps", "1"]) == 2
+    assert "tracked with the demo head model" in capsys.readouterr().err and not (tmp_path / "c").exists()
+
+
+def test_train_starts_from_the_prior_only_where_it_fits(tmp_path):
+    """starting_prior: a tracked video of the prior's head model starts from it (VIDEO_START), a synthetic
+    capture, another head model, a named model or --from-scratch from nothing, each with its reason."""
+    from models.avatars.registry import SHIPPED_PRIOR, VIDEO_START, starting_prior
+
+    if not (SHIPPED_PRIOR / "avatar.json").is_file():
+        pytest.skip(f"no shipped prior at {SHIPPED_PRIOR}")
+    folder, why = starting_prior("builtin", True, None, False, None)
+    assert (folder, why.split(" ")[0]) == ((SHIPPED_PRIOR, "from") if VIDEO_START == "prior" else (None, "from"))
+    assert starting_prior("builtin", False, None, False, None) == (None, "from scratch")
+    assert starting_prior("builtin", True, None, True, None) == (None, "from scratch (--from-scratch)")
+    assert starting_prior("builtin", True, "primitives", False, None) == (None, "from scratch")
+    if VIDEO_START == "prior":
+        folder, why = starting_prior("ict:/x/ict_head.npz", True, None, False, None)
+        assert folder is None and "the universal prior of the builtin head model" in why and "ict head" in why
+        folder, why = starting_prior("builtin", True, None, False, None)
+        assert "personalising" in why
+    from models.avatars.checkpoint import CheckpointError
+
+    with pytest.raises(CheckpointError, match="nothing"):  # a prior asked for by name must be one
+        starting_prior("builtin", True, "prior", False, tmp_path / "nothing")
