@@ -28,7 +28,7 @@ import numpy as np
 
 from app.display import buffer_image, resized
 from app.sliders import Sliders, View
-from models.avatars.rendering import RenderOptions, render_image
+from models.avatars.rendering import RenderOptions, preset_options, render_image
 from models.files import atomic_write_bytes
 from models.head.model import HeadModel
 from models.ranges import Range
@@ -234,14 +234,13 @@ def animation_frames(avatar, raster: Rasterizer, anim, size: int, preset: str, o
                      on_pose=None):
     """(size,size,3) uint8 frames of an animation played on an avatar, from its rest sliders (the preset may render
     fewer pixels: scaled up); on_pose(k, controls) before each frame is rendered."""
-    px = avatar.apply_preset(preset, size)
+    options, px = preset_options(avatar.card, preset, size, RenderOptions(should_stop=should_stop, buffers=()))
     for k, (sliders, view) in enumerate(animation_poses(anim, rest_sliders(avatar.head_model), View(),
                                                         avatar.head_model)):
         cam = view.camera(avatar.card.rest_vertices(), px, px)
         controls = avatar.card.at_rest(sliders.controls())
         if on_pose:
             on_pose(k, controls)
-        options = RenderOptions(should_stop=should_stop, buffers=())
         yield resized(buffer_image(render_image(avatar, cam, controls, options, raster), "rgb"), size)
         if on_frame:
             on_frame(k)

@@ -22,7 +22,7 @@ from app.turntable import TurntableConfig, turntable_frames
 from models.avatars.checkpoint import CheckpointError
 from models.avatars.effects import parse_effects
 from models.avatars.registry import load_avatar, starting_prior
-from models.avatars.rendering import RenderOptions, render_image
+from models.avatars.rendering import RenderOptions, preset_options, render_image
 from models.capture.dataset import check_images, is_capture, load_split
 from models.capture.frames import background_plate, frame_camera, load_rgb
 from models.capture.synthetic import read_png16
@@ -250,7 +250,8 @@ def capture_mismatch(model, meta: dict, split) -> str | None:
 def run_render(cfg: RenderCommandConfig) -> int:
     avatar, _ = open_avatar(cfg.avatar, cfg.device)
     controls = avatar.card.at_rest(load_controls(cfg.controls, avatar.head_model) if cfg.controls else Controls())
-    size = avatar.apply_preset(cfg.preset, cfg.size)
+    buffers, inspect = render_needs(cfg.buffer)
+    options, size = preset_options(avatar.card, cfg.preset, cfg.size, RenderOptions(inspect=inspect, buffers=buffers))
     cam = framing_camera(avatar.card.rest_vertices(), cfg.yaw_deg, cfg.pitch_deg, fov_y_deg=18.0, width_px=size,
                          height_px=size)
     offered = avatar.inspection_buffers()
@@ -261,8 +262,7 @@ def run_render(cfg: RenderCommandConfig) -> int:
                              f"{avatar.describe_effects()}) has no such buffer{why}")
     gl = GLContext.headless()
     t0 = time.perf_counter()
-    buffers, inspect = render_needs(cfg.buffer)
-    out = render_image(avatar, cam, controls, RenderOptions(inspect=inspect, buffers=buffers), Rasterizer(gl))
+    out = render_image(avatar, cam, controls, options, Rasterizer(gl))
     ms = 1e3 * (time.perf_counter() - t0)
     if cfg.buffer not in out and cfg.buffer not in INSPECT:
         raise UserInputError(f"--buffer {cfg.buffer}: this avatar's effect set has no normals network")

@@ -137,13 +137,13 @@ def measure(avatar: Avatar, quality: Quality, frames: TestFrames, raster: Raster
     buffers) and errors against the ground truth of one setting; the renders at full size."""
     images, times = [], []
     for i, (f, cam) in enumerate(zip(frames.frames, frames.cameras, strict=True)):
-        avatar.set_quality(quality)
         size = quality.size(cam.width_px)
         c = cam.resized(size, max(8, round(cam.height_px * size / cam.width_px)))
+        options = RenderOptions(buffers=(), quality=quality)  # the colour, as the studio shows
         if i == 0:
-            render_image(avatar, c, f.controls, RenderOptions(buffers=()), raster)
+            render_image(avatar, c, f.controls, options, raster)
         t0 = time.perf_counter()
-        out = render_image(avatar, c, f.controls, RenderOptions(buffers=()), raster)  # the colour, as the studio shows
+        out = render_image(avatar, c, f.controls, options, raster)
         times.append(time.perf_counter() - t0)
         images.append(upsample(out["rgb"], frames.truth[i].shape[:2]))
     finite = all(bool(np.isfinite(im).all()) for im in images)

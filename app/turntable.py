@@ -12,7 +12,7 @@ import numpy as np
 from app.configs import TurntableConfig
 from app.display import buffer_image, resized
 from models.avatars.base import Avatar
-from models.avatars.rendering import RenderOptions, render_image
+from models.avatars.rendering import RenderOptions, preset_options, render_image
 from models.head.controls import Controls
 from render.camera import turntable_camera
 from render.gl.raster import Rasterizer
@@ -40,7 +40,8 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
                      should_stop: Callable[[], bool] | None = None) -> Iterator[np.ndarray]:
     """(size,size,3) uint8 frames of the turntable (the preset may render fewer pixels: scaled up); on_frame(k)
     after each."""
-    size = avatar.apply_preset(cfg.preset, cfg.size)
+    options, size = preset_options(avatar.card, cfg.preset, cfg.size,
+                                   RenderOptions(should_stop=should_stop, buffers=()))
     controls = avatar.card.at_rest(controls or Controls())
     sweep = avatar.card.turntable_sweep_deg() if cfg.sweep_deg is None else cfg.sweep_deg
     for k in range(cfg.frames):
@@ -49,7 +50,6 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
         cam = turntable_camera(avatar.card.rest_vertices(), yaw, cfg.elevation_deg, fov_y_deg=18.0,
                                width_px=size, height_px=size, zoom=cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
-        options = RenderOptions(should_stop=should_stop, buffers=())
         yield resized(buffer_image(render_image(avatar, cam, c, options, rasterizer), "rgb"), cfg.size)
         if on_frame:
             on_frame(k)

@@ -99,7 +99,7 @@ def main() -> None:
                 rows.append(measure(avatar, raster, controls, size, buffers, in_c))
                 print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in rows[-1].items()}))
     report = {"avatar": str(args.avatar), "primitives": avatar.count, "voxels": avatar.cfg.voxels,
-              "samples": avatar.samples, "threads": torch.get_num_threads(), "cpus": os.cpu_count(), "rows": rows}
+              "samples": avatar.cfg.samples, "threads": torch.get_num_threads(), "cpus": os.cpu_count(), "rows": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(report, indent=1))
 

@@ -338,12 +338,12 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
     for i, name in enumerate(passes):
         if i + 1 < len(qualities) and qualities[i + 1] == qualities[i]:
             continue  # the bench may choose one setting for two presets: render it once, as the finer
-        avatar.apply_preset(name, size)
-        cam = scaled(request.camera, avatar.card.presets[name].quality.scale)
+        cam = scaled(request.camera, qualities[i].scale)
         results.put(("started", rid, recent.get((name, size))))  # the window paces its frames by it
         t0 = time.perf_counter()
         options = RenderOptions(frame=request.frame, inspect=request.inspect, buffers=request.buffers,
-                                chunk_rays=avatar.interactive_chunk_rays, should_stop=lambda: stale(rid), cores=CORES)
+                                chunk_rays=avatar.interactive_chunk_rays, should_stop=lambda: stale(rid), cores=CORES,
+                                quality=qualities[i])
         buffers = render_image(avatar, cam, request.controls, options, raster)
         ms = 1e3 * (time.perf_counter() - t0)
         if stale(rid):
@@ -358,8 +358,8 @@ def warm_up(avatar, raster) -> None:
     yet the window's first slider move went by that one (the preview first, the final on screen 178 ms after
     the move); after this 56 ms render the first final takes 73."""
     cam = framing_camera(avatar.card.rest_vertices(), 25, 5, fov_y_deg=18.0, width_px=32, height_px=32)
-    avatar.apply_preset("draft", 32)
-    render_image(avatar, cam, avatar.card.at_rest(Controls()), RenderOptions(buffers=None, cores=CORES), raster)
+    options = RenderOptions(buffers=None, cores=CORES, quality=avatar.card.presets["draft"].quality)
+    render_image(avatar, cam, avatar.card.at_rest(Controls()), options, raster)
 
 
 def seed_times(timed: dict[tuple[str, int], list[float]], figures: PresetFigures) -> None:
@@ -386,13 +386,13 @@ def measure_presets(avatar, raster, should_stop) -> PresetFigures:
     figures = PresetFigures(size_px=size)
     images = {}
     for name in ("final", "preview", "draft"):
-        avatar.apply_preset(name, size)
-        c = scaled(cam, avatar.card.presets[name].quality.scale)
+        quality = avatar.card.presets[name].quality
+        c = scaled(cam, quality.scale)
         times = []
         for _ in range(3):
             t0 = time.perf_counter()
             options = RenderOptions(buffers=(), chunk_rays=avatar.interactive_chunk_rays, should_stop=should_stop,
-                                    cores=CORES)
+                                    cores=CORES, quality=quality)
             images[name] = render_image(avatar, c, avatar.card.at_rest(Controls()), options, raster)["rgb"]
             times.append(1e3 * (time.perf_counter() - t0))
         figures.ms[name] = float(np.median(times))

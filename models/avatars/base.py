@@ -29,7 +29,6 @@ from torch import nn
 from models.avatars.card import AvatarCard
 from models.avatars.components.kept import keep_weight_names
 from models.avatars.mesh import MeshField
-from models.avatars.quality import Quality
 from models.head.controls import Controls
 from models.head.head import Head
 from models.head.model import HeadModel
@@ -244,21 +243,12 @@ class Avatar(nn.Module, ABC):
         """Every buffer this avatar can render, with its channels and the fill of pixels not rendered."""
         return dict(BASE_LAYOUT)
 
-    def display_mode(self) -> contextlib.AbstractContextManager:
-        """The autograd mode of display rendering (no gradients unless the model needs some)."""
+    def display_mode(self, options: Any = None) -> contextlib.AbstractContextManager:
+        """The autograd mode of display rendering (no gradients unless the model needs some), for render_image's
+        RenderOptions (its quality may ask for bf16)."""
         return torch.inference_mode()
 
     # ---- settings and lifecycle ------------------------------------------------------------------------
-    def set_quality(self, quality: Quality) -> None:
-        """Apply a quality setting's knobs (quality_knobs); the image size is the caller's."""
-        del quality
-
-    def apply_preset(self, preset: str, size: int) -> int:
-        """Set the render settings of one of the avatar's presets; returns the image size it renders at."""
-        quality = self.card.presets[preset].quality
-        self.set_quality(quality)
-        return quality.size(size)
-
     def mesh_field(self, controls: Controls, rasterizer: Rasterizer | None) -> MeshField:
         """The posed avatar's density and colour at any point, for mesh export (models/avatars/mesh.py)."""
         raise ValueError(f"a {self.name} avatar has no field to export as a mesh yet (primitives, prior and "

@@ -11,6 +11,8 @@ import numpy as np
 import torch
 
 from models.avatars.base import BACKGROUND, BASE_LAYOUT, Avatar, RenderCancelled
+from models.avatars.card import AvatarCard
+from models.avatars.quality import Quality
 from models.head.controls import Controls
 from render.camera import Camera, clipping_around
 from render.gl.raster import Rasterizer
@@ -40,6 +42,17 @@ class RenderOptions:
     its waves); yes raises RenderCancelled (a newer request won)."""
     cores: int | None = None
     """Cores a model may spread one batch's work over (the primitives' march groups); None: torch's thread count."""
+    quality: Quality | None = None
+    """The render's samples (and a second pass, bf16) where the model has such knobs: a preset's (preset_options);
+    None: the avatar's own, those it trained with. The image size is the camera's."""
+
+
+def preset_options(card: AvatarCard, preset: str, size: int, options: RenderOptions = RenderOptions()
+                   ) -> tuple[RenderOptions, int]:
+    """`options` with one of the avatar's presets (draft, preview, final: card.presets) and the image size that
+    preset renders at for a requested size (a draft renders smaller, shown scaled up)."""
+    quality = card.presets[preset].quality
+    return replace(options, quality=quality), quality.size(size)
 
 
 def render_image(avatar: Avatar, camera: Camera, controls: Controls, options: RenderOptions = RenderOptions(),
@@ -60,7 +73,7 @@ def render_image(avatar: Avatar, camera: Camera, controls: Controls, options: Re
     wanted = tuple(b for b in wanted if not (surface and b == "normals"))
     parts: dict[str, list[torch.Tensor]] = {k: [] for k in (*BASE_LAYOUT, *wanted, *names)}
     batch_options = replace(options, buffers=(*wanted, *names))
-    with avatar.display_mode():
+    with avatar.display_mode(options):
         chunk = options.chunk_rays or avatar.chunk_rays
         for a in range(0, len(rays), chunk):
             if options.should_stop is not None and options.should_stop():

@@ -239,13 +239,13 @@ def bake_texture(avatar: Avatar, chart: Chart, size: int, render_px: int, n_yaws
     normals = (vertex_normals(posed, triangles)[corners] * b).sum(1)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     views = bake_views(avatar, n_yaws)
-    avatar.set_quality(avatar.card.presets[preset].quality)  # its samples and passes; not its scale: render_px it is
+    options = RenderOptions(buffers=(), quality=avatar.card.presets[preset].quality)  # not its scale: render_px it is
     px = render_px
     background = avatar.background.detach().cpu().numpy().astype(np.float32)
     blend = ViewBlend(len(points))
     for k, (yaw, pitch) in enumerate(views):
         camera = turntable_camera(avatar.card.rest_vertices(), yaw, pitch, width_px=px, height_px=px)
-        images = render_image(avatar, camera, controls, RenderOptions(buffers=()), rasterizer)
+        images = render_image(avatar, camera, controls, options, rasterizer)
         raster = rasterizer.rasterize(posed.astype(np.float32), triangles, camera)
         blend.add(k, *seen_from(camera, raster, images, background, points, normals))
         if on_view:

@@ -17,7 +17,7 @@ from app.bench import REFERENCE, SETTINGS, BenchConfig, choose_presets, run_benc
 from app.cli import main
 from models.avatars.quality import Quality, load_presets, pareto
 from models.avatars.registry import load_avatar, untrained_avatar
-from models.avatars.rendering import render_image
+from models.avatars.rendering import RenderOptions, preset_options, render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera
 from models.training.metrics import psnr
@@ -93,10 +93,9 @@ def test_every_setting_is_finite_and_near_the_reference(tiny_avatar, capture, gl
     raster = Rasterizer(gl)
 
     def render(q: Quality) -> dict:
-        avatar.set_quality(q)
         size = q.size(cam.width_px)
         c = cam.resized(size, size)
-        return render_image(avatar, c, f.controls, rasterizer=raster)
+        return render_image(avatar, c, f.controls, RenderOptions(quality=q), rasterizer=raster)
 
     reference = render(REFERENCE)["rgb"]
     db = {}
@@ -146,8 +145,10 @@ def test_a_tiny_bench_run_writes_results_charts_and_presets(capture, tmp_path):
         assert p.ms == chosen[name]["ms"]
     preview = presets["preview"].quality
     avatar, _ = load_avatar(avatar_dir)
-    avatar.apply_preset("preview", 24)
-    assert (avatar.render_cfg.samples_per_ray, avatar.render_cfg.fine_samples) == (preview.samples, preview.fine)
+    options, _ = preset_options(avatar.card, "preview", 24)
+    assert options.quality == preview
+    rc = avatar.with_quality(options.quality)
+    assert (rc.samples_per_ray, rc.fine_samples) == (preview.samples, preview.fine)
     # A second run into the same folder refuses (exit 2) and leaves the first run's results as they were.
     before = (out / "results.json").read_bytes()
     assert main(["bench", "--out", str(out), "--dataset", str(capture), "--train-seconds", "1", "--size", "24"]) == 2

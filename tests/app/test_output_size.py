@@ -10,7 +10,7 @@ from PIL import Image
 
 from app.animation import Animation, save_animation
 from app.cli import main
-from models.avatars.rendering import RenderOptions, render_image
+from models.avatars.rendering import RenderOptions, preset_options, render_image
 from tests.app.videos import mp4_frames, psnr
 from tests.conftest import DEMO
 
@@ -26,7 +26,7 @@ def demo():
 
     avatar, _ = load_avatar(DEMO)
     # the test means something only where the presets render fewer pixels than asked for
-    assert avatar.apply_preset("preview", SIZE) == 16 and avatar.apply_preset("draft", SIZE) == 10
+    assert preset_options(avatar.card, "preview", SIZE)[1] == 16 and preset_options(avatar.card, "draft", SIZE)[1] == 10
     return avatar
 
 
@@ -41,9 +41,9 @@ def test_render_writes_the_size_asked_for(demo, tmp_path, gl):
     assert main(["render", str(DEMO), "--size", str(SIZE), "--out", str(out)]) == 0
     img = Image.open(out)
     assert img.size == (SIZE, SIZE)
-    px = demo.apply_preset("preview", SIZE)
+    options, px = preset_options(demo.card, "preview", SIZE, RenderOptions(buffers=()))
     cam = framing_camera(demo.card.rest_vertices(), 0.0, 0.0, fov_y_deg=18.0, width_px=px, height_px=px)
-    small = render_image(demo, cam, demo.card.at_rest(Controls()), RenderOptions(buffers=()), Rasterizer(gl))["rgb"]
+    small = render_image(demo, cam, demo.card.at_rest(Controls()), options, Rasterizer(gl))["rgb"]
     small = (np.clip(small, 0, 1) * 255).round().astype(np.uint8)
     assert psnr(np.asarray(img.convert("RGB").resize((px, px), Image.Resampling.BOX)), small) > 27
 

@@ -280,9 +280,11 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
         return frame_code(self.omega, frame, weights), frame_code(self.phi, frame, weights)
 
     # ---- rays ------------------------------------------------------------------------------------------
-    def settings(self, training: bool, create_graph: bool = False) -> render.RaySettings:
-        """The exact path for training; display's shortcuts from the render config."""
-        rc = self.render_cfg
+    def settings(self, training: bool, create_graph: bool = False, quality: Quality | None = None
+                 ) -> render.RaySettings:
+        """The exact path for training; display's shortcuts from the render config, its samples from `quality`
+        (a preset's) where given."""
+        rc = self.render_cfg if quality is None else self.with_quality(quality)
         if training or rc.dense_samples:
             return render.RaySettings(rc.samples_per_ray, rc.shell_m, dense=0 if training else rc.dense_samples,
                                       create_graph=create_graph)
@@ -294,14 +296,15 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
                     create_graph: bool = False, mesh_normals: bool = False) -> RayOutput:
         """Colour, opacity, depth (and, with normals, predicted and density-gradient normals) of R rays: every
         buffer whatever the options ask. create_graph: keep the density gradients' graph (training through the
-        normals, Eq. 13). mesh_normals: the mesh's normals stand in for both (RaySettings.mesh_normals)."""
-        del options
+        normals, Eq. 13). mesh_normals: the mesh's normals stand in for both (RaySettings.mesh_normals). options:
+        render_image's; its quality (a preset's samples) where given."""
         omega, phi = self.codes(frame, geometry.code_weights)
         if not training:
             omega, phi = omega.detach(), phi.detach()
         if self.pose_corrections is not None and frame is not None:
             rays = self.corrected_rays(rays, geometry, frame)
-        settings = replace(self.settings(training, create_graph), mesh_normals=mesh_normals)
+        quality = None if training or options is None else options.quality
+        settings = replace(self.settings(training, create_graph, quality), mesh_normals=mesh_normals)
         return self.trace(rays, geometry, omega, phi, settings, generator)
 
     def trace(self, rays: Rays, geo: FrameGeometry, omega: torch.Tensor, phi: torch.Tensor,
@@ -436,12 +439,13 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
         return super().layout() | {"normals": (3, 0.0), "grad_normals": (3, 0.0), "rgb_no_shadows": (3, BACKGROUND),
                                    "rgb_light": (3, 1.0), "rgb_flat": (3, BACKGROUND)}
 
-    def display_mode(self) -> contextlib.AbstractContextManager:
+    def display_mode(self, options: Any = None) -> contextlib.AbstractContextManager:
         """No gradients, except that density-gradient normals need autograd (no_grad, not inference_mode);
-        bf16 where the render config says."""
+        bf16 where the options' quality (else the render config) says."""
+        bf16 = self.render_cfg.bf16 if options is None or options.quality is None else options.quality.bf16
         stack = contextlib.ExitStack()
         stack.enter_context(torch.no_grad() if self.field_cfg.needs_normals else torch.inference_mode())
-        stack.enter_context(torch.autocast(self.background.device.type, torch.bfloat16, enabled=self.render_cfg.bf16))
+        stack.enter_context(torch.autocast(self.background.device.type, torch.bfloat16, enabled=bf16))
         return stack
 
     @property
@@ -449,10 +453,11 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
         return self.render_cfg.chunk_rays
 
     # ---- settings and lifecycle ------------------------------------------------------------------------
-    def set_quality(self, quality: Quality) -> None:
-        self.render_cfg = replace(self.render_cfg, samples_per_ray=self.samples_for(quality.samples,
-                                                                                     self.render_cfg.shell_m),
-                                  fine_samples=quality.fine, bf16=quality.bf16)
+    def with_quality(self, quality: Quality) -> RenderConfig:
+        """The render config with a quality setting's samples (at the spacing they give the default shell), second
+        pass and bf16."""
+        return replace(self.render_cfg, samples_per_ray=self.samples_for(quality.samples, self.render_cfg.shell_m),
+                       fine_samples=quality.fine, bf16=quality.bf16)
 
     def before_save(self, geometry: FrameGeometry) -> None:
         """The display's occupancy grid follows the density: rebuilt with every checkpoint."""

@@ -47,7 +47,6 @@ from models.avatars.primitives.chart import (
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
 from models.avatars.primitives.seen import edge_fade, inside_share
-from models.avatars.quality import Quality
 from models.avatars.rendering import RenderOptions
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
@@ -234,7 +233,6 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         self.decoder = self.make_decoder()
         self.latent = nn.Embedding(n_frames, cfg.code_dim)
         nn.init.zeros_(self.latent.weight)
-        self.samples = cfg.samples
         self.pose_corrections: nn.Parameter | None = None
         """(N,6) per training frame, on a tracked video (components/poses.py); None: the poses as given."""
         self.expression_corrections: nn.Parameter | None = None
@@ -361,10 +359,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
 
     def describe_rendering(self) -> str:
         c = self.cfg
-        return f"{self.count} primitives of {c.voxels}^3 voxels, {self.samples} samples a segment"
-
-    def set_quality(self, quality: Quality) -> None:
-        self.samples = quality.samples
+        return f"{self.count} primitives of {c.voxels}^3 voxels, {c.samples} samples a segment"
 
     @property
     def chunk_rays(self) -> int:
@@ -640,7 +635,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         cores = options.cores or torch.get_num_threads()
         parts = cores if len(origins) >= DISPLAY_PARALLEL_RAYS else 1
         display = dispatch.Display(self.cfg.stop_below, parts, options.should_stop)
-        out, self.displayed_by = dispatch.march_rays(origins, directions, background, prims, self.samples, display)
+        samples = self.cfg.samples if options.quality is None else options.quality.samples
+        out, self.displayed_by = dispatch.march_rays(origins, directions, background, prims, samples, display)
         return out
 
     def describe_display(self) -> str:
