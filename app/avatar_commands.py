@@ -30,7 +30,15 @@ from models.device import device_of
 from models.files import FolderBusy, WriterLock, atomic_write_bytes, foreign_files
 from models.head.controls import Controls, load_controls
 from models.training.configs import PERSONALIZE_LR
-from models.training.metrics import face_mse, luminance, normal_angles_deg, pearson, psnr, ssim
+from models.training.metrics import (
+    face_mse,
+    image_offset_px,
+    luminance,
+    normal_angles_deg,
+    pearson,
+    psnr,
+    ssim,
+)
 from models.training.prior import PriorTrainConfig, corpus_folders, distributed_from_env, prepare_prior
 from models.training.trainer import PROGRESS_SECONDS, TrainConfig, prepare_training
 from render.camera import framing_camera
@@ -190,8 +198,10 @@ def run_eval(cfg: EvalConfig) -> int:
         out = render_image(avatar, frame_camera(split, f), f.controls, rasterizer=raster)
         times.append(time.perf_counter() - t0)
         face = face_mask_of(f, truth.shape)
+        dx, dy = image_offset_px(out["rgb"], truth)
         row = {"frame": f.index, "psnr": psnr(out["rgb"], truth), "ssim": ssim(out["rgb"], truth),
-               "face_mse": face_mse(out["rgb"], truth, face)}
+               "face_mse": face_mse(out["rgb"], truth, face), "offset_px": float(np.hypot(dx, dy)),
+               "offset_xy_px": [round(dx, 2), round(dy, 2)]}
         panels = [truth, out["rgb"], np.clip(np.abs(out["rgb"] - truth) * 4, 0, 1)]
         if "normals" in out:
             panels.append(out["normals"] * 0.5 + 0.5)
@@ -206,15 +216,17 @@ def run_eval(cfg: EvalConfig) -> int:
         rows.append(row)
         save_png(cfg.out / f"{cfg.split}_{f.index:04d}.png",
                  (np.concatenate(panels, 1) * 255).round().astype(np.uint8))
-    metrics = {k: float(np.mean([r[k] for r in rows if k in r])) for k in ("psnr", "ssim", "face_mse", "normal_deg",
-               "normal_median_deg", *SHADOW_METRICS) if any(k in r for r in rows)}
+    metrics = {k: float(np.mean([r[k] for r in rows if k in r])) for k in (
+        "psnr", "ssim", "face_mse", "offset_px", "normal_deg", "normal_median_deg", *SHADOW_METRICS)
+        if any(k in r for r in rows)}
     metrics["render_ms"] = 1e3 * float(np.median(times))
     report = {"avatar": str(cfg.avatar), "dataset": str(cfg.dataset), "split": cfg.split, "frames": len(rows),
               "effects": meta.get("effects"), "training": meta.get("provenance"), "metrics": metrics, "per_frame": rows}
     (cfg.out / "metrics.json").write_text(json.dumps(report, indent=1))
     images = f"{len(rows)} side-by-side image{'s' * (len(rows) != 1)} ({cfg.out / cfg.split}_NNNN.png"
     print(f"wrote {cfg.out / 'metrics.json'} and {images}: truth, render, error x4...); PSNR {metrics['psnr']:.2f} "
-          f"dB, SSIM {metrics['ssim']:.3f}, face MSE {metrics['face_mse']:.4f}, {metrics['render_ms']:.0f} ms a frame")
+          f"dB, SSIM {metrics['ssim']:.3f}, face MSE {metrics['face_mse']:.4f}, {metrics['offset_px']:.1f} px from the "
+          f"truth, {metrics['render_ms']:.0f} ms a frame")
     return 0
 
 

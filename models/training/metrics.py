@@ -57,3 +57,15 @@ def pearson(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
 def luminance(rgb: np.ndarray) -> np.ndarray:
     """Rec. 709 luminance of linear RGB (...,3)."""
     return rgb @ np.array([0.2126, 0.7152, 0.0722])
+
+
+def image_offset_px(render: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """(dx, dy) pixels that `render` (H,W,3) sits from `truth`: the shift that moves the truth onto the render, by
+    phase correlation of their luminance (OpenCV's, Hann-windowed; sub-pixel). How far a held-out frame renders from
+    where the video has the person."""
+    import cv2
+
+    a, b = (np.ascontiguousarray(luminance(np.asarray(x, np.float64))) for x in (truth, render))
+    window = cv2.createHanningWindow(a.shape[::-1], cv2.CV_64F)
+    (dx, dy), _ = cv2.phaseCorrelate(a, b, window)
+    return float(dx), float(dy)

@@ -41,7 +41,7 @@ def test_train_eval_render(capture, tmp_path, capsys):
     assert "trained with shading" in capsys.readouterr().err  # not silently ignored
     assert main(["eval", str(avatar), str(capture), "--out", str(tmp_path / "ev")]) == 0
     metrics = json.loads((tmp_path / "ev" / "metrics.json").read_text())["metrics"]
-    assert {"psnr", "ssim", "face_mse", "normal_deg", "render_ms"} <= set(metrics)
+    assert {"psnr", "ssim", "face_mse", "offset_px", "normal_deg", "render_ms"} <= set(metrics)
     side = np.asarray(Image.open(tmp_path / "ev" / "test_0000.png"))
     assert side.shape == (24, 24 * 4, 3)  # ground truth, render, error, normals
     for buffer in ("rgb", "normals", "depth", "opacity"):
