@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Debian packages for headless GL (EGL, Mesa llvmpipe), the virtual display used by GUI tests, the C compiler
 # that builds the primitives' display march (models/avatars/primitives/native.py; without it the torch march shows),
-# Chromium for the tests that open exported avatars in a browser (app/chromium.py), and Node.js with npm where there
-# is none (the glTF validator and three.js come from npm: scripts/setup_python.sh).
+# Chromium for the tests that open exported avatars in a browser (app/chromium.py), Blender (and the numpy its glTF
+# importer needs) for the test that imports them into Blender, and Node.js with npm where there is none (the glTF
+# validator and three.js come from npm: scripts/setup_python.sh).
 # Installs only when running as root and something is missing; otherwise says what to install. The Makefile runs it
 # again whenever this file changes, so a machine set up before a package was added gets it.
 set -euo pipefail
-PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 libglx-mesa0 xvfb xauth gcc libc6-dev chromium)
+PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 libglx-mesa0 xvfb xauth gcc libc6-dev chromium blender python3-numpy)
 missing=()
 for p in "${PKGS[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
