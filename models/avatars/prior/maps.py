@@ -15,6 +15,7 @@ import torch.nn.functional as F
 
 from models.avatars.primitives.chart import ChartSampler, texel_points
 from render.camera import Camera
+from render.fill import push_pull
 from render.rays import Raster
 
 VISIBLE_WITHIN_M = 0.004
@@ -54,14 +55,19 @@ def texture_map(sampler: ChartSampler, triangles: torch.Tensor, vertices: torch.
 def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: np.ndarray | None = None
                     ) -> tuple[np.ndarray, np.ndarray]:
     """The weighted mean of frames' unprojected colours (S,S,3) and where any frame saw the texel (S,S) bool;
-    texels none saw take `fill` (the seen texels' mean colour if not given, as the seed fills unobserved parts)."""
+    texels none saw take `fill` where given, else are filled from the seen ones around them (render/fill.py's
+    push-pull: a video that saw the front gives the back of the head the colours at the edge of what it saw, the
+    hair's about the crown and the sides, where the seed's mean of every seen texel gave it the face's skin); grey
+    where none was seen."""
     w = np.stack(weights)[..., None]
     total = w.sum(0)
     seen = total[..., 0] > 1e-6
     mean = (np.stack(colours) * w).sum(0) / np.maximum(total, 1e-6)
-    if fill is None:
-        fill = mean[seen].mean(0) if seen.any() else np.full(3, 0.5)
-    return np.where(seen[..., None], mean, fill).astype(np.float32), seen
+    if fill is not None:
+        return np.where(seen[..., None], mean, fill).astype(np.float32), seen
+    if not seen.any():
+        return np.full_like(mean, 0.5, dtype=np.float32), seen
+    return push_pull(mean.astype(np.float64), seen).astype(np.float32), seen
 
 
 def texture_tensor(texture: np.ndarray) -> torch.Tensor:

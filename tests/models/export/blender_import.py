@@ -11,7 +11,7 @@ import numpy
 if not hasattr(numpy, "bool"):  # Debian's Blender 3.4 importer still names numpy.bool, gone since numpy 1.24
     numpy.bool = bool
 
-import bpy  # noqa: E402  (Blender's own module: only inside Blender)
+import bpy  # Blender's own module: only inside Blender
 
 glb, out, key = sys.argv[sys.argv.index("--") + 1:]
 bpy.ops.wm.read_factory_settings(use_empty=True)

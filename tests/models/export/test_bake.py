@@ -16,7 +16,6 @@ from models.export.bake import (
     bake_texture,
     bake_views,
     project,
-    push_pull,
     sample_bilinear,
     texel_surface,
     texture_image,
@@ -24,6 +23,7 @@ from models.export.bake import (
 from models.export.chart import head_chart
 from models.head.controls import Controls
 from render.camera import turntable_camera
+from render.fill import push_pull
 from render.rays import pixel_rays
 from tests.conftest import CODYNERF_DEMO
 

@@ -9,7 +9,7 @@ from scipy.ndimage import gaussian_filter, shift
 from models.training.metrics import image_offset_px
 
 
-@pytest.mark.parametrize("dx, dy", [(3.0, -2.0), (-4.5, 1.25), (0.0, 0.0)])
+@pytest.mark.parametrize(("dx", "dy"), [(3.0, -2.0), (-4.5, 1.25), (0.0, 0.0)])
 def test_image_offset_finds_a_known_shift(dx, dy):
     """A smooth random image moved by (dx, dy) pixels (whole or sub-pixel, scipy's spline shift) is found that far
     from the original: whole pixels to a twentieth, half pixels to a third (phase correlation's peak is read to
