@@ -353,9 +353,9 @@ def personalizing_trainer(tcfg: TrainConfig, prior: Path, gl: GLContext, tune: s
     """The trainer that fine-tunes a copy of the universal prior in `prior` on the capture tcfg.dataset (its
     neutral maps made first: the head model's fitted shape, the colours of its least expressive frames), and the
     seconds the maps took. `personalize` runs it, and `train` where it starts from the prior."""
-    from models.training.data import build_frames, validation_frame
+    from models.training.data import validation_frame
     from models.training.prior import neutral_texture
-    from models.training.trainer import Trainer
+    from models.training.trainer import Trainer, capture_frames
 
     split = load_split(tcfg.dataset, "train")
     check_images(split)
@@ -379,14 +379,9 @@ def personalizing_trainer(tcfg: TrainConfig, prior: Path, gl: GLContext, tune: s
             module.requires_grad_(False)
     maps_s = time.perf_counter() - t0
     avatar.train()
-    frames = build_frames(split, avatar, gl, on_frame)
-    if split.tracked:  # a video's frame cuts the neck and shoulders: they fade out where it stopped seeing them
-        avatar.note_reach(frames)
+    frames = capture_frames(avatar, split, gl, on_frame=on_frame)
     val = load_split(tcfg.dataset, "val")
     trainer = Trainer(tcfg, avatar, frames, validation_frame(val, avatar.background.numpy()) if val.frames else None)
-    # The scan saw the face; the prior saw heads from every side (its corpus's cameras go round them): turntables and
-    # the studio's orbit go all the way round.
-    trainer.view_range = {"yaw_deg": [-180.0, 180.0], "pitch_deg": trainer.view_range["pitch_deg"]}
     return trainer, maps_s
 
 

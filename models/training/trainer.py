@@ -84,15 +84,23 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None,
                                                      split.lighting, model_config)
         if plate is not None:
             avatar.plate.note(*plate)
+    frames = capture_frames(avatar, split, gl, cfg.corrections, on_frame)
+    validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
+    return Trainer(cfg, avatar, frames, validation, resumed)
+
+
+def capture_frames(avatar: Avatar, split, gl: GLContext, corrections: bool | None = None,
+                   on_frame: Callable[[int, int], None] | None = None) -> FrameSet:
+    """The training frames of a capture, the avatar made ready for them: a tracked video's corrections and code
+    keys, what the frames saw (note_views). Every avatar `train` makes or resumes, and a personalised prior."""
     if split.tracked:  # (a resumed avatar too: what it learns is not all in avatar.json)
-        avatar.fit_to_tracked_video(cfg.corrections)
+        avatar.fit_to_tracked_video(corrections)
         # Its codes carry what the controls miss (hair, shoulders) and follow the controls: held-out frames and
         # sliders take the nearest training frames' (components/codes.py). Synthetic captures keep the mean code.
         avatar.code_keys.note([f.controls for f in split.frames])
     frames = build_frames(split, avatar, gl, on_frame)
     avatar.note_views(frames)
-    validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
-    return Trainer(cfg, avatar, frames, validation, resumed)
+    return frames
 
 
 def model_options(cls: type[Avatar], settings: tuple[str, ...], base: Any) -> Any:
@@ -134,6 +142,8 @@ class Trainer:
         self.validation = validation
         template = avatar.head_model.template
         self.view_range = view_range(frames.split, 0.5 * (template.min(0) + template.max(0)))
+        if avatar.personalizes:  # a person's prior: it saw heads from every side (its corpus's cameras go round them),
+            self.view_range["yaw_deg"] = [-180.0, 180.0]  # so turntables and the studio's orbit go all the way round
         self.rest_translation = np.mean([f.controls.translation for f in frames.split.frames], 0) \
             if frames.split.frames else np.zeros(3)
         self.rays_per_step = cfg.rays_per_step or avatar.rays_per_step

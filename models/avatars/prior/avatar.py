@@ -93,6 +93,11 @@ class PriorAvatar(PrimitivesAvatar):
     def fit_to_tracked_video(self, corrections: bool | None = None) -> None:
         """No per-frame corrections: the prior keeps no per-frame anything (a frame is its maps and its mesh)."""
 
+    def note_views(self, frames) -> None:
+        """What the frames saw: where their fade ends (the neck and shoulders a video's frame cut fade out there,
+        note_reach); no cone of views: the prior saw heads from every side, its decoder reads any view."""
+        self.note_reach(frames)
+
     def make_decoder(self) -> SlabDecoder:
         """The primitives' decoder with the spatial expression code in place of the controls' expression (which
         reaches it as Delta G): its condition is the view (and the light where the capture records one)."""

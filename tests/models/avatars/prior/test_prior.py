@@ -405,6 +405,10 @@ def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_pa
     personal, meta = load_avatar(tmp_path / "a")
     assert meta["model"] == "prior" and float(personal.neutral_texture.abs().sum()) > 0
     assert meta["provenance"]["config"]["lr"] == "0.001"  # the prior's fine-tuning rate, not from scratch's
+    assert main(["train", str(scan), "--out", str(tmp_path / "a"), "--steps", "2", "--resume"]) == 0
+    meta = json.loads((tmp_path / "a" / "avatar.json").read_text())
+    assert meta["model"] == "prior" and meta["provenance"]["steps"] == 2
+    assert meta["view_range"]["yaw_deg"] == [-180.0, 180.0]  # resumed, it still turns all the way round
     assert main(["train", str(scan), "--prior", str(prior), "--from-scratch", "--out", str(tmp_path / "b"),
                  "--steps", "1"]) == 0
     assert "from scratch (--from-scratch)" in capsys.readouterr().out
