@@ -37,7 +37,7 @@ def angle_from_face_deg(frame) -> float:
     """Degrees between where the face looks (the head's +z turned by the frame's root pose) and the way from the
     head (its translation) to the camera."""
     c = frame.controls
-    turn = rotation_matrix_from_axis_angle(torch.tensor([np.asarray(c.root, np.float64)]))[0].numpy()
+    turn = rotation_matrix_from_axis_angle(torch.as_tensor(np.asarray(c.root, np.float64)[None]))[0].numpy()
     facing = turn @ np.array([0.0, 0.0, 1.0])
     to_camera = np.asarray(frame.camera_to_world, np.float64)[:3, 3] - np.asarray(c.translation, np.float64)
     cos = facing @ to_camera / max(np.linalg.norm(to_camera), 1e-12)
