@@ -143,3 +143,28 @@ def background_plate(frames: list[np.ndarray], masks: list[np.ndarray], grow_px:
     if hole.any():
         plate = cv2.inpaint(plate, hole, 5, cv2.INPAINT_TELEA)
     return plate, float(hole.mean())
+
+
+STILL_ROOM_LEVELS = 5.0
+"""A room that differs from its plate by more than this (8-bit levels, the frames' median of their mean) is not
+still: measured on the tracked clips of ../shared/data/video at 256 px, cameras on a tripod 0.3-2.3 (d3, d19,
+talking_hdtf, five of more/), a camera moving through a room 18.6 (wide_room_plants), sea and a moving street
+behind 8.5 and 10.0 (portrait_seaside, singing_boy)."""
+
+
+def room_residual(frames: list[np.ndarray], masks: list[np.ndarray], plate: np.ndarray, grow_px: int,
+                  offsets: np.ndarray | None = None) -> float:
+    """How far the room in the frames is from the plate: per frame the mean absolute difference (8-bit levels,
+    over the channels) of the pixels the person's mask grown by grow_px leaves free, its window of the plate
+    where the crop follows; the median over the frames. A still camera's room differs by its noise; one that
+    moves (or water, traffic) by much more (STILL_ROOM_LEVELS)."""
+    fh, fw = frames[0].shape[:2]
+    offsets = np.zeros((len(frames), 2), np.int64) if offsets is None else np.asarray(offsets)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow_px + 1, 2 * grow_px + 1))
+    levels = []
+    for (ox, oy), f, m in zip(offsets, frames, masks, strict=True):
+        room = cv2.dilate((m > 0.5).astype(np.uint8), kernel) == 0
+        if room.any():
+            window = plate[oy:oy + fh, ox:ox + fw].astype(np.float64)
+            levels.append(float(np.abs(f.astype(np.float64) - window)[room].mean()))
+    return float(np.median(levels)) if levels else 0.0

@@ -37,7 +37,7 @@ from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.finder import FaceFinder
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
 from models.tracking.landmarker import Face
-from models.tracking.masks import background_plate, foreground_masks
+from models.tracking.masks import STILL_ROOM_LEVELS, background_plate, foreground_masks, room_residual
 from models.tracking.splits import frame_splits
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames
 from render.video import write_video
@@ -287,8 +287,11 @@ def write_frames(cfg, partial: Path, kept: list[dict], crops: list[np.ndarray], 
                                         grow_px=max(1, round(0.01 * cfg.size)), offsets=framing.offsets[train],
                                         canvas_wh=(framing.width, framing.height))
     write_png8(partial / "background.png", plate / 255.0)
+    residual = room_residual([crops[j] for j in train], [masks[j] for j in train], plate,
+                             grow_px=max(1, round(0.03 * cfg.size)), offsets=framing.offsets[train])
     plate_report = {"file": "background.png", "inpainted_share": round(inpainted, 4),
-                    "frames": len(train)}
+                    "frames": len(train), "room_residual_levels": round(residual, 2),
+                    "room": "still" if residual <= STILL_ROOM_LEVELS else "moving"}
     own = [[k.fx, k.fy, k.cx - float(ox), k.cy - float(oy)] for ox, oy in framing.offsets]  # each window's camera
     header = split_header(cfg, framing, k, own[0], result.shape, video_fps)
     splits: dict[str, list[dict]] = {"train": [], "val": [], "test": []}

@@ -43,6 +43,8 @@ def test_d3_video_tracks(d3_dataset):
     # The face fills d3's frame (landmarks 286 px across its 512, measured with MediaPipe on every 6th frame), so
     # the crop is the whole frame and at 128 px the face is 286 / 4 = 71.5 px wide.
     assert report["crop"]["whole_frame"] and 62 < report["face_width_px"]["median"] < 82, report["face_width_px"]
+    # d3 was filmed on a tripod before a plain wall: its room is still (1.8 levels at 256 px, all its frames)
+    assert report["background_plate"]["room"] == "still", report["background_plate"]
     test = load_split(d3_dataset, "test")
     train = load_split(d3_dataset, "train")
     assert len(test.frames) == int(np.ceil(0.1 * report["frames_kept"]))

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.tracking.masks import foreground_mask, foreground_masks
+from models.tracking.masks import (
+    STILL_ROOM_LEVELS,
+    background_plate,
+    foreground_mask,
+    foreground_masks,
+    room_residual,
+)
 
 
 def portrait(seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -43,3 +49,32 @@ def test_masks_in_workers_are_the_masks_one_by_one():
     head = ((xx - cx) / 18.0) ** 2 + ((yy - 40) / 24.0) ** 2 < 0.8
     corner = (yy < 20) & ((xx < 15) | (xx > 80))
     assert alone[0][head].mean() > 0.95 and alone[0][corner].mean() < 0.05
+
+
+def test_a_room_that_moves_is_told_from_a_still_one():
+    """A textured room behind a person (a disc that moves about): seen by a still camera with a level of noise, its
+    frames differ from their plate by about that noise; panned 3 px a frame, by far more than STILL_ROOM_LEVELS."""
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(0)
+    room = np.stack([gaussian_filter(rng.random((96, 160)), 2) for _ in range(3)], -1)
+    room = ((room - room.min()) / np.ptp(room) * 255).astype(np.float64)
+    yy, xx = np.mgrid[:64, :64]
+
+    def frames(pan_px: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        images, masks = [], []
+        for k in range(12):
+            image = room[16:80, 8 + pan_px * k: 72 + pan_px * k] + rng.normal(0, 1.0, (64, 64, 3))
+            person = ((xx - 28 - k) ** 2 + (yy - 36) ** 2 < 14 ** 2).astype(np.float32)
+            image[person > 0] = 200.0
+            images.append(image.clip(0, 255).astype(np.uint8))
+            masks.append(person)
+        return images, masks
+
+    for pan, still in ((0, True), (3, False)):
+        images, masks = frames(pan)
+        plate, _ = background_plate(images, masks, grow_px=1)
+        level = room_residual(images, masks, plate, grow_px=2)
+        assert (level <= STILL_ROOM_LEVELS) == still, (pan, level)
+        if still:
+            assert level < 2.0  # about the noise's mean absolute value (0.8 levels)
