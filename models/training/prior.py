@@ -202,7 +202,8 @@ class PriorTrainer:
         split = self.identities[0].frames.split
         return {**self.avatar.meta(), "head_model": split.head_model, "frames": len(self.avatar.latent.weight),
                 "image_px": [split.width, split.height], "background": self.avatar.background.tolist(),
-                "corpus": {"folder": str(self.cfg.corpus), "identities": [i.name for i in self.identities]},
+                "corpus": {"folder": str(self.cfg.corpus), "people": [str(p) for p in self.cfg.people],
+                           "identities": [i.name for i in self.identities]},
                 "provenance": {"steps": self.step, "skipped_steps": self.skipped_steps,
                                "seconds": round(self.elapsed, 1), "processes": self.world,
                                "config": {k: str(v) for k, v in asdict(self.cfg).items()}}}

