@@ -58,7 +58,8 @@ def train_and_measure(clip: str, way: str, capture: Path, work: Path, minutes: f
         if not (out / "metrics.json").is_file():
             run(["eval", str(avatar), str(capture), "--split", split, "--out", str(out)], work / f"eval_{out.name}.log")
         m = json.loads((out / "metrics.json").read_text())["metrics"]
-        row[split] = {k: round(float(m[k]), 4) for k in ("psnr", "ssim", "face_mse") if k in m}
+        keys = ("psnr", "ssim", "face_mse", "offset_px", "render_ms")
+        row[split] = {k: round(float(m[k]), 4) for k in keys if k in m}
     return row
 
 
