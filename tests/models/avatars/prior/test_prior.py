@@ -419,27 +419,33 @@ def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_pa
     assert "tracked with the demo head model" in capsys.readouterr().err and not (tmp_path / "c").exists()
 
 
-def test_train_starts_from_the_prior_only_where_it_fits(tmp_path):
-    """starting_prior: a tracked video of the prior's head model starts from it (VIDEO_START), a synthetic
-    capture, another head model, a named model or --from-scratch from nothing, each with its reason."""
-    from models.avatars.registry import SHIPPED_PRIOR, VIDEO_START, starting_prior
+def test_train_starts_from_the_prior_only_where_it_fits(tmp_path, monkeypatch):
+    """starting_prior: a prior asked for (`--model prior`, `--prior`) is personalised, and must be a prior of the
+    capture's head model; left to the default, a tracked video starts from the shipped prior where VIDEO_START says
+    so and the prior fits its head model; a synthetic capture, another head model, another model or --from-scratch
+    train from nothing; each with its reason."""
+    from models.avatars import registry
+    from models.avatars.checkpoint import CheckpointError
+    from models.avatars.registry import SHIPPED_PRIOR, starting_prior
 
     if not (SHIPPED_PRIOR / "avatar.json").is_file():
         pytest.skip(f"no shipped prior at {SHIPPED_PRIOR}")
-    folder, why = starting_prior("builtin", True, None, False, None)
-    assert (folder, why.split(" ")[0]) == ((SHIPPED_PRIOR, "from") if VIDEO_START == "prior" else (None, "from"))
-    assert starting_prior("builtin", False, None, False, None) == (None, "from scratch")
-    assert starting_prior("builtin", True, None, True, None) == (None, "from scratch (--from-scratch)")
-    assert starting_prior("builtin", True, "primitives", False, None) == (None, "from scratch")
-    if VIDEO_START == "prior":
-        folder, why = starting_prior("ict:/x/ict_head.npz", True, None, False, None)
-        assert folder is None and "the universal prior of the builtin head model" in why and "ict head" in why
+    for start in ("prior", "scratch"):
+        monkeypatch.setattr(registry, "VIDEO_START", start)
         folder, why = starting_prior("builtin", True, None, False, None)
-        assert "personalising" in why
-    from models.avatars.checkpoint import CheckpointError
-
-    with pytest.raises(CheckpointError, match="nothing"):  # a prior asked for by name must be one
-        starting_prior("builtin", True, "prior", False, tmp_path / "nothing")
+        assert folder == (SHIPPED_PRIOR if start == "prior" else None), (start, why)
+        assert ("personalising" in why) == (start == "prior") and why.startswith("from")
+        assert starting_prior("builtin", False, None, False, None) == (None, "from scratch")
+        assert starting_prior("builtin", True, None, True, None) == (None, "from scratch (--from-scratch)")
+        assert starting_prior("builtin", True, "primitives", False, None) == (None, "from scratch")
+        folder, why = starting_prior("ict:/x/ict_head.npz", True, None, False, None)
+        assert folder is None and ("ict head" in why) == (start == "prior"), why
+        assert starting_prior("builtin", False, None, False, SHIPPED_PRIOR)[0] == SHIPPED_PRIOR  # named: used
+        assert starting_prior("builtin", True, "prior", False, None)[0] == SHIPPED_PRIOR
+        with pytest.raises(CheckpointError, match="tracked with the ict head model"):
+            starting_prior("ict:/x/ict_head.npz", True, "prior", False, None)
+        with pytest.raises(CheckpointError, match="nothing"):  # a prior asked for by name must be one
+            starting_prior("builtin", True, None, False, tmp_path / "nothing")
 
 
 def test_a_frontal_scans_back_of_the_head_takes_the_hair_colour(tmp_path, gl):
