@@ -85,8 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     done = {(r["clip"], r["way"]) for r in rows}
     rows = [r for r in kept if (r["clip"], r["way"]) not in done] + rows
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"minutes": args.minutes, "prior": str(args.prior or "shipped"), "rows": rows},
-                                   indent=1) + "\n")
+    args.out.write_text(json.dumps({"prior": str(args.prior or "shipped"), "rows": rows}, indent=1) + "\n")
     for r in rows:
         print(f"{r['clip']:32s} {r['way']:8s} {r['model']:10s} {r['steps']:6d} steps  held out "
               f"{r['test']['psnr']:.2f} dB (SSIM {r['test']['ssim']:.3f})  validation {r['val']['psnr']:.2f} dB")

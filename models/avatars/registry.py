@@ -39,9 +39,10 @@ VIDEO_START = "scratch"
 """How `train` starts a tracked video's avatar when neither a model nor a prior is named: "scratch", VIDEO_MODEL
 from nothing, or "prior", personalising the universal prior of the capture's head model where there is one.
 Scratch, measured (docs/results.md, Beyond the captured views): on two real clips held out by view, 30 minutes
-from scratch gave 31.67 and 35.26 dB on the furthest turns where 30 minutes of personalising gave 29.47 and
-(grimaces) ...; the prior's whole head (a turntable round a front-only capture: +5.1 to +8.6 dB behind and beside
-on a synthetic person with hair, after 3 minutes) does not survive 30 minutes of fine-tuning on a real video."""
+from scratch gave 31.67 and 35.26 dB on the furthest turns where 30 minutes of personalising gave 29.47 and 33.66
+(3 minutes: 28.55 and 31.05); the prior's whole head (a turntable round a front-only capture: +5.1 to +8.6 dB
+behind and beside on a synthetic person with hair, after 3 minutes) does not survive 30 minutes of fine-tuning on
+a real video."""
 
 
 def starting_prior(capture_head: str | None, tracked: bool, model: str | None, from_scratch: bool,
