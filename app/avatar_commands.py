@@ -119,17 +119,17 @@ def train_locked(cfg: TrainConfig) -> int:
 
 
 def start_training(cfg: TrainConfig, gl: GLContext):
-    """The trainer `train` runs: the universal prior personalised on the capture where the capture is a tracked
-    video and a prior of its head model is at hand (registry.starting_prior), else a model from nothing (or the
-    checkpoint resumed); the line that says which goes to the terminal."""
+    """The trainer `train` runs: the universal prior personalised on the capture where one is asked for (or, by
+    registry.VIDEO_START, for a tracked video: registry.starting_prior), else a model from nothing, or the
+    checkpoint resumed; the line that says which goes to the terminal."""
     reading = progress_callback("reading the frames")
     if cfg.resume:
         return prepare_training(cfg, gl, on_frame=reading)
     try:
         split = load_split(cfg.dataset, "train")
         prior, why = starting_prior(split.head_model, split.tracked, cfg.model, cfg.from_scratch, cfg.prior)
-    except CheckpointError as e:
-        raise UserInputError(f"--prior: {e}") from None
+    except CheckpointError as e:  # a prior asked for that is none, or of another head model: names the folder
+        raise UserInputError(str(e)) from None
     print(f"training {cfg.out} {why}", flush=True)
     if prior is None:
         return prepare_training(cfg, gl, on_frame=reading)
