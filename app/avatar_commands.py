@@ -29,6 +29,7 @@ from models.capture.synthetic import read_png16
 from models.device import device_of
 from models.files import FolderBusy, WriterLock, atomic_write_bytes, foreign_files
 from models.head.controls import Controls, load_controls
+from models.head.sources import head_kind
 from models.training.configs import PERSONALIZE_LR
 from models.training.metrics import (
     face_mse,
@@ -362,7 +363,7 @@ def personalizing_trainer(tcfg: TrainConfig, prior: Path, gl: GLContext, tune: s
     avatar, meta = load_avatar(prior, tcfg.device)
     if not avatar.personalizes:
         raise UserInputError(f"{prior}: a {avatar.name} avatar, not a universal prior (`prior-train` makes one)")
-    if (split.head_model or "").split(":")[0] != str(meta["head_model"]).split(":")[0]:
+    if head_kind(split.head_model) != head_kind(meta["head_model"]):
         raise UserInputError(f"{tcfg.dataset}: its head model is {split.head_model!r}, the prior's "
                              f"{meta['head_model']!r}")
     t0 = time.perf_counter()

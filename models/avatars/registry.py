@@ -17,7 +17,7 @@ from models.avatars.primitives.avatar import PrimitivesAvatar
 from models.avatars.prior.avatar import PriorAvatar
 from models.avatars.quality import load_presets
 from models.device import device_of
-from models.head.sources import load_head
+from models.head.sources import head_kind, load_head
 
 AVATARS: dict[str, type[Avatar]] = {cls.name: cls for cls in (
     CoDyNeRFAvatar,
@@ -57,14 +57,14 @@ def starting_prior(capture_head: str | None, tracked: bool, model: str | None, f
     if not asked and (not tracked or VIDEO_START != "prior"):
         return None, "from scratch"
     folder = Path(prior) if prior is not None else SHIPPED_PRIOR
-    kind = (capture_head or "none").split(":")[0]
+    kind = head_kind(capture_head)
     try:
         meta = read_meta(folder)
     except CheckpointError as e:
         if not asked:
             return None, f"from scratch (no universal prior: {e})"
         raise
-    prior_kind = str(meta.get("head_model", "")).split(":")[0]
+    prior_kind = head_kind(meta.get("head_model"))
     if meta.get("model") != PriorAvatar.name or prior_kind != kind:
         what = f"a {meta.get('model')} avatar" if meta.get("model") != PriorAvatar.name else \
             f"the universal prior of the {prior_kind} head model"

@@ -19,6 +19,15 @@ _BUILTIN_KEYS = ("template", "triangles", "shape_basis", "expr_basis", "expr_nam
                  "weights", "parents", "joint_names", "landmarks", "uv", "triangles_uv")
 
 
+def head_kind(spec: str | None) -> str:
+    """The kind of a HEAD spec (builtin, demo, ict, flame), without its path; "none" for no head model.
+
+    >>> head_kind("ict:/data/ict_head.npz"), head_kind(None)
+    ('ict', 'none')
+    """
+    return (spec or "none").split(":")[0]
+
+
 def load_builtin(path: str | Path = SHIPPED_PATH) -> HeadModel:
     """The built-in head from its npz (as written by models.head.builtin)."""
     path = Path(path)

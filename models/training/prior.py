@@ -33,7 +33,7 @@ from models.avatars.prior.maps import average_texture, texture_map, texture_tens
 from models.capture.dataset import CaptureSplit, load_split
 from models.capture.frames import background_plate, frame_camera, load_rgb
 from models.device import DeviceError, device_of
-from models.head.sources import load_head
+from models.head.sources import head_kind, load_head
 from models.training.configs import PriorTrainConfig
 from models.training.data import FrameSet, build_frames
 from models.training.trainer import (
@@ -117,7 +117,7 @@ def corpus_folders(corpus: Path, people: Sequence[Path] = ()) -> list[Path]:
     if twice:
         raise ValueError(f"{', '.join(twice)}: more than one person of that name in the corpus (the prior names "
                          "its people by their folders)")
-    kinds = {f: head_kind(f) for f in folders}
+    kinds = {f: capture_head_kind(f) for f in folders}
     first = kinds[folders[0]]
     other = next((f for f in folders if kinds[f] != first), None)
     if other is not None:
@@ -126,11 +126,10 @@ def corpus_folders(corpus: Path, people: Sequence[Path] = ()) -> list[Path]:
     return folders
 
 
-def head_kind(capture: Path) -> str:
-    """The kind of a capture's head model (builtin, demo, ict, flame), as its transforms_train.json names it."""
+def capture_head_kind(capture: Path) -> str:
+    """The kind of a capture's head model, as its transforms_train.json names it."""
     with open(Path(capture) / "transforms_train.json") as f:
-        head = json.load(f).get("head_model") or "none"
-    return str(head).split(":")[0]
+        return head_kind(json.load(f).get("head_model"))
 
 
 class PriorLoss(nn.Module):
