@@ -7,7 +7,7 @@ it shows how far the load has slowed everything (about 100 ms on this one idle).
 
     .venv/bin/python -m benchmarks.bench_live [--avatar resources/demo_avatar --avatar out/real/d3_view_win]
         [--video ../shared/data/video/expressions_d3.mp4] [--size 1440x900] [--runs 1]
-        [--live-pass auto --live-pass final]
+        [--live-pass auto --live-pass final] [--guide held --guide follows]
         [--out benchmarks/results/live.json]
 
 The first second of each run is left out (the tracker's process starts and its first frames queue behind the
@@ -18,6 +18,7 @@ scripted run's report; the figures are only as good as the machine is idle.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import subprocess
@@ -58,6 +59,9 @@ def main() -> None:
     p.add_argument("--runs", type=int, default=1, help="runs of the whole video for each avatar")
     p.add_argument("--live-pass", action="append", choices=("auto", "draft", "preview", "final"),
                    help="the pass live poses render (repeat: each measured); default auto, the finest that keeps up")
+    p.add_argument("--guide", action="append", choices=("held", "follows"),
+                   help="the guide while live (repeat: each measured): held (the studio's default) or drawn anew "
+                        "for every live pose; default held")
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "live.json")
     a = p.parse_args()
     if not a.video.is_file():
@@ -71,19 +75,19 @@ def main() -> None:
     load = os.getloadavg()[0]
     results: dict = {"machine": f"{os.cpu_count()} CPU cores, no GPU (Mesa llvmpipe)", "video": str(a.video),
                      "window": a.size, "load_average_1min_at_start": round(load, 2), "avatars": {}}
-    steps = lambda live_pass: [{"refine_to": "final"}, {"wait_render": "final"}, {"wait_frames": 60},
-                               {"live_pass": live_pass}, {"live": str(a.video)},
-                               {"wait_live_end": True, "timeout_s": 120}]
+    steps = lambda live_pass, guide: [{"refine_to": "final"}, {"wait_render": "final"}, {"wait_frames": 60},
+                                      {"live_pass": live_pass}, {"live_guide": guide == "follows"},
+                                      {"live": str(a.video)}, {"wait_live_end": True, "timeout_s": 120}]
     try:
         for avatar in avatars:
             avatar = avatar.resolve()
             key = str(avatar.relative_to(REPO) if avatar.is_relative_to(REPO) else avatar)
             runs = []
-            for live_pass in a.live_pass or ["auto"]:
+            for live_pass, guide in itertools.product(a.live_pass or ["auto"], a.guide or ["held"]):
                 for _ in range(a.runs):
                     with tempfile.TemporaryDirectory() as tmp:
-                        row = live_row(studio_run(display, avatar, steps(live_pass), Path(tmp), size))
-                    runs.append({"live_pass": live_pass, **row})
+                        row = live_row(studio_run(display, avatar, steps(live_pass, guide), Path(tmp), size))
+                    runs.append({"live_pass": live_pass, "guide": guide, **row})
                     print(f"{key}: {json.dumps(runs[-1])}", flush=True)
             with tempfile.TemporaryDirectory() as tmp:
                 slider = summary(studio_run(display, avatar, latency_steps(5), Path(tmp), size)["latencies"], "final")

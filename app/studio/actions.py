@@ -412,7 +412,8 @@ class SetDisplay(Action):
 
     def apply(self, s: Session) -> None:
         for name, value in self.changes.items():
-            if name not in ("guide_pass", "wireframe", "landmarks", "layout", "overlay_alpha", "live_pass"):
+            if name not in ("guide_pass", "wireframe", "landmarks", "layout", "overlay_alpha", "live_pass",
+                            "live_guide"):
                 raise ValueError(f"no display setting {name!r}")
             setattr(s.display, name, value)
 

@@ -482,6 +482,7 @@ class Studio:
                 "presets": {"ms": self.worker.figures.ms, "psnr_vs_final": self.worker.figures.psnr_vs_final},
                 "errors": list(self.session.errors),
                 "viewport": {"space": self.viewport.space, "rect": self.viewport.rect,
+                             "guide_draws": self.viewport.guide_draws,
                              "images": dict(self.viewport.images)},
                 "live": {**self.live_figures.report(self.live), "render_px": self.session.display.neural_size},
                 "steps_run": None if self.script is None else self.script.ran,

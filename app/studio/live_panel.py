@@ -58,6 +58,13 @@ def draw(ctx: PanelContext) -> None:
         act(a.SetDisplay({"live_pass": choices[k]}))
     if imgui.is_item_hovered():
         imgui.set_tooltip("auto: the finest pass that keeps up with the camera; a preset: that one, however slow")
+    imgui.same_line()
+    changed, follows = imgui.checkbox("guide follows", s.display.live_guide)
+    if changed:
+        act(a.SetDisplay({"live_guide": follows}))
+    if imgui.is_item_hovered():
+        imgui.set_tooltip("draw the guide anew for every live pose: on a machine without a GPU its drawing delays "
+                          "the avatar's pixels (about 50 ms here)")
     f = ctx.live
     if f is not None:
         recent = f.latency_ms[-30:]

@@ -23,7 +23,8 @@ its value, the fields beside it); a step that cannot be done ends the run with o
   {"redo": true}                          redo it (Ctrl+Shift+Z)
   {"reset": GROUP}                        a group back to rest: expression[:brows|eyes|mouth|...], head, neck, jaw,
                                           gaze, camera
-  {"record_sliders": true}               keep the sliders' values now, for the report's "sliders_log"
+  {"record_sliders": true}               keep the sliders' values (and how often the guide was drawn) now, for
+                                          the report's "sliders_log"
   {"save_pose": NAME}                     save the sliders as a named pose of this avatar
   {"recall_pose": NAME}                   set the sliders to a named pose
   {"key": true}                           key the pose at the animation's time (Animation tab's "Key pose")
@@ -58,6 +59,7 @@ its value, the fields beside it); a step that cannot be done ends the run with o
   {"stop_live": true}                     stop live driving
   {"live_neutral": true}                  the next face becomes the neutral one
   {"live_pass": PASS}                     the pass live poses render: auto, draft, preview or final
+  {"live_guide": BOOL}                    whether the guide is drawn anew for every live pose
   {"record": true}                        record the live performance
   {"stop_recording": JSON}                stop: the recording onto the timeline and into the file
   {"expect_error": TEXT}                  fail unless a message in the window contains TEXT
@@ -315,7 +317,7 @@ def _reset(sc: Script, st: Driven, s: dict) -> bool:
 
 @step("record_sliders", TRUE)
 def _record_sliders(sc: Script, st: Driven, s: dict) -> bool:
-    sc.sliders_log.append(sliders_json(st.session.sliders))
+    sc.sliders_log.append({**sliders_json(st.session.sliders), "guide_draws": st.viewport.guide_draws})
     return True
 
 
@@ -621,6 +623,12 @@ def _save_live(sc: Script, st: Driven, s: dict) -> bool:
 @step("live_pass", one_of(("auto", *PRESET_NAMES)))
 def _live_pass(sc: Script, st: Driven, s: dict) -> bool:
     st.act(a.SetDisplay({"live_pass": s["live_pass"]}))
+    return True
+
+
+@step("live_guide", BOOL)
+def _live_guide(sc: Script, st: Driven, s: dict) -> bool:
+    st.act(a.SetDisplay({"live_guide": s["live_guide"]}))
     return True
 
 

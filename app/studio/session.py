@@ -56,6 +56,11 @@ class Display:
     live_pass: str = "auto"
     """The pass a live pose renders: auto (the finest that keeps up: app/studio/neural.py, live_pass), or a preset's
     name (that one, however long it takes)."""
+    live_guide: bool = False
+    """Whether the guide is drawn anew for every live pose. Off, it holds the pose it had when live driving began
+    (and follows again when it stops): on a software GL the guide's draw (about 27 ms at 381 px, its shadow map
+    included) shares the cores with the render, and with it the avatar's pixels came 187 ms after the camera's
+    frame where without it they came in 135 (docs/live.md)."""
 
 
 @dataclass

@@ -67,6 +67,8 @@ class Viewport:
         self.space: tuple[int, int, int, int] | None = None
         """The space the viewport gives its images (below its toolbar): x, y, width, height (pixels)."""
         self._guide_key: tuple = ()
+        self.guide_draws = 0
+        """How many times the guide was drawn (the report's: live driving holds it unless asked)."""
 
     def init(self, gl: GLContext) -> None:
         self.gl = gl
@@ -80,8 +82,11 @@ class Viewport:
         return self.gl.ctx.texture(size, 3)
 
     def draw_guide(self, s: Session, size: int) -> None:
-        """Draw the guide mesh into its texture, only when something it shows changed."""
+        """Draw the guide mesh into its texture, only when something it shows changed; while live, only where the
+        guide follows live poses (Display.live_guide)."""
         sl, d, v = s.sliders, s.display, s.view
+        if self.guide_paused(s):
+            return
         key = (size, d.guide_pass, d.wireframe, d.landmarks, s.timeline_frame,
                sl.expression.tobytes(), sl.head.tobytes(), sl.neck.tobytes(), sl.jaw_open_deg, sl.gaze_linked,
                sl.gaze_left.tobytes(), sl.gaze_right.tobytes(), v.yaw_deg, v.pitch_deg, v.zoom, v.fov_deg,
@@ -100,6 +105,11 @@ class Viewport:
             self.gl.ctx.copy_framebuffer(self.guide_tex, fb)
             self.gl.ctx.detect_framebuffer(0).use()
         self.guide_image_size = (size, size)
+        self.guide_draws += 1
+
+    def guide_paused(self, s: Session) -> bool:
+        """Live driving with the guide held (Display.live_guide off): the guide drawn before stays."""
+        return s.live.running and not s.display.live_guide and self.guide_tex is not None
 
     def update_capture(self, s: Session) -> bool:
         """On the timeline: the captured frame's image in its texture (read when the frame changes). False when
@@ -222,6 +232,9 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
         else:
             imgui.image(ref, imgui.ImVec2(w, h), *uv)
         vp.images[name] = (*at, w, h)
+        if name == "guide" and vp.guide_paused(s):
+            imgui.get_window_draw_list().add_text(imgui.ImVec2(at[0] + 6, at[1] + 4), imgui.IM_COL32(230, 230, 230, 255),
+                                                  "held while live (Live: guide follows)")
         if name == "capture":
             if imgui.is_item_hovered():
                 imgui.set_tooltip(f"capture frame {s.timeline_frame}, as the camera saw it")

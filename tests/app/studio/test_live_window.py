@@ -102,12 +102,21 @@ def test_a_missing_video_is_one_message_and_the_studio_goes_on(display, tmp_path
 
 
 def test_stopping_live_driving_gives_the_sliders_back(display, tmp_path):
-    """Stopped mid-video: no message, the poses stop coming, and a slider's move renders as before."""
-    steps = [{"wait_render": "draft"}, {"live": str(SHARED_VIDEO)}, {"wait_live": 30}, {"stop_live": True},
+    """Stopped mid-video: no message, the poses stop coming, and a slider's move renders as before. The guide holds
+    while live unless asked to follow (Display.live_guide), and follows the sliders again once live stops."""
+    steps = [{"wait_render": "draft"}, {"record_sliders": True}, {"live": str(SHARED_VIDEO)}, {"wait_live": 30},
+             {"record_sliders": True}, {"stop_live": True},
              {"record_sliders": True}, {"wait_frames": 30}, {"record_sliders": True},
-             {"expression": 0, "value": 0.7}, {"wait_render": "draft"}, {"record_sliders": True}]
+             {"expression": 0, "value": 0.7}, {"wait_render": "draft"}, {"record_sliders": True},
+             {"live_guide": True}, {"live": str(SHARED_VIDEO)}, {"wait_live": 30}, {"record_sliders": True},
+             {"stop_live": True}]
     report = run_script(display, tmp_path, DEMO, steps)
-    stopped, later, moved = report["sliders_log"]
+    log = report["sliders_log"]
+    before, live, stopped, later, moved, following = (entry.pop("guide_draws") for entry in log)
+    assert live == before  # 30 live poses, the guide held
+    assert moved > later >= stopped  # drawn again once live stopped
+    assert following >= moved + 5  # asked to follow: drawn for the live poses
+    stopped, later, moved = log[2:5]
     assert report["errors"] == [] and report["live"]["state"] is None
     assert 30 <= report["live"]["on_screen"] < 200
     assert stopped == later  # nothing drives the sliders once stopped
