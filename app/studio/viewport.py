@@ -233,7 +233,8 @@ def draw(ctx: PanelContext, vp: Viewport) -> None:
             imgui.image(ref, imgui.ImVec2(w, h), *uv)
         vp.images[name] = (*at, w, h)
         if name == "guide" and vp.guide_paused(s):
-            imgui.get_window_draw_list().add_text(imgui.ImVec2(at[0] + 6, at[1] + 4), imgui.IM_COL32(230, 230, 230, 255),
+            imgui.get_window_draw_list().add_text(imgui.ImVec2(at[0] + 6, at[1] + 4),
+                                                  imgui.IM_COL32(230, 230, 230, 255),
                                                   "held while live (Live: guide follows)")
         if name == "capture":
             if imgui.is_item_hovered():
