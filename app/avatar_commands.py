@@ -21,8 +21,9 @@ from app.progress import Progress, progress_callback
 from app.turntable import TurntableConfig, turntable_frames
 from models.avatars.checkpoint import CheckpointError
 from models.avatars.effects import parse_effects
-from models.avatars.registry import load_avatar, starting_prior
+from models.avatars.registry import load_avatar, training_start
 from models.avatars.rendering import RenderOptions, preset_options, render_image
+from models.avatars.whole.avatar import WholeHeadAvatar
 from models.capture.dataset import check_images, is_capture, load_split
 from models.capture.frames import background_plate, frame_camera, load_rgb
 from models.capture.synthetic import read_png16
@@ -79,7 +80,46 @@ def train_locked(cfg: TrainConfig) -> int:
     if not cfg.resume and (cfg.out / "avatar.json").exists():
         raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
     gl = GLContext.headless()
-    trainer = start_training(cfg, gl)
+    reading = progress_callback("reading the frames")
+    if cfg.resume and not (cfg.out / "avatar.json").exists() and (cfg.out / WHOLE_PARTS).is_dir():
+        return train_whole(cfg, gl, None)  # a whole head's parts, stopped before it was put together
+    if cfg.resume:
+        trainer = prepare_training(cfg, gl, on_frame=reading)
+    else:
+        try:
+            split = load_split(cfg.dataset, "train")
+            way, prior, why = training_start(split.head_model, split.tracked, cfg.model, cfg.from_scratch, cfg.prior)
+        except CheckpointError as e:  # a prior asked for that is none, or of another head model: names the folder
+            raise UserInputError(str(e)) from None
+        print(f"training {cfg.out} {why}", flush=True)
+        if way == WholeHeadAvatar.name:
+            return train_whole(cfg, gl, prior)
+        if prior is None:
+            trainer = prepare_training(cfg, gl, on_frame=reading)
+        else:
+            trainer, _ = personalizing_trainer(replace(cfg, model="prior", lr=personalizing_lr(cfg)), prior, gl,
+                                               on_frame=reading)
+    if not run_trainer(trainer, gl):
+        return 0
+    print(f"wrote {cfg.out}: {trainer.step} steps in {trainer.elapsed / 60:.1f} min, "
+          f"last loss {trainer.last.get('loss', 0):.5f}")
+    print_next(cfg)
+    return 0
+
+
+def personalizing_lr(cfg: TrainConfig) -> float:
+    """The learning rate a personalisation runs at: the prior's (PERSONALIZE_LR) unless --lr says otherwise."""
+    return PERSONALIZE_LR if cfg.lr == TrainConfig.lr else cfg.lr
+
+
+def print_next(cfg: TrainConfig) -> None:
+    out, dataset = shlex.quote(str(cfg.out)), shlex.quote(str(cfg.dataset))
+    print(f"next: avatar-studio studio {out}  (or: avatar-studio turntable {out}; avatar-studio eval {out} {dataset})")
+
+
+def run_trainer(trainer, gl: GLContext, on_record=None) -> bool:
+    """Run a trainer to its budget, its progress on the terminal (and to on_record); False where it was stopped
+    (SIGTERM, the studio's Cancel, or Ctrl-C: it finishes the step and checkpoints)."""
     tty = sys.stderr.isatty()
     last_line = [0.0]
 
@@ -87,6 +127,8 @@ def train_locked(cfg: TrainConfig) -> int:
         """On a terminal a line redrawn at every log record (every 50 steps, and every PROGRESS_SECONDS); in a log
         a line at most that often (and at validation). The photometric error apart from the weighted total, which
         rises when a term joins mid-run."""
+        if on_record is not None:
+            on_record(r)
         text = (f"step {r['step']}" + (f"  photometric {r['photometric']:.5f}" if "photometric" in r else "")
                 + f"  total {r['loss']:.5f}  {r['elapsed_s']:.0f} s, {r['eta_s']:.0f} s left"
                 + (f"  val PSNR {r['val_psnr']:.2f} dB" if "val_psnr" in r else ""))
@@ -107,36 +149,100 @@ def train_locked(cfg: TrainConfig) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
-    last = trainer.run(gl, show)
-    if trainer.stop_requested:
-        print(f"stopped at step {trainer.step}; checkpoint in {cfg.out} (continue with --resume)")
+    trainer.last = trainer.run(gl, show)
     if tty:
         sys.stderr.write("\n")
-    print(f"wrote {cfg.out}: {trainer.step} steps in {trainer.elapsed / 60:.1f} min, "
-          f"last loss {last.get('loss', 0):.5f}")
-    out, dataset = shlex.quote(str(cfg.out)), shlex.quote(str(cfg.dataset))
-    print(f"next: avatar-studio studio {out}  (or: avatar-studio turntable {out}; avatar-studio eval {out} {dataset})")
-    return 0
+    if trainer.stop_requested:
+        print(f"stopped at step {trainer.step}; checkpoint in {trainer.cfg.out} (continue with --resume)")
+        return False
+    return True
 
 
-def start_training(cfg: TrainConfig, gl: GLContext):
-    """The trainer `train` runs: the universal prior personalised on the capture where one is asked for (or, by
-    registry.VIDEO_START, for a tracked video: registry.starting_prior), else a model from nothing, or the
-    checkpoint resumed; the line that says which goes to the terminal."""
+WHOLE_PARTS = "parts"
+"""Where a whole head's two parts train, inside its folder (parts/inside, parts/outside): each its own checkpoint,
+so that `train --resume` continues the one that was stopped."""
+WHOLE_PRIOR_NOTE = "prior.json"
+"""In WHOLE_PARTS: the prior the outside personalises (named when the training began)."""
+WHOLE_OUTSIDE_SHARE = 0.1
+"""The share of a whole head's budget (minutes, steps) that personalises the prior: 3 of 30 minutes. Measured
+(docs/results.md): 3 minutes keep the prior's whole head, 30 lose it."""
+
+
+def budget_share(budget: float | int | None, share: float) -> float | int | None:
+    """A share of a budget: minutes as they are, steps whole and at least one; None stays None.
+
+    >>> budget_share(30.0, 0.1), budget_share(2000, 0.9), budget_share(5, 0.1), budget_share(None, 0.5)
+    (3.0, 1800, 1, None)
+    """
+    if budget is None:
+        return None
+    return max(1, round(budget * share)) if isinstance(budget, int) else budget * share
+
+
+def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
+    """A whole-head avatar (models/avatars/whole/): the video's avatar from scratch (`inside`), then the universal
+    prior personalised on the same video (`outside`), each in its folder under WHOLE_PARTS, then both put together
+    in cfg.out. `--resume` continues the part that was stopped. The studio's job reads the two runs' progress as one
+    (cfg.out's progress.jsonl, the outside's steps and seconds after the inside's)."""
+    from models.avatars.registry import training_start
+    from models.training.whole import compose
+
+    parts = cfg.out / WHOLE_PARTS
+    inside_cfg = replace(cfg, out=parts / "inside", model="primitives", prior=None,
+                         minutes=budget_share(cfg.minutes, 1 - WHOLE_OUTSIDE_SHARE),
+                         steps=budget_share(cfg.steps, 1 - WHOLE_OUTSIDE_SHARE),
+                         resume=(parts / "inside" / "avatar.json").is_file())
+    outside_cfg = replace(cfg, out=parts / "outside", model="prior", lr=personalizing_lr(cfg),
+                          minutes=budget_share(cfg.minutes, WHOLE_OUTSIDE_SHARE),
+                          steps=budget_share(cfg.steps, WHOLE_OUTSIDE_SHARE),
+                          resume=(parts / "outside" / "avatar.json").is_file())
+    if cfg.minutes is None and cfg.steps is None:  # the trainer's own default, 2000 steps, shared the same way
+        inside_cfg, outside_cfg = replace(inside_cfg, steps=1800), replace(outside_cfg, steps=200)
+    log = cfg.out / "progress.jsonl"
+    before = {"step": 0, "elapsed_s": 0.0}
+
+    def mirror(stage: str):
+        def on_record(r: dict) -> None:
+            record = {**r, "stage": stage, "step": r["step"] + before["step"],
+                      "elapsed_s": r["elapsed_s"] + before["elapsed_s"]}
+            with open(log, "a") as f:
+                f.write(json.dumps(record) + "\n")
+        return on_record
+
+    if prior is not None:  # the prior this whole head personalises, for a --resume before its turn comes
+        parts.mkdir(parents=True, exist_ok=True)
+        (parts / WHOLE_PRIOR_NOTE).write_text(json.dumps({"prior": str(Path(prior).resolve())}) + "\n")
     reading = progress_callback("reading the frames")
-    if cfg.resume:
-        return prepare_training(cfg, gl, on_frame=reading)
+    print(f"training the inside ({inside_cfg.out}: from scratch)", flush=True)
+    inside = prepare_training(inside_cfg, gl, on_frame=reading)
+    if not run_trainer(inside, gl, mirror("inside")):
+        return 0
+    before.update(step=inside.step, elapsed_s=inside.elapsed)
+    if outside_cfg.resume:
+        outside = prepare_training(outside_cfg, gl, on_frame=reading)
+    else:
+        if prior is None:  # resumed before the outside began: the prior the first run named
+            noted = parts / WHOLE_PRIOR_NOTE
+            try:
+                split = load_split(cfg.dataset, "train")
+                named = cfg.prior or (Path(json.loads(noted.read_text())["prior"]) if noted.is_file() else None)
+                _, prior, _ = training_start(split.head_model, split.tracked, "whole", False, named)
+            except CheckpointError as e:
+                raise UserInputError(str(e)) from None
+            except (OSError, ValueError, KeyError, TypeError) as e:
+                raise UserInputError(f"{noted}: cannot read the prior the training began with ({e})") from None
+        print(f"training the outside ({outside_cfg.out}: the universal prior {prior} personalised)", flush=True)
+        outside, _ = personalizing_trainer(outside_cfg, prior, gl, on_frame=reading)
+    if not run_trainer(outside, gl, mirror("outside")):
+        return 0
     try:
-        split = load_split(cfg.dataset, "train")
-        prior, why = starting_prior(split.head_model, split.tracked, cfg.model, cfg.from_scratch, cfg.prior)
-    except CheckpointError as e:  # a prior asked for that is none, or of another head model: names the folder
+        compose(inside_cfg.out, outside_cfg.out, cfg.out)
+    except CheckpointError as e:
         raise UserInputError(str(e)) from None
-    print(f"training {cfg.out} {why}", flush=True)
-    if prior is None:
-        return prepare_training(cfg, gl, on_frame=reading)
-    lr = PERSONALIZE_LR if cfg.lr == TrainConfig.lr else cfg.lr
-    trainer, _ = personalizing_trainer(replace(cfg, model="prior", lr=lr), prior, gl, on_frame=reading)
-    return trainer
+    print(f"wrote {cfg.out}: a whole head, {inside.step} steps from scratch and {outside.step} personalising the "
+          f"prior in {(inside.elapsed + outside.elapsed) / 60:.1f} min")
+    print_next(cfg)
+    return 0
 
 
 def face_mask_of(frame, image_shape) -> np.ndarray:

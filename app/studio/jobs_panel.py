@@ -23,11 +23,13 @@ from app.studio.actions import (
 )
 from app.studio.config import STUDIO_HOME
 from app.studio.context import PanelContext
-from models.avatars.registry import AVATARS, VIDEO_MODEL, default_model
+from models.avatars.registry import AVATARS, default_model
 from models.capture.dataset import DatasetError, load_split
 
 MODELS = tuple(AVATARS)
-VIDEO_MODELS = (VIDEO_MODEL, *(m for m in MODELS if m != VIDEO_MODEL))
+VIDEO_MODELS = ("default", *MODELS)
+"""A video's avatar: `train`'s own choice first (a whole head where a universal prior of the video's head model
+ships, else VIDEO_MODEL from scratch: registry.training_start), or a model named."""
 """A new avatar from video offers train's default for tracked videos first."""
 EFFECTS = ("all", "none", "shading", "shading,specular", "shadows")
 
@@ -131,7 +133,8 @@ def draw(ctx: PanelContext) -> None:
         _, f.video_model = imgui.combo("model##video", f.video_model, list(VIDEO_MODELS))
         if imgui.button("Track and train"):
             act(StartFromVideo(f.video.strip(), f.head, f.landmarker.strip(), f.out.strip(), EFFECTS[f.effects],
-                               max(f.minutes, 0.1), model=VIDEO_MODELS[f.video_model]))
+                               max(f.minutes, 0.1),
+                               model=None if f.video_model == 0 else VIDEO_MODELS[f.video_model]))
         imgui.same_line()
         imgui.text_disabled("(avatar folder, effects and minutes from above)")
     if imgui.collapsing_header("Drive the open avatar from a performance"):
@@ -151,7 +154,7 @@ def draw(ctx: PanelContext) -> None:
     imgui.separator()
     for job in reversed(jobs.jobs):
         imgui.push_id(job.id)
-        model = job.model or default_model(tracked=job.video is not None)  # a video job trains on its tracking
+        model = job.model or ("default" if job.video is not None else default_model(tracked=False))
         what = f"driven by {job.video.name}" if job.stage == "reenact" and job.video else f"{model} {job.effects}"
         imgui.text(f"#{job.id} {job.out.name}: {what} - {jobs.status(job)}"
                    + (" (resumed)" if job.resume else ""))

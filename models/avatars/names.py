@@ -6,4 +6,4 @@ from __future__ import annotations
 
 from typing import Literal
 
-ModelName = Literal["codynerf", "nerface", "primitives", "prior"]
+ModelName = Literal["codynerf", "nerface", "primitives", "prior", "whole"]

@@ -16,6 +16,7 @@ from models.avatars.nerface.avatar import NerfaceAvatar
 from models.avatars.primitives.avatar import PrimitivesAvatar
 from models.avatars.prior.avatar import PriorAvatar
 from models.avatars.quality import load_presets
+from models.avatars.whole.avatar import WholeHeadAvatar
 from models.device import device_of
 from models.head.sources import head_kind, load_head
 
@@ -24,6 +25,7 @@ AVATARS: dict[str, type[Avatar]] = {cls.name: cls for cls in (
     NerfaceAvatar,
     PrimitivesAvatar,
     PriorAvatar,
+    WholeHeadAvatar,
 )}
 DEFAULT_MODEL = "codynerf"
 VIDEO_MODEL = "primitives"
@@ -35,46 +37,55 @@ CoDyNeRF's 1.0-5.4 s (README, Real people)."""
 
 SHIPPED_PRIOR = Path(__file__).resolve().parents[2] / "resources" / "prior"
 """The universal prior that ships (`scripts/make_prior.sh` rebuilds it), for the head model it was trained on."""
-VIDEO_START = "scratch"
+VIDEO_START = "whole"
 """How `train` starts a tracked video's avatar when neither a model nor a prior is named: "scratch", VIDEO_MODEL
-from nothing, or "prior", personalising the universal prior of the capture's head model where there is one.
-Scratch, measured (docs/results.md, Beyond the captured views): on two real clips held out by view, 30 minutes
-from scratch gave 31.67 and 35.26 dB on the furthest turns where 30 minutes of personalising gave 29.47 and 33.66
-(3 minutes: 28.55 and 31.05); the prior's whole head (a turntable round a front-only capture: +5.1 to +8.6 dB
-behind and beside on a synthetic person with hair, after 3 minutes) does not survive 30 minutes of fine-tuning on
-a real video."""
+from nothing; "prior", personalising the universal prior of the capture's head model; "whole", both (a whole-head
+avatar, models/avatars/whole/: VIDEO_MODEL from scratch where the video saw the head, the prior personalised for
+3 of every 30 minutes where it did not), where there is a prior of its head model (else from scratch).
+Measured (docs/results.md, Beyond the captured views): on two real clips held out by view, 30 minutes from scratch
+gave 31.67 and 35.26 dB on the furthest turns where personalising the prior gave 28.55 and 31.05 (3 minutes) or
+29.47 and 33.66 (30 minutes: its whole head lost); only the prior has a head beyond the views (+5.1 to +8.6 dB
+behind and beside on a synthetic person with hair). The whole head renders the video's own views as the scratch
+avatar does, and the rest as the prior."""
 
 
-def starting_prior(capture_head: str | None, tracked: bool, model: str | None, from_scratch: bool,
-                   prior: Path | None) -> tuple[Path | None, str]:
-    """The prior `train` personalises (None: it trains `model` from nothing) and the line that says why. A prior is
-    personalised where one is asked for (`--model prior`, or `--prior FOLDER`: an error where it is not a prior of
-    the capture's head model; FOLDER, else SHIPPED_PRIOR) or, for a tracked video with neither a model nor a prior
-    named, where VIDEO_START says so and SHIPPED_PRIOR is of its head model."""
-    if from_scratch or model not in (None, PriorAvatar.name):
-        return None, "from scratch" + (" (--from-scratch)" if from_scratch else "")
-    asked = model == PriorAvatar.name or prior is not None
-    if not asked and (not tracked or VIDEO_START != "prior"):
-        return None, "from scratch"
+def training_start(capture_head: str | None, tracked: bool, model: str | None, from_scratch: bool,
+                   prior: Path | None) -> tuple[str, Path | None, str]:
+    """How `train` starts, the prior it personalises, and the line that says why: "scratch" (`model` from nothing,
+    no prior), "prior" (the prior personalised) or "whole" (both: WholeHeadAvatar). A prior is personalised where
+    one is asked for (`--model prior` or `--model whole`, or `--prior FOLDER` alone: personalised; an error where
+    it is not a prior of the capture's head model; FOLDER, else SHIPPED_PRIOR) or, for a tracked video with neither a
+    model nor a prior named, as VIDEO_START says where SHIPPED_PRIOR is of its head model."""
+    scratch = "from scratch" + (" (--from-scratch)" if from_scratch else "")
+    if from_scratch or model not in (None, PriorAvatar.name, WholeHeadAvatar.name):
+        return "scratch", None, scratch
+    asked = model is not None or prior is not None
+    way = model or (PriorAvatar.name if prior is not None else VIDEO_START if tracked else "scratch")
+    if way == "scratch":
+        return way, None, scratch
     folder = Path(prior) if prior is not None else SHIPPED_PRIOR
     kind = head_kind(capture_head)
     try:
         meta = read_meta(folder)
     except CheckpointError as e:
         if not asked:
-            return None, f"from scratch (no universal prior: {e})"
+            return "scratch", None, f"from scratch (no universal prior: {e})"
         raise
     prior_kind = head_kind(meta.get("head_model"))
     if meta.get("model") != PriorAvatar.name or prior_kind != kind:
         what = f"a {meta.get('model')} avatar" if meta.get("model") != PriorAvatar.name else \
             f"the universal prior of the {prior_kind} head model"
         if not asked:
-            return None, f"from scratch ({folder} is {what}; the capture is tracked with the {kind} head)"
+            return "scratch", None, f"from scratch ({folder} is {what}; the capture is tracked with the {kind} head)"
         raise CheckpointError(f"{folder}: is {what}, and the capture is tracked with the {kind} head model")
     people = len(meta.get("corpus", {}).get("identities", ())) or "its"
-    return folder, (f"from the universal prior {folder} ({people} people of the {kind} head): personalising it, "
-                    "so the sides and back the video never showed come from the heads it has seen "
-                    "(--from-scratch trains from nothing)")
+    source = f"the universal prior {folder} ({people} people of the {kind} head)"
+    if way == WholeHeadAvatar.name:
+        return way, folder, (f"as a whole head: {VIDEO_MODEL} from scratch where the video saw the head, and {source} "
+                             "personalised for the sides and back it never showed (--from-scratch: the first "
+                             "alone)")
+    return way, folder, (f"from {source}: personalising it, so the sides and back the video never showed come "
+                         "from the heads it has seen (--from-scratch trains from nothing)")
 
 
 def default_model(tracked: bool) -> str:

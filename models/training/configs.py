@@ -22,11 +22,11 @@ class TrainConfig:
     --resume the checkpoint's, and another set is an error)."""
     model: ModelName | None = None
     """The avatar model (models/avatars/registry.py): codynerf, the NerFACE baseline, primitives (volumetric
-    primitives on the guide mesh, decoded once a frame) or prior (the universal prior personalised); default: a
-    tracked video's avatar starts from the universal prior of its head model where there is one (else
-    primitives), a synthetic capture's is codynerf."""
+    primitives on the guide mesh, decoded once a frame), prior (the universal prior personalised) or whole (both:
+    primitives where the video saw the head, the prior beyond); default: a tracked video's avatar is a whole head
+    where there is a universal prior of its head model (else primitives), a synthetic capture's is codynerf."""
     from_scratch: bool = False
-    """Train a tracked video's avatar from nothing (primitives) instead of personalising the universal prior."""
+    """Train a tracked video's avatar from nothing alone (primitives), without the universal prior beyond its views."""
     prior: Path | None = None
     """The universal prior a video's avatar starts from (`prior-train`); default: the one that ships, where it is
     of the capture's head model."""

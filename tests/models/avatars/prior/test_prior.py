@@ -420,32 +420,36 @@ def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_pa
 
 
 def test_train_starts_from_the_prior_only_where_it_fits(tmp_path, monkeypatch):
-    """starting_prior: a prior asked for (`--model prior`, `--prior`) is personalised, and must be a prior of the
-    capture's head model; left to the default, a tracked video starts from the shipped prior where VIDEO_START says
-    so and the prior fits its head model; a synthetic capture, another head model, another model or --from-scratch
+    """training_start: a prior asked for (`--model prior`, `--model whole`, `--prior`) is personalised, and must be a
+    prior of the capture's head model; left to the default, a tracked video starts as VIDEO_START says where the
+    shipped prior fits its head model; a synthetic capture, another head model, another model or --from-scratch
     train from nothing; each with its reason."""
     from models.avatars import registry
     from models.avatars.checkpoint import CheckpointError
-    from models.avatars.registry import SHIPPED_PRIOR, starting_prior
+    from models.avatars.registry import SHIPPED_PRIOR, training_start
 
     if not (SHIPPED_PRIOR / "avatar.json").is_file():
         pytest.skip(f"no shipped prior at {SHIPPED_PRIOR}")
-    for start in ("prior", "scratch"):
+    assert registry.VIDEO_START == "whole"  # the default: a whole head (tests/models/avatars/test_whole.py)
+    scratch = ("scratch", None, "from scratch")
+    for start in ("prior", "scratch", "whole"):
         monkeypatch.setattr(registry, "VIDEO_START", start)
-        folder, why = starting_prior("builtin", True, None, False, None)
-        assert folder == (SHIPPED_PRIOR if start == "prior" else None), (start, why)
-        assert ("personalising" in why) == (start == "prior") and why.startswith("from")
-        assert starting_prior("builtin", False, None, False, None) == (None, "from scratch")
-        assert starting_prior("builtin", True, None, True, None) == (None, "from scratch (--from-scratch)")
-        assert starting_prior("builtin", True, "primitives", False, None) == (None, "from scratch")
-        folder, why = starting_prior("ict:/x/ict_head.npz", True, None, False, None)
-        assert folder is None and ("ict head" in why) == (start == "prior"), why
-        assert starting_prior("builtin", False, None, False, SHIPPED_PRIOR)[0] == SHIPPED_PRIOR  # named: used
-        assert starting_prior("builtin", True, "prior", False, None)[0] == SHIPPED_PRIOR
-        with pytest.raises(CheckpointError, match="tracked with the ict head model"):
-            starting_prior("ict:/x/ict_head.npz", True, "prior", False, None)
+        way, folder, why = training_start("builtin", True, None, False, None)
+        assert way == start and folder == (None if start == "scratch" else SHIPPED_PRIOR), (start, why)
+        assert ("personalising" in why) == (start == "prior") and ("whole head" in why) == (start == "whole")
+        assert training_start("builtin", False, None, False, None) == scratch
+        assert training_start("builtin", True, None, True, None) == ("scratch", None, "from scratch (--from-scratch)")
+        assert training_start("builtin", True, "primitives", False, None) == scratch
+        way, folder, why = training_start("ict:/x/ict_head.npz", True, None, False, None)
+        assert way == "scratch" and folder is None and ("ict head" in why) == (start != "scratch"), why
+        assert training_start("builtin", False, None, False, SHIPPED_PRIOR)[:2] == ("prior", SHIPPED_PRIOR)
+        assert training_start("builtin", True, "prior", False, None)[:2] == ("prior", SHIPPED_PRIOR)
+        assert training_start("builtin", False, "whole", False, None)[:2] == ("whole", SHIPPED_PRIOR)
+        for model in ("prior", "whole"):
+            with pytest.raises(CheckpointError, match="tracked with the ict head model"):
+                training_start("ict:/x/ict_head.npz", True, model, False, None)
         with pytest.raises(CheckpointError, match="nothing"):  # a prior asked for by name must be one
-            starting_prior("builtin", True, None, False, tmp_path / "nothing")
+            training_start("builtin", True, None, False, tmp_path / "nothing")
 
 
 def test_a_frontal_scans_back_of_the_head_takes_the_hair_colour(tmp_path, gl):

@@ -1,0 +1,317 @@
+"""A whole head from a video that saw one side of it: the avatar trained on the video (primitives from scratch,
+`inside`) where the video saw the head, and the universal prior personalised on the same video (`outside`) where
+it did not, blended ray by ray. `train --model whole` makes one (models/training/whole.py); `train` does for a
+tracked video.
+
+Why two: on real clips held out by view, the avatar trained from scratch is the sharper one where the video
+looked (31.7 and 35.3 dB against 28.6 and 31.1 for 3 minutes of personalising the prior), and the prior is the
+only one with a head where it did not (a turntable of the scratch avatar breaks into blocks and holes from about
+60 degrees; docs/results.md). Personalising the prior for longer sharpens it in view but loses the whole head.
+
+Which of the two a ray shows: the inside where the ray's camera stands within the cone of the capture's views (the
+inside's CaptureViews, the directions its decoder read: its own views are rendered exactly as the inside alone
+renders them), or where the point
+it meets faces a direction within that cone (the head taken as a sphere about its centre: the face, and what
+the video saw at a slant); the outside elsewhere; between, a weight that falls smoothly with the angle beyond
+the cone, both rendered and their buffers mixed by it. Rays whose weight is 0 or 1 are rendered by one model
+only, so a view inside the captured cone costs what the inside alone costs."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+
+from models.avatars.base import Avatar, RayOutput, TrainingBatch
+from models.avatars.mesh import MeshField
+from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesGeometry
+from models.avatars.prior.avatar import PriorAvatar
+from models.head.controls import Controls
+from models.head.model import HeadModel
+from render.camera import Camera
+from render.gl.raster import Rasterizer
+from render.rays import Raster, Rays
+
+VIEW_FADE_DEG = (0.0, 20.0)
+"""A ray whose view direction lies this far beyond the captured cone: all inside, to all outside (smoothstep)."""
+FACING_FADE_DEG = (10.0, 40.0)
+"""A ray meeting the head where it faces this far beyond the captured cone: all inside, to all outside. The
+inside is sharp on surfaces the video saw at up to about 60 degrees from straight on (the cone is the views' own,
+so its rim already saw them at a slant)."""
+EPS = 1e-3
+"""Weights within this of 0 or 1 render one model only."""
+
+
+def smooth_fall(x: torch.Tensor, lo: float, hi: float) -> torch.Tensor:
+    """1 up to lo, 0 from hi, smoothstep between (lo < hi).
+
+    >>> smooth_fall(torch.tensor([0.0, 1.0, 1.5, 2.0, 3.0]), 1.0, 2.0).tolist()
+    [1.0, 1.0, 0.5, 0.0, 0.0]
+    """
+    s = ((x - lo) / (hi - lo)).clamp(0.0, 1.0)
+    return 1.0 - s * s * (3.0 - 2.0 * s)
+
+
+def beyond_cone_deg(v: torch.Tensor, axis: torch.Tensor, cos_half: float) -> torch.Tensor:
+    """(N,) degrees by which unit directions (N,3) lie outside the cone (axis, cosine of its half-angle); 0 inside.
+
+    >>> v = torch.tensor([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    >>> beyond_cone_deg(v, torch.tensor([0.0, 0.0, 1.0]), math.cos(math.radians(30))).round().tolist()
+    [0.0, 60.0, 150.0]
+    """
+    angle = torch.rad2deg(torch.acos((v @ axis.to(v)).clamp(-1.0, 1.0)))
+    return (angle - math.degrees(math.acos(min(max(cos_half, -1.0), 1.0)))).clamp_min(0.0)
+
+
+def sphere_points(origins: torch.Tensor, directions: torch.Tensor, centre: torch.Tensor, radius: float
+                  ) -> torch.Tensor:
+    """(R,3) where each ray first meets the sphere (centre, radius), or, for a ray that passes it by, its point
+    nearest the centre (a ray through the hair beside a head meets the head's side there).
+
+    >>> o = torch.tensor([[0.0, 0.0, 5.0], [2.0, 0.0, 5.0]]); d = torch.tensor([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
+    >>> sphere_points(o, d, torch.zeros(3), 1.0).tolist()
+    [[0.0, 0.0, 1.0], [2.0, 0.0, 0.0]]
+    """
+    to_centre = centre - origins
+    b = (to_centre * directions).sum(-1)
+    c = to_centre.square().sum(-1) - radius * radius
+    disc = b * b - c
+    s = torch.where(disc >= 0, b - disc.clamp_min(0.0).sqrt(), b)
+    return origins + s[:, None] * directions
+
+
+@dataclass
+class WholeGeometry:
+    """A frame as each of the two sees it; the outside's made when a ray first needs it (a view within the captured
+    cone never does)."""
+
+    inside: PrimitivesGeometry
+    outside_of: Callable[[], PrimitivesGeometry]
+    centre: torch.Tensor = field(default_factory=lambda: torch.zeros(3))
+    """The head's middle (world): the posed mesh's points above its lowest fifth, averaged."""
+    radius: float = 0.1
+    """The head's median distance from its middle (metres)."""
+    device: torch.device | str | None = None
+    _outside: PrimitivesGeometry | None = None
+
+    @property
+    def posed(self) -> torch.Tensor:
+        return self.inside.posed
+
+    @property
+    def outside(self) -> PrimitivesGeometry:
+        if self._outside is None:
+            made = self.outside_of()
+            self._outside = made if self.device is None else made.to(self.device)
+        return self._outside
+
+    def to(self, device: torch.device | str) -> WholeGeometry:
+        return WholeGeometry(self.inside.to(device), self.outside_of, self.centre.to(device), self.radius, device,
+                             None if self._outside is None else self._outside.to(device))
+
+
+class WholeHeadAvatar(Avatar):
+    name: ClassVar[str] = "whole"
+    normals_from_surface: ClassVar[bool] = True
+    reads_raster: ClassVar[bool] = False
+    quality_knobs: ClassVar[tuple[str, ...]] = PrimitivesAvatar.quality_knobs
+    rays_per_step: ClassVar[int] = PrimitivesAvatar.rays_per_step
+
+    def __init__(self, inside: PrimitivesAvatar, outside: PriorAvatar):
+        if inside.head_model.name != outside.head_model.name:
+            raise ValueError(f"the inside is of the {inside.head_model.name} head model, the outside of the "
+                             f"{outside.head_model.name}")
+        super().__init__(inside.head_model, inside.n_frames, inside.background.cpu().numpy().copy())
+        self.inside = inside
+        self.outside = outside
+        with torch.no_grad():  # one room behind both: the inside's
+            outside.background.copy_(inside.background)
+
+    # ---- making and describing -------------------------------------------------------------------------
+    @classmethod
+    def for_capture(cls, head_model: HeadModel, n_frames: int, background: np.ndarray, effects: tuple[str, ...],
+                    lighting: dict | None, config: Any = None) -> WholeHeadAvatar:
+        raise ValueError("a whole-head avatar is two trained avatars: `train --model whole` trains both on a video")
+
+    @classmethod
+    def from_meta(cls, head_model: HeadModel, meta: dict) -> WholeHeadAvatar:
+        return cls(PrimitivesAvatar.from_meta(head_model, meta["inside"]),
+                   PriorAvatar.from_meta(head_model, meta["outside"]))
+
+    def meta(self) -> dict:
+        """Each part's own description (with its frames and background: what its from_meta reads) under `inside`
+        and `outside`; what a checkpoint's avatar.json has at its top besides (head model, frames, views) is the
+        inside's (the trainer's, or `compose`'s from the inside's folder)."""
+        part = lambda m: {**m.meta(), "frames": m.n_frames, "background": m.background.tolist()}
+        return {"model": self.name, "effects": list(self.effects), "inside": part(self.inside),
+                "outside": part(self.outside),
+                "blend": {"view_fade_deg": list(VIEW_FADE_DEG), "facing_fade_deg": list(FACING_FADE_DEG)}}
+
+    @classmethod
+    def buffer_names(cls, meta: dict) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """The inside's normals (the rendered surface's, normals_from_surface: of the mixed depth, whatever either
+        part has), and what else both parts make."""
+        inside = PrimitivesAvatar.buffer_names(meta["inside"])
+        outside = PriorAvatar.buffer_names(meta["outside"])
+        return (tuple(b for b in inside[0] if b == "normals" or b in outside[0]),
+                tuple(b for b in inside[1] if b in outside[1]))
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        return self.inside.effects
+
+    @property
+    def plate(self):
+        """The capture's room (the inside's): behind both parts."""
+        return self.inside.plate
+
+    @property
+    def views(self):
+        return self.inside.views
+
+    @property
+    def code_keys(self):
+        """The inside's per-frame codes' keys (training goes on in the inside)."""
+        return self.inside.code_keys
+
+    def describe_rendering(self) -> str:
+        return (f"whole head: inside the captured views {self.inside.describe_rendering()}; beyond them the "
+                f"universal prior personalised")
+
+    def describe_display(self) -> str:
+        return self.inside.describe_display()
+
+    def layout(self) -> dict[str, tuple[int, float | str]]:
+        return self.inside.layout()
+
+    @property
+    def chunk_rays(self) -> int:
+        return self.inside.chunk_rays
+
+    @property
+    def interactive_chunk_rays(self) -> int:
+        return self.inside.interactive_chunk_rays
+
+    # ---- per frame -------------------------------------------------------------------------------------
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> WholeGeometry:
+        inside = self.inside.frame_geometry(controls, rasterizer)
+        posed = inside.posed
+        # The head's middle: the mesh above its lowest fifth (a head model's neck and shoulders pull the box's
+        # middle down towards the chin).
+        low, high = posed[:, 1].min(), posed[:, 1].max()
+        head = posed[posed[:, 1] > low + 0.2 * (high - low)]
+        centre = head.mean(0)
+        radius = float((head - centre).norm(dim=-1).median())
+        return WholeGeometry(inside, lambda: self.outside.frame_geometry(controls, rasterizer), centre, radius)
+
+    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+        return self.inside.image_pixels(camera, raster)
+
+    def training_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+        return self.inside.training_pixels(camera, raster)
+
+    def note_views(self, frames) -> None:
+        self.inside.note_views(frames)
+
+    def fit_to_tracked_video(self, corrections: bool | None = None) -> None:
+        self.inside.fit_to_tracked_video(corrections)
+
+    def parameter_groups(self) -> list[dict]:
+        """Training goes on in the inside (`train --resume`): the outside stays as personalised."""
+        return self.inside.parameter_groups()
+
+    def mesh_field(self, controls: Controls, rasterizer: Rasterizer | None) -> MeshField:
+        return self.inside.mesh_field(controls, rasterizer)
+
+    def before_save(self, geometry: WholeGeometry) -> None:
+        self.inside.before_save(geometry.inside)
+
+    # ---- rays ------------------------------------------------------------------------------------------
+    def inside_weight(self, rays: Rays, geometry: WholeGeometry) -> torch.Tensor:
+        """(R,) how much of each ray the inside renders (module docstring): 1 where the ray's camera stands within
+        the captured cone (seen from the head's middle, as the inside's decoder reads its view), or where the ray
+        meets the head where it faces into it, falling to 0 beyond (VIEW_FADE_DEG,
+        FACING_FADE_DEG); 1 everywhere for an inside that kept no cone (a capture from all round)."""
+        views = self.inside.views
+        if views.axis is None:
+            return rays.origins.new_ones(len(rays.origins))
+        R = geometry.inside.rotation.to(rays.directions)  # head -> world: a world direction d is d @ R in the head's
+        axis, cos_half = views.axis.to(rays.directions), float(views.cos)
+        towards = rays.origins - geometry.inside.translation.to(rays.origins)  # as the decoder reads it (view_of)
+        towards = towards / towards.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+        view = beyond_cone_deg(towards @ R, axis, cos_half)
+        centre = geometry.centre.to(rays.origins)
+        points = sphere_points(rays.origins, rays.directions, centre, geometry.radius)
+        facing = points - centre
+        facing = facing / facing.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+        side = beyond_cone_deg(facing @ R, axis, cos_half)
+        return torch.maximum(smooth_fall(view, *VIEW_FADE_DEG), smooth_fall(side, *FACING_FADE_DEG))
+
+    def render_rays(self, rays: Rays, geometry: WholeGeometry, frame: int | None,
+                    generator: torch.Generator | None = None, training: bool = False, options: Any = None
+                    ) -> RayOutput:
+        if training:  # training goes on in the inside (parameter_groups)
+            return self.inside.render_rays(rays, geometry.inside, frame, generator, training=True, options=options)
+        w = self.inside_weight(rays, geometry)
+        parts = []
+        for outside, keep, code in ((False, w > EPS, frame), (True, w < 1.0 - EPS, None)):
+            idx = torch.nonzero(keep).squeeze(1)
+            if len(idx) == 0:  # the outside's geometry is not even made
+                parts.append((idx, None))
+                continue
+            model, geo = self.part(outside, geometry)
+            parts.append((idx, model.render_rays(rays[idx], geo, code, options=options)))
+        return RayOutput(self.mixed(w, parts, ("rgb", "opacity", "depth"), lambda out: out.buffers),
+                         (w, parts))
+
+    def part(self, outside: bool, geometry: WholeGeometry) -> tuple[PrimitivesAvatar, PrimitivesGeometry]:
+        """One part and its geometry of the frame."""
+        return (self.outside, geometry.outside) if outside else (self.inside, geometry.inside)
+
+    @staticmethod
+    def mixed(w: torch.Tensor, parts, names, buffers_of) -> dict[str, torch.Tensor]:
+        """Each named buffer of the two parts' rays, mixed by the inside's weight w (R,): a ray one part alone
+        rendered takes its value; a depth that one part leaves infinite (it drew nothing there) takes the other's."""
+        out = {}
+        for name in names:
+            full = [None, None]
+            for k, (idx, part) in enumerate(parts):
+                if part is None:
+                    continue
+                value = buffers_of(part)[name]
+                buf = value.new_zeros((len(w), *value.shape[1:]))
+                buf[idx] = value
+                full[k] = buf
+            if full[1] is None:
+                out[name] = full[0]
+                continue
+            if full[0] is None:
+                out[name] = full[1]
+                continue
+            a, b = full
+            ww = w.reshape(-1, *([1] * (a.dim() - 1))).to(a)
+            if name == "depth":
+                a = torch.where(torch.isfinite(a), a, b)
+                b = torch.where(torch.isfinite(b), b, a)
+            out[name] = ww * a + (1.0 - ww) * b
+        return out
+
+    def inspect(self, out: RayOutput, geometry: WholeGeometry, names: tuple[str, ...]) -> dict[str, torch.Tensor]:
+        if not names:
+            return {}
+        w, parts = out.internals
+        found = []
+        for outside, (idx, part) in enumerate(parts):
+            if part is None:
+                found.append((idx, None))
+                continue
+            model, geo = self.part(bool(outside), geometry)
+            found.append((idx, model.inspect(part, geo, names)))
+        return self.mixed(w, found, names, lambda made: made)
+
+    def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
+        return self.inside.loss_terms(replace(batch, geometry=batch.geometry.inside))

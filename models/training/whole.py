@@ -1,0 +1,40 @@
+"""A whole-head avatar (models/avatars/whole/avatar.py) from its two trained parts: the avatar trained from scratch
+on a video (`inside`) and the universal prior personalised on the same video (`outside`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from models.avatars.checkpoint import CheckpointError, save_checkpoint
+from models.avatars.primitives.avatar import PrimitivesAvatar
+from models.avatars.prior.avatar import PriorAvatar
+from models.avatars.registry import load_avatar
+from models.avatars.whole.avatar import WholeHeadAvatar
+from models.head.sources import head_kind
+
+PART_FIELDS = ("model", "effects", "light_dir", "pose_corrections", "expression_corrections", "format", "step",
+               "files", PrimitivesAvatar.config_key)
+"""A part's own fields of its avatar.json (the whole's describes them under `inside` and `outside`)."""
+
+
+def compose(inside_folder: Path, outside_folder: Path, out: Path) -> Path:
+    """Write the whole-head avatar of two avatar folders trained on the same capture into `out` (its avatar.json's
+    top is the inside's: head model, frames, views); CheckpointError naming the folder that does not fit."""
+    inside, inside_meta = load_avatar(inside_folder, model=PrimitivesAvatar.name)
+    outside, outside_meta = load_avatar(outside_folder, model=PriorAvatar.name)
+    if head_kind(inside_meta["head_model"]) != head_kind(outside_meta["head_model"]):
+        raise CheckpointError(f"{outside_folder}: of the {head_kind(outside_meta['head_model'])} head model, "
+                              f"{inside_folder} of the {head_kind(inside_meta['head_model'])}")
+    datasets = [m.get("provenance", {}).get("dataset_resolved") for m in (inside_meta, outside_meta)]
+    if None not in datasets and datasets[0] != datasets[1]:
+        raise CheckpointError(f"{outside_folder}: trained on {datasets[1]}, {inside_folder} on {datasets[0]} (the "
+                              "two parts of a whole head are of one capture)")
+    whole = WholeHeadAvatar(inside, outside)
+    top = {k: v for k, v in inside_meta.items() if k not in PART_FIELDS}
+    made = [m.get("provenance", {}) for m in (inside_meta, outside_meta)]
+    provenance = {"dataset": made[0].get("dataset"), "dataset_resolved": datasets[0],
+                  "steps": sum(int(p.get("steps", 0)) for p in made),
+                  "seconds": round(sum(float(p.get("seconds", 0.0)) for p in made), 1),
+                  "inside": made[0], "outside": made[1]}
+    meta = {**top, **whole.meta(), "provenance": provenance}
+    return save_checkpoint(out, meta, whole.state_dict(), int(inside_meta["step"]))

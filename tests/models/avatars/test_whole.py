@@ -1,0 +1,155 @@
+"""The whole-head avatar (models/avatars/whole/avatar.py): which part each ray shows, the mix between, the captured
+views rendered exactly as the inside renders them, and a whole head made, saved, loaded and resumed by `train`."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig
+from models.avatars.prior.avatar import PriorAvatar
+from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image
+from models.avatars.whole.avatar import FACING_FADE_DEG, VIEW_FADE_DEG, WholeHeadAvatar, beyond_cone_deg
+from models.head.controls import Controls
+from models.head.sources import load_builtin
+from render.camera import orbit_camera
+from tests.models.avatars.prior.test_prior import SMALL
+
+CONE_DEG = 20.0
+
+
+@pytest.fixture(scope="module")
+def whole() -> WholeHeadAvatar:
+    """Two untrained parts of the built-in head (their own seeds: they render differently), the inside's views a
+    cone of 20 degrees about the head's front."""
+    head = load_builtin()
+    torch.manual_seed(1)
+    inside = PrimitivesAvatar.for_capture(head, 4, np.full(3, 0.2, np.float32), (), None,
+                                          PrimitivesConfig(grid=8, voxels=2, width=16))
+    torch.manual_seed(2)
+    outside = PriorAvatar.for_capture(head, 1, np.full(3, 0.7, np.float32), (), None, SMALL)
+    inside.views.keep("axis", torch.tensor([0.0, 0.0, 1.0]))
+    inside.views.keep("cos", torch.tensor(math.cos(math.radians(CONE_DEG))))
+    return WholeHeadAvatar(inside, outside).eval()
+
+
+def rays_and_weights(whole: WholeHeadAvatar, yaw_deg: float, size: int = 32):
+    cam = orbit_camera(yaw_deg, 0.0, 0.6, width_px=size, height_px=size)
+    geo = whole.frame_geometry(Controls(), None)
+    rays, _ = pixel_rays_of(whole, geo, cam, None)
+    with torch.inference_mode():
+        return cam, geo, rays, whole.inside_weight(rays, geo)
+
+
+def test_the_captured_views_render_as_the_inside_alone(whole):
+    """A camera inside the cone: every ray the inside's (weight exactly 1), the image bit for bit the inside's."""
+    cam, _, _, w = rays_and_weights(whole, 15.0)
+    assert torch.all(w == 1.0)
+    a = render_image(whole, cam, Controls(), RenderOptions(buffers=()))
+    b = render_image(whole.inside, cam, Controls(), RenderOptions(buffers=()))
+    for name in ("rgb", "opacity", "depth"):
+        np.testing.assert_array_equal(a[name], b[name])
+
+
+def test_behind_the_head_the_outside_and_between_a_mix(whole):
+    """From behind, the rays that meet the head where it faces away (over 40 degrees beyond the cone) are the
+    outside's alone; from the side, rays between are both parts' buffers mixed by the weight, worked out here
+    from the parts' own renders of the same rays."""
+    _, geo, rays, w = rays_and_weights(whole, 180.0)
+    head_rays = (rays.origins + rays.directions * 0.6 - geo.centre).norm(dim=-1) < geo.radius  # through its middle
+    assert torch.all(w[head_rays] == 0.0)
+
+    _, geo, rays, w = rays_and_weights(whole, 70.0)
+    mixed = (w > 0.01) & (w < 0.99)
+    assert mixed.sum() > 20 and (w == 1.0).any() and (w == 0.0).any()
+    with torch.inference_mode():
+        out = whole.render_rays(rays, geo, None)
+        a = whole.inside.render_rays(rays, geo.inside, None).buffers
+        b = whole.outside.render_rays(rays, geo.outside, None).buffers
+    ww = w[:, None]  # the march's waves sum a subset of rays in another order: within 1e-3, where w moves it by 0.01-1
+    torch.testing.assert_close(out.buffers["rgb"], ww * a["rgb"] + (1 - ww) * b["rgb"], atol=1e-3, rtol=0)
+    torch.testing.assert_close(out.buffers["opacity"], w * a["opacity"] + (1 - w) * b["opacity"], atol=1e-3, rtol=0)
+    assert torch.isfinite(out.buffers["rgb"]).all()
+
+
+def test_the_weight_falls_with_the_angle_beyond_the_cone(whole):
+    """The view's part of the weight, by hand: a camera 10 degrees beyond the cone is halfway through VIEW_FADE_DEG
+    (smoothstep: 0.5); 30 degrees beyond, none of it is left (the facing part alone)."""
+    assert VIEW_FADE_DEG == (0.0, 20.0) and FACING_FADE_DEG == (10.0, 40.0)
+    axis, cos = whole.views.axis, float(whole.views.cos)
+    for yaw, expected in ((CONE_DEG + 10.0, 0.5), (CONE_DEG + 30.0, 0.0)):
+        _, geo, rays, w = rays_and_weights(whole, yaw)
+        towards = rays.origins[0] - geo.inside.translation
+        beyond = beyond_cone_deg((towards / towards.norm())[None] @ geo.inside.rotation, axis, cos)
+        assert float(beyond) == pytest.approx(yaw - CONE_DEG, abs=0.5)
+        assert float(w.min()) == pytest.approx(expected, abs=0.06)  # rays that meet the head's far side
+
+
+def test_an_inside_that_saw_the_head_all_round_is_everywhere(whole):
+    """No cone (a capture from all round): the inside renders every ray."""
+    cone = whole.inside.views.axis, whole.inside.views.cos
+    whole.inside.views.keep("axis", None)
+    try:
+        assert torch.all(rays_and_weights(whole, 180.0)[3] == 1.0)
+    finally:
+        whole.inside.views.keep("axis", cone[0])
+
+
+def test_far_and_extreme_rays_stay_finite(whole):
+    """Rays that graze the head's sphere, pass far from it, or start inside it: finite weights in [0, 1]."""
+    geo = whole.frame_geometry(Controls(), None)
+    from render.rays import Rays
+
+    c = geo.centre
+    origins = torch.stack([c + torch.tensor([0.0, 0.0, 5.0]), c + torch.tensor([geo.radius, 0.0, 1.0]),
+                           c + torch.tensor([100.0, 0.0, 0.0]), c.clone()])
+    directions = torch.tensor([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+    rays = Rays(origins, directions, torch.full((4,), float("inf")))
+    w = whole.inside_weight(rays, geo)
+    assert torch.isfinite(w).all() and (w >= 0).all() and (w <= 1).all()
+
+
+def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, face_video, landmarker, capsys):
+    """`train --model whole` on a tracked video: the inside from scratch, then the prior personalised, each in
+    parts/, put together as one avatar whose captured views are the inside's; the studio's progress as one run;
+    stopped before it was put together, `--resume` finishes the outside with the prior it began with."""
+    from app.cli import main
+    from models.avatars.checkpoint import save_checkpoint
+    from models.avatars.registry import load_avatar
+    from models.capture.dataset import load_split
+    from models.capture.frames import frame_camera
+    scan, prior, out = tmp_path / "scan", tmp_path / "prior", tmp_path / "whole"
+    assert main(["track", str(face_video), "--out", str(scan), "--size", "64", "--seconds", "1",
+                 "--landmarker", str(landmarker), "--no-overlay"]) == 0
+    torch.manual_seed(0)
+    small = PriorAvatar.for_capture(load_builtin(), 1, np.full(3, 0.5, np.float32), (), None, SMALL)
+    save_checkpoint(prior, {**small.meta(), "head_model": "builtin", "frames": 1, "background": [0.5] * 3},
+                    small.state_dict(), 1)
+    capsys.readouterr()
+    assert main(["train", str(scan), "--model", "whole", "--prior", str(prior), "--out", str(out), "--steps", "4"]) == 0
+    said = capsys.readouterr().out
+    assert "as a whole head" in said and "a whole head, 4 steps from scratch and 1 personalising" in said
+    avatar, meta = load_avatar(out)
+    assert isinstance(avatar, WholeHeadAvatar) and meta["model"] == "whole" and meta["provenance"]["steps"] == 5
+    assert float(avatar.outside.neutral_texture.abs().sum()) > 0  # personalised on the scan
+    records = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
+    assert records[0]["stage"] == "inside" and records[-1]["stage"] == "outside" and records[-1]["step"] == 5
+    assert all(b["elapsed_s"] >= a["elapsed_s"] for a, b in itertools.pairwise(records))
+    split = load_split(scan, "train")  # a training frame's view is the inside's, as its own folder renders it
+    camera, controls = frame_camera(split, split.frames[0]), split.frames[0].controls
+    inside, _ = load_avatar(out / "parts" / "inside")
+    np.testing.assert_array_equal(render_image(avatar, camera, controls, RenderOptions(buffers=()))["rgb"],
+                                  render_image(inside, camera, controls, RenderOptions(buffers=()))["rgb"])
+
+    for f in [out / "avatar.json", *out.glob("weights-*.safetensors")]:  # as if stopped in the outside's turn
+        f.unlink()
+    for f in (out / "parts" / "outside").iterdir():
+        f.unlink()
+    assert main(["train", str(scan), "--out", str(out), "--steps", "4", "--resume"]) == 0
+    assert f"the universal prior {prior.resolve()} personalised" in capsys.readouterr().out
+    assert json.loads((out / "avatar.json").read_text())["model"] == "whole"
