@@ -21,7 +21,7 @@ from app.progress import Progress, progress_callback
 from app.turntable import TurntableConfig, turntable_frames
 from models.avatars.checkpoint import CheckpointError
 from models.avatars.effects import parse_effects
-from models.avatars.registry import load_avatar, training_start
+from models.avatars.registry import load_avatar, load_prior, training_start
 from models.avatars.rendering import RenderOptions, preset_options, render_image
 from models.avatars.whole.avatar import WholeHeadAvatar
 from models.capture.dataset import check_images, is_capture, load_split
@@ -30,7 +30,6 @@ from models.capture.synthetic import read_png16
 from models.device import device_of
 from models.files import FolderBusy, WriterLock, atomic_write_bytes, foreign_files
 from models.head.controls import Controls, load_controls
-from models.head.sources import head_kind
 from models.training.configs import PERSONALIZE_LR
 from models.training.metrics import (
     face_mse,
@@ -466,12 +465,10 @@ def personalizing_trainer(tcfg: TrainConfig, prior: Path, gl: GLContext, tune: s
 
     split = load_split(tcfg.dataset, "train")
     check_images(split)
-    avatar, meta = load_avatar(prior, tcfg.device)
-    if not avatar.personalizes:
-        raise UserInputError(f"{prior}: a {avatar.name} avatar, not a universal prior (`prior-train` makes one)")
-    if head_kind(split.head_model) != head_kind(meta["head_model"]):
-        raise UserInputError(f"{tcfg.dataset}: its head model is {split.head_model!r}, the prior's "
-                             f"{meta['head_model']!r}")
+    try:
+        avatar, _ = load_prior(prior, split.head_model, tcfg.device)
+    except CheckpointError as e:
+        raise UserInputError(str(e)) from None
     t0 = time.perf_counter()
     plate = background_plate(split)  # a tracked video's room: composited behind the person, as `train` does
     with torch.no_grad():

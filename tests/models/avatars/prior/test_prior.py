@@ -414,16 +414,25 @@ def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_pa
                  "--steps", "1"]) == 0
     assert "from scratch (--from-scratch)" in capsys.readouterr().out
     assert json.loads((tmp_path / "b" / "avatar.json").read_text())["model"] == "primitives"
+    # Of another head model (the demo's, ICT's identity): the same weights on its primitives (load_prior)
     assert main(["train", str(other), "--model", "prior", "--prior", str(prior), "--out", str(tmp_path / "c"),
-                 "--steps", "1"]) == 2
-    assert "tracked with the demo head model" in capsys.readouterr().err and not (tmp_path / "c").exists()
+                 "--steps", "1"]) == 0
+    assert "on the demo head the capture is tracked with" in capsys.readouterr().out
+    across, meta = load_avatar(tmp_path / "c")
+    prior_avatar, _ = load_avatar(prior)
+    assert meta["head_model"] == "demo" and across.head_model.name != prior_avatar.head_model.name
+    layout_of = PriorAvatar(across.head_model, across.cfg, 1, np.zeros(3, np.float32)).layout_triangles
+    assert torch.equal(across.layout_triangles, layout_of)  # where the demo head's primitives sit, not the prior's
+    ref, got = prior_avatar.decoder.state_dict(), across.decoder.state_dict()  # the prior's weights, one step on
+    step = max(float((got[k] - v).abs().max()) for k, v in ref.items() if v.is_floating_point())
+    fresh = PriorAvatar(across.head_model, across.cfg, 1, np.zeros(3, np.float32)).decoder.state_dict()
+    assert step <= 2e-3 < 0.05 < max(float((fresh[k] - v).abs().max()) for k, v in ref.items() if v.is_floating_point())
 
 
 def test_train_starts_from_the_prior_only_where_it_fits(tmp_path, monkeypatch):
     """training_start: a prior asked for (`--model prior`, `--model whole`, `--prior`) is personalised, and must be a
-    prior of the capture's head model; left to the default, a tracked video starts as VIDEO_START says where the
-    shipped prior fits its head model; a synthetic capture, another head model, another model or --from-scratch
-    train from nothing; each with its reason."""
+    universal prior (of any head model: load_prior); left to the default, a tracked video starts as VIDEO_START
+    says; a synthetic capture, another model or --from-scratch train from nothing; each with its reason."""
     from models.avatars import registry
     from models.avatars.checkpoint import CheckpointError
     from models.avatars.registry import SHIPPED_PRIOR, training_start
@@ -440,14 +449,14 @@ def test_train_starts_from_the_prior_only_where_it_fits(tmp_path, monkeypatch):
         assert training_start("builtin", False, None, False, None) == scratch
         assert training_start("builtin", True, None, True, None) == ("scratch", None, "from scratch (--from-scratch)")
         assert training_start("builtin", True, "primitives", False, None) == scratch
-        way, folder, why = training_start("ict:/x/ict_head.npz", True, None, False, None)
-        assert way == "scratch" and folder is None and ("ict head" in why) == (start != "scratch"), why
+        way, folder, why = training_start("ict:/x/ict_head.npz", True, None, False, None)  # the built-in head's prior
+        assert way == start and ("on the ict head" in why) == (start != "scratch"), why
         assert training_start("builtin", False, None, False, SHIPPED_PRIOR)[:2] == ("prior", SHIPPED_PRIOR)
         assert training_start("builtin", True, "prior", False, None)[:2] == ("prior", SHIPPED_PRIOR)
         assert training_start("builtin", False, "whole", False, None)[:2] == ("whole", SHIPPED_PRIOR)
         for model in ("prior", "whole"):
-            with pytest.raises(CheckpointError, match="tracked with the ict head model"):
-                training_start("ict:/x/ict_head.npz", True, model, False, None)
+            with pytest.raises(CheckpointError, match="a primitives avatar, not a universal prior"):
+                training_start("builtin", True, model, False, DEMO)
         with pytest.raises(CheckpointError, match="nothing"):  # a prior asked for by name must be one
             training_start("builtin", True, None, False, tmp_path / "nothing")
 
