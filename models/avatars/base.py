@@ -85,6 +85,9 @@ class Avatar(nn.Module, ABC):
     """The frozen dataclass for_capture's `config` is (`train --model-options` sets its fields); None: none."""
     personalizes: ClassVar[bool] = False
     """Whether `personalize` makes one person's avatar of this one from a scan of them (a universal prior does)."""
+    all_round: ClassVar[bool] = False
+    """Whether it has a head to show from every side whatever its capture saw (a universal prior's, a whole head's):
+    its views are recorded as the full turn, so turntables and the studio's orbit go all the way round."""
     normals_from_surface: ClassVar[bool] = False
     """The normals buffer is the rendered surface's (render/normals.py: the guide mesh's normals where the render's
     depth lies on the mesh, the depth's own elsewhere), made by render_image, not by render_rays: for a model with

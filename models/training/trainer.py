@@ -142,8 +142,8 @@ class Trainer:
         self.validation = validation
         template = avatar.head_model.template
         self.view_range = view_range(frames.split, 0.5 * (template.min(0) + template.max(0)))
-        if avatar.personalizes:  # a person's prior: it saw heads from every side (its corpus's cameras go round them),
-            self.view_range["yaw_deg"] = [-180.0, 180.0]  # so turntables and the studio's orbit go all the way round
+        if avatar.all_round:  # a person's prior, or a whole head: its prior saw heads from every side (its corpus's
+            self.view_range["yaw_deg"] = [-180.0, 180.0]  # cameras go round them): turntables and orbits go round
         self.rest_translation = np.mean([f.controls.translation for f in frames.split.frames], 0) \
             if frames.split.frames else np.zeros(3)
         self.rays_per_step = cfg.rays_per_step or avatar.rays_per_step

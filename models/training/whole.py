@@ -36,5 +36,8 @@ def compose(inside_folder: Path, outside_folder: Path, out: Path) -> Path:
                   "steps": sum(int(p.get("steps", 0)) for p in made),
                   "seconds": round(sum(float(p.get("seconds", 0.0)) for p in made), 1),
                   "inside": made[0], "outside": made[1]}
-    meta = {**top, **whole.meta(), "provenance": provenance}
+    views = top.get("view_range")
+    if isinstance(views, dict):  # the outside has the rest of the head: turntables and the studio's orbit go round
+        top["view_range"] = {**views, "yaw_deg": [-180.0, 180.0]}
+    meta = {**top, **whole.meta(), "provenance": provenance, "captured_view_range": views}
     return save_checkpoint(out, meta, whole.state_dict(), int(inside_meta["step"]))

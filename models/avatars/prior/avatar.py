@@ -66,6 +66,7 @@ class PriorAvatar(PrimitivesAvatar):
     config_class: ClassVar[type] = PriorConfig
     config_key: ClassVar[str] = "prior"
     personalizes: ClassVar[bool] = True
+    all_round: ClassVar[bool] = True
 
     def __init__(self, head_model: HeadModel, cfg: PriorConfig, n_frames: int, background: np.ndarray,
                  effects: tuple[str, ...] = (), light_dir: tuple[float, float, float] | None = None):

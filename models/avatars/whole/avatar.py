@@ -116,6 +116,7 @@ class WholeGeometry:
 
 class WholeHeadAvatar(Avatar):
     name: ClassVar[str] = "whole"
+    all_round: ClassVar[bool] = True
     normals_from_surface: ClassVar[bool] = True
     reads_raster: ClassVar[bool] = False
     quality_knobs: ClassVar[tuple[str, ...]] = PrimitivesAvatar.quality_knobs

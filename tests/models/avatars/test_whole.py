@@ -137,6 +137,9 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, face_video, la
     avatar, meta = load_avatar(out)
     assert isinstance(avatar, WholeHeadAvatar) and meta["model"] == "whole" and meta["provenance"]["steps"] == 5
     assert float(avatar.outside.neutral_texture.abs().sum()) > 0  # personalised on the scan
+    assert meta["view_range"]["yaw_deg"] == [-180.0, 180.0] and avatar.card.turntable_sweep_deg() == 0.0  # round
+    assert meta["captured_view_range"] == json.loads((out / "parts" / "inside" / "avatar.json").read_text())[
+        "view_range"]
     records = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
     assert records[0]["stage"] == "inside" and records[-1]["stage"] == "outside" and records[-1]["step"] == 5
     assert all(b["elapsed_s"] >= a["elapsed_s"] for a, b in itertools.pairwise(records))
