@@ -9,7 +9,10 @@ side and behind.
     OMP_NUM_THREADS=1 avatar-studio train $S/front$P --model primitives --minutes 30 --out $S/scratch$P
     OMP_NUM_THREADS=1 avatar-studio personalize $S/front$P --minutes 3 --out $S/prior$P
     .venv/bin/python -m benchmarks.bench_beyond_views --round $S/round$P scratch=$S/scratch$P prior=$S/prior$P \\
-        --out benchmarks/results/beyond_views_$P.json
+        --whole $S/whole$P --out benchmarks/results/beyond_views_$P.json
+
+`--whole FOLDER` puts the `scratch` and `prior` avatars together as a whole head (models/training/whole.py: what
+`train` makes of a tracked video, its two parts trained 27 and 3 minutes) and scores it as `whole`.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from models.capture.dataset import load_split
 from models.capture.frames import frame_camera, load_rgb
 from models.head.lbs import rotation_matrix_from_axis_angle
 from models.training.metrics import psnr
+from models.training.whole import compose
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
@@ -64,7 +68,15 @@ def main() -> None:
     ap.add_argument("avatars", nargs="+", help="NAME=AVATAR_FOLDER")
     ap.add_argument("--round", type=Path, required=True, help="the capture all round (its test split is scored)")
     ap.add_argument("--out", type=Path, required=True, help="results JSON")
+    ap.add_argument("--whole", type=Path, help="put the scratch= and prior= avatars together here as a whole head, and "
+                                               "score it as whole")
     args = ap.parse_args()
+    named = dict(item.split("=", 1) for item in args.avatars)
+    if args.whole is not None:
+        if not {"scratch", "prior"} <= named.keys():
+            raise SystemExit("--whole needs scratch=FOLDER and prior=FOLDER")
+        compose(Path(named["scratch"]), Path(named["prior"]), args.whole)
+        args.avatars.append(f"whole={args.whole}")
     raster = Rasterizer(GLContext.headless())
     round_split = load_split(args.round, "test")
     results = {"round": str(args.round), "angles_deg": list(ANGLES_DEG), "avatars": {}}
