@@ -1,8 +1,8 @@
-"""How far each frame of a capture's splits stands beyond the cone of views an avatar's decoder was trained with
+"""How far each frame of a capture's splits stands beyond the cone of views a whole head's inside was trained with
 (models/avatars/components/views.py), in degrees: 0 within it. A whole head (models/avatars/whole/) renders a
 frame within the cone exactly as its inside alone.
 
-    .venv/bin/python scripts/views_beyond.py AVATAR CAPTURE"""
+    .venv/bin/python scripts/views_beyond.py WHOLE_HEAD_AVATAR CAPTURE"""
 
 from __future__ import annotations
 
@@ -18,8 +18,7 @@ from models.capture.frames import frame_camera
 
 
 def main() -> None:
-    avatar, _ = load_avatar(sys.argv[1])
-    inside = getattr(avatar, "inside", avatar)
+    inside = load_avatar(sys.argv[1], model="whole")[0].inside
     if inside.views.axis is None:
         raise SystemExit(f"{sys.argv[1]}: its views have no cone (a capture from all round)")
     for split in ("train", "val", "test"):

@@ -479,3 +479,29 @@ def test_a_frontal_scans_back_of_the_head_takes_the_hair_colour(tmp_path, gl):
     back = np.concatenate([lum[middle, :2], lum[middle, -2:]], 1).mean()
     face = lum[middle, S // 2 - 1:S // 2 + 1].mean()
     assert face > 0.3 and back < 0.3 * face, (back, face)
+
+
+def test_the_prior_sits_on_a_flame_head_as_on_its_own(tmp_path):
+    """load_prior on a head model of another kind: a FLAME-format file made from the built-in head (the same mesh and
+    bases) gets the shipped prior's weights with its primitives placed on the FLAME head's mesh, and renders what the
+    prior renders on the built-in head (an independent reference: the same geometry by another loader)."""
+    from models.avatars.registry import SHIPPED_PRIOR, load_avatar, load_prior
+    from models.head.flame import load_flame
+    from render.camera import orbit_camera
+    from tests.models.head.flame_files import write_flame_from_head
+
+    if not (SHIPPED_PRIOR / "avatar.json").is_file():
+        pytest.skip(f"no shipped prior at {SHIPPED_PRIOR}")
+    path = write_flame_from_head(tmp_path / "flame", load_builtin())
+    spec = f"flame:{path}"
+    on_flame, meta = load_prior(SHIPPED_PRIOR, spec)
+    own, _ = load_avatar(SHIPPED_PRIOR)
+    assert meta["head_model"] == spec and on_flame.head_model.name != own.head_model.name
+    assert on_flame.head_model.name == load_flame(path).name
+    assert torch.equal(on_flame.layout_triangles, own.layout_triangles)  # the same mesh: the same places
+    controls = Controls(expression=np.eye(own.head_model.num_expression, dtype=np.float32)[0] * 0.8)
+    cam = orbit_camera(40.0, 5.0, 0.6, width_px=48, height_px=48)
+    a = render_image(on_flame, cam, controls)["rgb"]
+    b = render_image(own, cam, controls)["rgb"]
+    assert float(np.abs(b - b.mean((0, 1))).mean()) > 0.02  # a head, not a blank
+    np.testing.assert_allclose(a, b, atol=2e-3)
