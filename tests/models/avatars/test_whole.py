@@ -80,7 +80,7 @@ def test_behind_the_head_the_outside_and_between_a_mix(whole):
 def test_the_weight_falls_with_the_angle_beyond_the_cone(whole):
     """The view's part of the weight, by hand: a camera 10 degrees beyond the cone is halfway through VIEW_FADE_DEG
     (smoothstep: 0.5); 30 degrees beyond, none of it is left (the facing part alone)."""
-    assert VIEW_FADE_DEG == (0.0, 20.0) and FACING_FADE_DEG == (10.0, 40.0)
+    assert VIEW_FADE_DEG == (0.0, 20.0) and FACING_FADE_DEG == (0.0, 20.0)
     axis, cos = whole.views.axis, float(whole.views.cos)
     for yaw, expected in ((CONE_DEG + 10.0, 0.5), (CONE_DEG + 30.0, 0.0)):
         _, geo, rays, w = rays_and_weights(whole, yaw)
