@@ -2,8 +2,8 @@
 from the usual facing held out), an avatar trained on the rest in each way asked for, and each measured on the
 held-out turns (`eval --split test`) and on its validation frames (between the training frames). The ways:
 `scratch` is `train --from-scratch` (volumetric primitives from nothing), `default` is `train` as a user runs it
-(on a tracked video: a whole head, the primitives from scratch and the universal prior of its head model
-personalised beyond the video's views, where there is a prior), `prior` is `train --model prior --prior PRIOR`.
+(on a tracked video: a whole head, the primitives from scratch and the universal prior personalised beyond the
+video's views), `prior` is `train --model prior --prior PRIOR`.
 Two runs at a time, one thread each (the machine's two cores).
 
     .venv/bin/python -m benchmarks.bench_held_out_views --minutes 30 --ways scratch default \\

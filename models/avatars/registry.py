@@ -39,9 +39,9 @@ SHIPPED_PRIOR = Path(__file__).resolve().parents[2] / "resources" / "prior"
 """The universal prior that ships (`scripts/make_prior.sh` rebuilds it), for the head model it was trained on."""
 VIDEO_START = "whole"
 """How `train` starts a tracked video's avatar when neither a model nor a prior is named: "scratch", VIDEO_MODEL
-from nothing; "prior", personalising the universal prior of the capture's head model; "whole", both (a whole-head
+from nothing; "prior", personalising the universal prior (of any head model: load_prior); "whole", both (a whole-head
 avatar, models/avatars/whole/: VIDEO_MODEL from scratch where the video saw the head, the prior personalised for
-3 of every 30 minutes where it did not), where there is a prior of its head model (else from scratch).
+3 of every 30 minutes where it did not), where SHIPPED_PRIOR is there (else from scratch).
 Measured (docs/results.md, Beyond the captured views): on two real clips held out by view, 30 minutes from scratch
 gave 31.67 and 35.26 dB on the furthest turns where personalising the prior gave 28.55 and 31.05 (3 minutes) or
 29.47 and 33.66 (30 minutes: its whole head lost); only the prior has a head beyond the views (+5.1 to +8.6 dB
@@ -54,8 +54,8 @@ def training_start(capture_head: str | None, tracked: bool, model: str | None, f
     """How `train` starts, the prior it personalises, and the line that says why: "scratch" (`model` from nothing,
     no prior), "prior" (the prior personalised) or "whole" (both: WholeHeadAvatar). A prior is personalised where
     one is asked for (`--model prior` or `--model whole`, or `--prior FOLDER` alone: personalised; an error where
-    it is not a prior of the capture's head model; FOLDER, else SHIPPED_PRIOR) or, for a tracked video with neither a
-    model nor a prior named, as VIDEO_START says where SHIPPED_PRIOR is of its head model."""
+    it is not a universal prior; FOLDER, else SHIPPED_PRIOR, of whichever head model: load_prior) or, for a tracked
+    video with neither a model nor a prior named, as VIDEO_START says where SHIPPED_PRIOR is there."""
     scratch = "from scratch" + (" (--from-scratch)" if from_scratch else "")
     if from_scratch or model not in (None, PriorAvatar.name, WholeHeadAvatar.name):
         return "scratch", None, scratch

@@ -24,7 +24,7 @@ class TrainConfig:
     """The avatar model (models/avatars/registry.py): codynerf, the NerFACE baseline, primitives (volumetric
     primitives on the guide mesh, decoded once a frame), prior (the universal prior personalised) or whole (both:
     primitives where the video saw the head, the prior beyond); default: a tracked video's avatar is a whole head
-    where there is a universal prior of its head model (else primitives), a synthetic capture's is codynerf."""
+    where the universal prior ships (else primitives), a synthetic capture's is codynerf."""
     from_scratch: bool = False
     """Train a tracked video's avatar from nothing alone (primitives), without the universal prior beyond its views."""
     prior: Path | None = None
