@@ -80,8 +80,8 @@ def train_locked(cfg: TrainConfig) -> int:
         raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
     gl = GLContext.headless()
     reading = progress_callback("reading the frames")
-    if cfg.resume and not (cfg.out / "avatar.json").exists() and (cfg.out / WHOLE_PARTS).is_dir():
-        return train_whole(cfg, gl, None)  # a whole head's parts, stopped before it was put together
+    if cfg.resume and (cfg.out / WHOLE_PARTS).is_dir():  # a whole head's parts: each continued, then put together
+        return train_whole(cfg, gl, None)
     if cfg.resume:
         trainer = prepare_training(cfg, gl, on_frame=reading)
     else:
@@ -181,8 +181,9 @@ def budget_share(budget: float | int | None, share: float) -> float | int | None
 def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
     """A whole-head avatar (models/avatars/whole/): the video's avatar from scratch (`inside`), then the universal
     prior personalised on the same video (`outside`), each in its folder under WHOLE_PARTS, then both put together
-    in cfg.out. `--resume` continues the part that was stopped. The studio's job reads the two runs' progress as one
-    (cfg.out's progress.jsonl, the outside's steps and seconds after the inside's)."""
+    in cfg.out. `--resume` continues each part to its share of the budget given (the one that was stopped, or both
+    of a finished whole head given more) and puts them together again. The studio's job reads the two runs'
+    progress as one (cfg.out's progress.jsonl, the outside's steps and seconds after the inside's)."""
     from models.avatars.registry import training_start
     from models.training.whole import compose
 
@@ -212,7 +213,8 @@ def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
         parts.mkdir(parents=True, exist_ok=True)
         (parts / WHOLE_PRIOR_NOTE).write_text(json.dumps({"prior": str(Path(prior).resolve())}) + "\n")
     reading = progress_callback("reading the frames")
-    print(f"training the inside ({inside_cfg.out}: from scratch)", flush=True)
+    print(f"training the inside ({inside_cfg.out}: from scratch{', continued' if inside_cfg.resume else ''})",
+          flush=True)
     inside = prepare_training(inside_cfg, gl, on_frame=reading)
     if not run_trainer(inside, gl, mirror("inside")):
         return 0

@@ -156,3 +156,6 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, face_video, la
     assert main(["train", str(scan), "--out", str(out), "--steps", "4", "--resume"]) == 0
     assert f"the universal prior {prior.resolve()} personalised" in capsys.readouterr().out
     assert json.loads((out / "avatar.json").read_text())["model"] == "whole"
+    assert main(["train", str(scan), "--out", str(out), "--steps", "12", "--resume"]) == 0  # finished: more of both
+    made = json.loads((out / "avatar.json").read_text())["provenance"]
+    assert (made["inside"]["steps"], made["outside"]["steps"], made["steps"]) == (11, 1, 12)
