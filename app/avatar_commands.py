@@ -42,6 +42,7 @@ from models.training.metrics import (
 )
 from models.training.prior import PriorTrainConfig, corpus_folders, distributed_from_env, prepare_prior
 from models.training.trainer import PROGRESS_SECONDS, TrainConfig, prepare_training
+from models.training.whole import compose
 from render.camera import framing_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
@@ -98,10 +99,11 @@ def train_locked(cfg: TrainConfig) -> int:
         else:
             trainer, _ = personalizing_trainer(replace(cfg, model="prior", lr=personalizing_lr(cfg)), prior, gl,
                                                on_frame=reading)
-    if not run_trainer(trainer, gl):
+    last = run_trainer(trainer, gl)
+    if last is None:
         return 0
     print(f"wrote {cfg.out}: {trainer.step} steps in {trainer.elapsed / 60:.1f} min, "
-          f"last loss {trainer.last.get('loss', 0):.5f}")
+          f"last loss {last.get('loss', 0):.5f}")
     print_next(cfg)
     return 0
 
@@ -116,9 +118,9 @@ def print_next(cfg: TrainConfig) -> None:
     print(f"next: avatar-studio studio {out}  (or: avatar-studio turntable {out}; avatar-studio eval {out} {dataset})")
 
 
-def run_trainer(trainer, gl: GLContext, on_record=None) -> bool:
-    """Run a trainer to its budget, its progress on the terminal (and to on_record); False where it was stopped
-    (SIGTERM, the studio's Cancel, or Ctrl-C: it finishes the step and checkpoints)."""
+def run_trainer(trainer, gl: GLContext, on_record=None) -> dict | None:
+    """Run a trainer to its budget, its progress on the terminal (and to on_record); its last record, or None where
+    it was stopped (SIGTERM, the studio's Cancel, or Ctrl-C: it finishes the step and checkpoints)."""
     tty = sys.stderr.isatty()
     last_line = [0.0]
 
@@ -148,13 +150,13 @@ def run_trainer(trainer, gl: GLContext, on_record=None) -> bool:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
-    trainer.last = trainer.run(gl, show)
+    last = trainer.run(gl, show)
     if tty:
         sys.stderr.write("\n")
     if trainer.stop_requested:
         print(f"stopped at step {trainer.step}; checkpoint in {trainer.cfg.out} (continue with --resume)")
-        return False
-    return True
+        return None
+    return last
 
 
 WHOLE_PARTS = "parts"
@@ -184,9 +186,6 @@ def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
     in cfg.out. `--resume` continues each part to its share of the budget given (the one that was stopped, or both
     of a finished whole head given more) and puts them together again. The studio's job reads the two runs'
     progress as one (cfg.out's progress.jsonl, the outside's steps and seconds after the inside's)."""
-    from models.avatars.registry import training_start
-    from models.training.whole import compose
-
     parts = cfg.out / WHOLE_PARTS
     inside_cfg = replace(cfg, out=parts / "inside", model="primitives", prior=None,
                          minutes=budget_share(cfg.minutes, 1 - WHOLE_OUTSIDE_SHARE),
@@ -216,7 +215,7 @@ def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
     print(f"training the inside ({inside_cfg.out}: from scratch{', continued' if inside_cfg.resume else ''})",
           flush=True)
     inside = prepare_training(inside_cfg, gl, on_frame=reading)
-    if not run_trainer(inside, gl, mirror("inside")):
+    if run_trainer(inside, gl, mirror("inside")) is None:
         return 0
     before.update(step=inside.step, elapsed_s=inside.elapsed)
     if outside_cfg.resume:
@@ -234,7 +233,7 @@ def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
                 raise UserInputError(f"{noted}: cannot read the prior the training began with ({e})") from None
         print(f"training the outside ({outside_cfg.out}: the universal prior {prior} personalised)", flush=True)
         outside, _ = personalizing_trainer(outside_cfg, prior, gl, on_frame=reading)
-    if not run_trainer(outside, gl, mirror("outside")):
+    if run_trainer(outside, gl, mirror("outside")) is None:
         return 0
     try:
         compose(inside_cfg.out, outside_cfg.out, cfg.out)
