@@ -41,7 +41,7 @@ from models.training.metrics import (
     ssim,
 )
 from models.training.prior import PriorTrainConfig, corpus_folders, distributed_from_env, prepare_prior
-from models.training.trainer import PROGRESS_SECONDS, TrainConfig, prepare_training
+from models.training.trainer import DEFAULT_STEPS, PROGRESS_SECONDS, TrainConfig, prepare_training
 from models.training.whole import compose
 from render.camera import framing_camera
 from render.gl.context import GLContext
@@ -195,8 +195,9 @@ def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
                           minutes=budget_share(cfg.minutes, WHOLE_OUTSIDE_SHARE),
                           steps=budget_share(cfg.steps, WHOLE_OUTSIDE_SHARE),
                           resume=(parts / "outside" / "avatar.json").is_file())
-    if cfg.minutes is None and cfg.steps is None:  # the trainer's own default, 2000 steps, shared the same way
-        inside_cfg, outside_cfg = replace(inside_cfg, steps=1800), replace(outside_cfg, steps=200)
+    if cfg.minutes is None and cfg.steps is None:  # the trainer's own default, shared the same way
+        inside_cfg = replace(inside_cfg, steps=budget_share(DEFAULT_STEPS, 1 - WHOLE_OUTSIDE_SHARE))
+        outside_cfg = replace(outside_cfg, steps=budget_share(DEFAULT_STEPS, WHOLE_OUTSIDE_SHARE))
     log = cfg.out / "progress.jsonl"
     before = {"step": 0, "elapsed_s": 0.0}
 

@@ -30,7 +30,6 @@ MODELS = tuple(AVATARS)
 VIDEO_MODELS = ("default", *MODELS)
 """A video's avatar: `train`'s own choice first (a whole head where the universal prior
 ships, else VIDEO_MODEL from scratch: registry.training_start), or a model named."""
-"""A new avatar from video offers train's default for tracked videos first."""
 EFFECTS = ("all", "none", "shading", "shading,specular", "shadows")
 
 

@@ -100,24 +100,8 @@ def load_prior(folder: str | Path, head_spec: str, device: str = "cpu") -> tuple
     if meta.get("model") != PriorAvatar.name:
         raise CheckpointError(f"{folder}: a {meta.get('model')} avatar, not a universal prior (`prior-train` makes "
                               "one)")
-    if head_kind(meta.get("head_model")) == head_kind(head_spec):
-        return load_avatar(folder, device)
-    ck = load_checkpoint(folder)
-    try:
-        head = load_head(head_spec)
-        avatar = PriorAvatar.from_meta(head, meta)
-    except (KeyError, TypeError, ValueError) as e:
-        raise CheckpointError(f"{Path(folder) / 'avatar.json'}: {e}") from None
-    layout = {k for k in avatar.state_dict() if k.startswith(LAYOUT_BUFFERS)}
-    missing, unexpected = avatar.load_state_dict({k: v for k, v in ck.weights.items() if k not in layout},
-                                                 strict=False)
-    if set(missing) != layout or unexpected:
-        raise CheckpointError(f"{Path(folder) / 'avatar.json'}: does not describe these weights "
-                              f"({sorted(set(missing) - layout) or unexpected})")
-    avatar.eval()
-    avatar.card = card_of(PriorAvatar.name, {**meta, "head_model": head_spec}, head, avatar.effects,
-                          avatar.default_buffers(), avatar.inspection_buffers(), *load_presets(folder))
-    return avatar.to(device_of(device)), {**meta, "head_model": head_spec}
+    same = head_kind(meta.get("head_model")) == head_kind(head_spec)
+    return load_avatar(folder, device, PriorAvatar.name, None if same else head_spec)
 
 
 LAYOUT_BUFFERS = ("layout_",)
@@ -138,12 +122,15 @@ def avatar_class(name: str) -> type[Avatar]:
         raise ValueError(f"unknown avatar model {name!r}: expected one of {', '.join(AVATARS)}") from None
 
 
-def load_avatar(folder: str | Path, device: str = "cpu", model: str | None = None) -> tuple[Avatar, dict]:
+def load_avatar(folder: str | Path, device: str = "cpu", model: str | None = None, on_head: str | None = None
+                ) -> tuple[Avatar, dict]:
     """The avatar avatar.json describes (its "model"; avatars written before models had names are CoDyNeRF's)
     with its weights and presets, on `device`, in eval mode; and avatar.json. model: the one model a caller works
-    with (a model's own benchmark or pictures): a CheckpointError where the folder holds another's."""
+    with (a model's own benchmark or pictures): a CheckpointError where the folder holds another's. on_head: a head
+    model's spec to place it on instead of its own (load_prior: every weight but where its primitives sit,
+    LAYOUT_BUFFERS, which are made for that head; the avatar.json returned names it)."""
     ck = load_checkpoint(folder)
-    meta = ck.meta
+    meta = ck.meta if on_head is None else {**ck.meta, "head_model": on_head}
     name = meta.get("model", DEFAULT_MODEL)
     if model is not None and name != model:
         raise CheckpointError(f"{folder}: a {name} avatar, not a {model} one")
@@ -154,8 +141,12 @@ def load_avatar(folder: str | Path, device: str = "cpu", model: str | None = Non
         avatar = cls.from_meta(head, meta)
     except (KeyError, TypeError, ValueError) as e:
         raise CheckpointError(f"{Path(folder) / 'avatar.json'}: {e}") from None
+    weights = ck.weights if on_head is None else {k: v for k, v in ck.weights.items()
+                                                 if not k.startswith(LAYOUT_BUFFERS)}
     try:
-        avatar.load_state_dict(ck.weights)
+        missing, unexpected = avatar.load_state_dict(weights, strict=on_head is None)
+        if unexpected or any(not k.startswith(LAYOUT_BUFFERS) for k in missing):  # on_head: what strict would say
+            raise RuntimeError(f"weights that do not fit:\n{sorted(unexpected) or sorted(missing)}")
     except RuntimeError as e:  # torch lists every mismatched tensor, one a line: the first says enough
         first = next((ln.strip() for ln in str(e).splitlines()[1:] if ln.strip()), str(e).splitlines()[0])
         raise CheckpointError(f"{Path(folder) / 'avatar.json'}: does not describe these weights ({first})") from None

@@ -32,6 +32,9 @@ from models.training.metrics import psnr
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
+DEFAULT_STEPS = 2000
+"""The step budget of a run given neither minutes nor steps (TrainConfig.steps)."""
+
 
 def _adam_state_tensors(opt: torch.optim.Adam) -> dict[str, torch.Tensor]:
     out = {}
@@ -241,7 +244,7 @@ class Trainer:
         budget_s = cfg.minutes * 60 if cfg.minutes else math.inf
         budget_steps = cfg.steps if cfg.steps else math.inf
         if budget_s == math.inf and budget_steps == math.inf:
-            budget_steps = 2000
+            budget_steps = DEFAULT_STEPS
         log = Path(cfg.out) / "progress.jsonl"
         Path(cfg.out).mkdir(parents=True, exist_ok=True)
         trim_progress(log, self.step)

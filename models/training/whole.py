@@ -10,7 +10,6 @@ from models.avatars.primitives.avatar import PrimitivesAvatar
 from models.avatars.prior.avatar import PriorAvatar
 from models.avatars.registry import load_avatar
 from models.avatars.whole.avatar import WholeHeadAvatar
-from models.head.sources import head_kind
 
 PART_FIELDS = ("model", "effects", "light_dir", "pose_corrections", "expression_corrections", "format", "step",
                "files", PrimitivesAvatar.config_key)
@@ -22,16 +21,16 @@ def compose(inside_folder: Path, outside_folder: Path, out: Path) -> Path:
     top is the inside's: head model, frames, views); CheckpointError naming the folder that does not fit."""
     inside, inside_meta = load_avatar(inside_folder, model=PrimitivesAvatar.name)
     outside, outside_meta = load_avatar(outside_folder, model=PriorAvatar.name)
-    if head_kind(inside_meta["head_model"]) != head_kind(outside_meta["head_model"]):
-        raise CheckpointError(f"{outside_folder}: of the {head_kind(outside_meta['head_model'])} head model, "
-                              f"{inside_folder} of the {head_kind(inside_meta['head_model'])}")
-    datasets = [m.get("provenance", {}).get("dataset_resolved") for m in (inside_meta, outside_meta)]
+    made = [m.get("provenance", {}) for m in (inside_meta, outside_meta)]
+    datasets = [p.get("dataset_resolved") for p in made]
     if None not in datasets and datasets[0] != datasets[1]:
         raise CheckpointError(f"{outside_folder}: trained on {datasets[1]}, {inside_folder} on {datasets[0]} (the "
                               "two parts of a whole head are of one capture)")
-    whole = WholeHeadAvatar(inside, outside)
+    try:
+        whole = WholeHeadAvatar(inside, outside)
+    except ValueError as e:  # of two head models
+        raise CheckpointError(f"{inside_folder} and {outside_folder}: {e}") from None
     top = {k: v for k, v in inside_meta.items() if k not in PART_FIELDS}
-    made = [m.get("provenance", {}) for m in (inside_meta, outside_meta)]
     provenance = {"dataset": made[0].get("dataset"), "dataset_resolved": datasets[0],
                   "steps": sum(int(p.get("steps", 0)) for p in made),
                   "seconds": round(sum(float(p.get("seconds", 0.0)) for p in made), 1),

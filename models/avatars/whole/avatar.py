@@ -25,6 +25,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from models.avatars.base import Avatar, RayOutput, TrainingBatch
 from models.avatars.mesh import MeshField
@@ -244,13 +245,10 @@ class WholeHeadAvatar(Avatar):
             return rays.origins.new_ones(len(rays.origins))
         R = geometry.inside.rotation.to(rays.directions)  # head -> world: a world direction d is d @ R in the head's
         axis, cos_half = views.axis.to(rays.directions), float(views.cos)
-        towards = rays.origins - geometry.inside.translation.to(rays.origins)  # as the decoder reads it (view_of)
-        towards = towards / towards.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+        towards = F.normalize(rays.origins - geometry.inside.translation.to(rays.origins), dim=-1)  # as view_of
         view = beyond_cone_deg(towards @ R, axis, cos_half)
         centre = geometry.centre.to(rays.origins)
-        points = sphere_points(rays.origins, rays.directions, centre, geometry.radius)
-        facing = points - centre
-        facing = facing / facing.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+        facing = F.normalize(sphere_points(rays.origins, rays.directions, centre, geometry.radius) - centre, dim=-1)
         side = beyond_cone_deg(facing @ R, axis, cos_half)
         return torch.maximum(smooth_fall(view, *VIEW_FADE_DEG), smooth_fall(side, *FACING_FADE_DEG))
 
@@ -260,8 +258,9 @@ class WholeHeadAvatar(Avatar):
         if training:  # training goes on in the inside (parameter_groups)
             return self.inside.render_rays(rays, geometry.inside, frame, generator, training=True, options=options)
         w = self.inside_weight(rays, geometry)
+        w = torch.where(w >= 1.0 - EPS, 1.0, torch.where(w <= EPS, 0.0, w))  # a ray one part renders is all its
         parts = []
-        for outside, keep, code in ((False, w > EPS, frame), (True, w < 1.0 - EPS, None)):
+        for outside, keep, code in ((False, w > 0.0, frame), (True, w < 1.0, None)):
             idx = torch.nonzero(keep).squeeze(1)
             if len(idx) == 0:  # the outside's geometry is not even made
                 parts.append((idx, None))
@@ -279,6 +278,9 @@ class WholeHeadAvatar(Avatar):
     def mixed(w: torch.Tensor, parts, names, buffers_of) -> dict[str, torch.Tensor]:
         """Each named buffer of the two parts' rays, mixed by the inside's weight w (R,): a ray one part alone
         rendered takes its value; a depth that one part leaves infinite (it drew nothing there) takes the other's."""
+        alone = [part for _, part in parts if part is not None]
+        if len(alone) == 1:  # one part rendered every ray (a view within the cone): its buffers as they are
+            return {name: buffers_of(alone[0])[name] for name in names}
         out = {}
         for name in names:
             full = [None, None]
@@ -289,12 +291,6 @@ class WholeHeadAvatar(Avatar):
                 buf = value.new_zeros((len(w), *value.shape[1:]))
                 buf[idx] = value
                 full[k] = buf
-            if full[1] is None:
-                out[name] = full[0]
-                continue
-            if full[0] is None:
-                out[name] = full[1]
-                continue
             a, b = full
             ww = w.reshape(-1, *([1] * (a.dim() - 1))).to(a)
             if name == "depth":
