@@ -8,13 +8,14 @@ looked (31.7 and 35.3 dB against 28.6 and 31.1 for 3 minutes of personalising th
 only one with a head where it did not (a turntable of the scratch avatar breaks into blocks and holes from about
 60 degrees; docs/results.md). Personalising the prior for longer sharpens it in view but loses the whole head.
 
-Which of the two a ray shows: the inside where the ray's camera stands within the cone of the capture's views (the
-inside's CaptureViews, the directions its decoder read: its own views are rendered exactly as the inside alone
-renders them), or where the point
-it meets faces a direction within that cone (the head taken as a sphere about its centre: the face, and what
-the video saw at a slant); the outside elsewhere; between, a weight that falls smoothly with the angle beyond
-the cone, both rendered and their buffers mixed by it. Rays whose weight is 0 or 1 are rendered by one model
-only, so a view inside the captured cone costs what the inside alone costs."""
+Which of the two a ray shows: every ray the inside where the ray's camera stands within the cone of the capture's
+views (the inside's CaptureViews, the directions its decoder read: its own views are rendered exactly as the inside
+alone renders them). Beyond the cone, by where the ray meets the head (taken as a sphere about its centre): the
+inside where that point faces a direction within the cone, widened by a margin that shrinks as the camera leaves the
+cone (SWEEP_DEG at its rim, 0 from VIEW_FADE_DEG's end), the outside where it faces further round, and both rendered
+and their buffers mixed by a smoothstep over FACING_FADE_DEG between. So as the camera turns away from what the
+video saw, the boundary sweeps across the head from its far side to the cone's rim, and only the rays near it
+render twice: a frame costs little more than one part does."""
 
 from __future__ import annotations
 
@@ -38,11 +39,19 @@ from render.gl.raster import Rasterizer
 from render.rays import Raster, Rays
 
 VIEW_FADE_DEG = (0.0, 20.0)
-"""A ray whose camera (seen from the head, as the inside's decoder reads its view) stands this far beyond the captured
-cone: all inside, to all outside (smoothstep). Narrower, the inside's own blocks showed at 30 degrees round."""
+"""Over this angle of the camera beyond the captured cone (seen from the head, as the inside's decoder reads its view)
+the inside's margin shrinks from SWEEP_DEG to none (smoothstep)."""
+SWEEP_DEG = 120.0
+"""The inside's margin beyond the cone, in the facing direction, for a camera at the cone's rim: every surface such a
+camera sees faces at most about 90 degrees beyond the cone, so the frame is still all inside. Until 26 November
+2026 the camera's angle set one weight for the whole frame (both parts rendered every ray of a camera 0-20 degrees
+beyond): on the synthetic person seen from the front the frames 25-75 degrees round score 23.24 dB on average
+against 23.32 (sweeps from 90 and 180 degrees: 23.22 and 23.18), and the child's whole head renders a live pose in
+78 ms against 133 (`benchmarks/bench_live.py`)."""
 FACING_FADE_DEG = (0.0, 20.0)
-"""A ray meeting the head where it faces this far beyond the captured cone: all inside, to all outside (the cone
-is the views' own, so its rim already saw those surfaces at a slant). Measured against (10, 40): on the synthetic
+"""A ray meeting the head where it faces this far beyond the captured cone and the margin: all inside, to all outside
+(the cone is the views' own, so its rim already saw those surfaces at a slant). 0-40 with the margin: 0.3 dB lower on
+the synthetic person 25-75 degrees round. Measured against (10, 40): on the synthetic
 person seen from the front 23.62 / 21.17 / 24.01 dB at 45 / 90 / 135 degrees against 23.08 / 20.73 / 23.78, d3's
 held-out turns 25.23 against 25.21, and by eye fewer of the inside's speckles on the cheeks at 30-60 degrees."""
 EPS = 1e-3
@@ -153,7 +162,8 @@ class WholeHeadAvatar(Avatar):
         part = lambda m: {**m.meta(), "frames": m.n_frames, "background": m.background.tolist()}
         return {"model": self.name, "effects": list(self.effects), "inside": part(self.inside),
                 "outside": part(self.outside),
-                "blend": {"view_fade_deg": list(VIEW_FADE_DEG), "facing_fade_deg": list(FACING_FADE_DEG)}}
+                "blend": {"view_fade_deg": list(VIEW_FADE_DEG), "sweep_deg": SWEEP_DEG,
+                          "facing_fade_deg": list(FACING_FADE_DEG)}}
 
     @classmethod
     def buffer_names(cls, meta: dict) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -237,9 +247,10 @@ class WholeHeadAvatar(Avatar):
     # ---- rays ------------------------------------------------------------------------------------------
     def inside_weight(self, rays: Rays, geometry: WholeGeometry) -> torch.Tensor:
         """(R,) how much of each ray the inside renders (module docstring): 1 where the ray's camera stands within
-        the captured cone (seen from the head's middle, as the inside's decoder reads its view), or where the ray
-        meets the head where it faces into it, falling to 0 beyond (VIEW_FADE_DEG,
-        FACING_FADE_DEG); 1 everywhere for an inside that kept no cone (a capture from all round)."""
+        the captured cone (seen from the head's middle, as the inside's decoder reads its view); beyond, 1 where the
+        ray meets the head where it faces into the cone widened by the camera's margin (SWEEP_DEG, shrinking over
+        VIEW_FADE_DEG), falling to 0 over FACING_FADE_DEG beyond that; 1 everywhere for an inside that kept no cone
+        (a capture from all round)."""
         views = self.inside.views
         if views.axis is None:
             return rays.origins.new_ones(len(rays.origins))
@@ -250,7 +261,8 @@ class WholeHeadAvatar(Avatar):
         centre = geometry.centre.to(rays.origins)
         facing = F.normalize(sphere_points(rays.origins, rays.directions, centre, geometry.radius) - centre, dim=-1)
         side = beyond_cone_deg(facing @ R, axis, cos_half)
-        return torch.maximum(smooth_fall(view, *VIEW_FADE_DEG), smooth_fall(side, *FACING_FADE_DEG))
+        margin = SWEEP_DEG * smooth_fall(view, *VIEW_FADE_DEG)
+        return torch.where(view <= 0.0, 1.0, smooth_fall(side - margin, *FACING_FADE_DEG))
 
     def render_rays(self, rays: Rays, geometry: WholeGeometry, frame: int | None,
                     generator: torch.Generator | None = None, training: bool = False, options: Any = None

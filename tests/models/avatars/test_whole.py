@@ -14,7 +14,8 @@ import torch
 from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig
 from models.avatars.prior.avatar import PriorAvatar
 from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image
-from models.avatars.whole.avatar import FACING_FADE_DEG, VIEW_FADE_DEG, WholeHeadAvatar, beyond_cone_deg
+from models.avatars.whole.avatar import (FACING_FADE_DEG, SWEEP_DEG, VIEW_FADE_DEG, WholeHeadAvatar, beyond_cone_deg,
+                                         sphere_points)
 from models.head.controls import Controls
 from models.head.sources import load_builtin
 from render.camera import orbit_camera
@@ -77,17 +78,41 @@ def test_behind_the_head_the_outside_and_between_a_mix(whole):
     assert torch.isfinite(out.buffers["rgb"]).all()
 
 
-def test_the_weight_falls_with_the_angle_beyond_the_cone(whole):
-    """The view's part of the weight, by hand: a camera 10 degrees beyond the cone is halfway through VIEW_FADE_DEG
-    (smoothstep: 0.5); 30 degrees beyond, none of it is left (the facing part alone)."""
-    assert VIEW_FADE_DEG == (0.0, 20.0) and FACING_FADE_DEG == (0.0, 20.0)
-    axis, cos = whole.views.axis, float(whole.views.cos)
-    for yaw, expected in ((CONE_DEG + 10.0, 0.5), (CONE_DEG + 30.0, 0.0)):
-        _, geo, rays, w = rays_and_weights(whole, yaw)
-        towards = rays.origins[0] - geo.inside.translation
-        beyond = beyond_cone_deg((towards / towards.norm())[None] @ geo.inside.rotation, axis, cos)
-        assert float(beyond) == pytest.approx(yaw - CONE_DEG, abs=0.5)
-        assert float(w.min()) == pytest.approx(expected, abs=0.06)  # rays that meet the head's far side
+def sides_deg(whole: WholeHeadAvatar, geo, rays) -> torch.Tensor:
+    """(R,) degrees beyond the cone that each ray's point on the head's sphere faces (the head is at rest: its
+    rotation is the identity, so the head's frame is the world's)."""
+    facing = sphere_points(rays.origins, rays.directions, geo.centre, geo.radius) - geo.centre
+    facing = facing / facing.norm(dim=-1, keepdim=True)
+    return beyond_cone_deg(facing, whole.views.axis, float(whole.views.cos))
+
+
+def test_beyond_the_cone_the_boundary_sweeps_across_the_head(whole):
+    """By hand: a camera 10 degrees beyond the cone is halfway through VIEW_FADE_DEG, so the inside keeps half its
+    margin (60 of SWEEP_DEG's 120): rays meeting the head where it faces up to 60 degrees beyond the cone are all
+    inside, 70 (halfway through FACING_FADE_DEG) half, from 80 on all outside. From 20 degrees beyond no margin is
+    left. As the camera turns away the inside's share of the rays falls, and only the rays near the boundary
+    render twice."""
+    assert VIEW_FADE_DEG == (0.0, 20.0) and FACING_FADE_DEG == (0.0, 20.0) and SWEEP_DEG == 120.0
+    _, geo, rays, w = rays_and_weights(whole, CONE_DEG + 10.0, size=64)
+    towards = rays.origins[0] - geo.inside.translation
+    assert float(beyond_cone_deg((towards / towards.norm())[None] @ geo.inside.rotation, whole.views.axis,
+                                 float(whole.views.cos))) == pytest.approx(10.0, abs=0.5)
+    side = sides_deg(whole, geo, rays)
+    assert torch.all(w[side <= 59.0] == 1.0) and torch.all(w[side >= 81.0] == 0.0)
+    near = (side - 70.0).abs() < 1.0
+    assert near.sum() > 0 and torch.allclose(w[near], torch.full_like(w[near], 0.5), atol=0.1)
+
+    _, geo, rays, w = rays_and_weights(whole, CONE_DEG + 30.0, size=64)
+    side = sides_deg(whole, geo, rays)
+    assert torch.all(w[side <= 0.0] == 1.0) and torch.all(w[side >= 20.0] == 0.0)
+
+    inside_share, twice = [], []
+    for beyond in (2.0, 8.0, 12.0, 16.0, 25.0):
+        w = rays_and_weights(whole, CONE_DEG + beyond, size=64)[3]
+        inside_share.append(float((w > 0.0).float().mean()))
+        twice.append(float(((w > 0.0) & (w < 1.0)).float().mean()))
+    assert inside_share == sorted(inside_share, reverse=True) and inside_share[0] > 0.9 > 0.5 > inside_share[-1]
+    assert max(twice) < 0.35
 
 
 def test_an_inside_that_saw_the_head_all_round_is_everywhere(whole):
