@@ -43,11 +43,11 @@ VIEW_FADE_DEG = (0.0, 20.0)
 the inside's margin shrinks from SWEEP_DEG to none (smoothstep)."""
 SWEEP_DEG = 120.0
 """The inside's margin beyond the cone, in the facing direction, for a camera at the cone's rim: every surface such a
-camera sees faces at most about 90 degrees beyond the cone, so the frame is still all inside. Until 26 November
+camera sees faces at most about 90 degrees beyond the cone, so the frame is still all inside. Until 27 November
 2026 the camera's angle set one weight for the whole frame (both parts rendered every ray of a camera 0-20 degrees
 beyond): on the synthetic person seen from the front the frames 25-75 degrees round score 23.24 dB on average
 against 23.32 (sweeps from 90 and 180 degrees: 23.22 and 23.18), and the child's whole head renders a live pose in
-78 ms against 133 (`benchmarks/bench_live.py`)."""
+85 ms against 133 (`benchmarks/bench_live.py`)."""
 FACING_FADE_DEG = (0.0, 20.0)
 """A ray meeting the head where it faces this far beyond the captured cone and the margin: all inside, to all outside
 (the cone is the views' own, so its rim already saw those surfaces at a slant). 0-40 with the margin: 0.3 dB lower on
