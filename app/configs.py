@@ -121,6 +121,9 @@ class TrackConfig:
     """Frames whose face is sharper than this fraction of the video's median sharpness are kept."""
     overlay: bool = True
     """Write tracking/overlay.mp4: the fitted mesh over the frames."""
+    masks: Literal["auto", "selfie", "grabcut"] = "auto"
+    """How the person's masks are cut: selfie, MediaPipe's selfie segmenter (the set-up installs its model);
+    grabcut, OpenCV's GrabCut seeded by the face; auto: the segmenter where its model is installed."""
 
 
 @dataclass(frozen=True)

