@@ -18,6 +18,7 @@ from models.avatars.rendering import render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
+from models.tracking.segmenter import installed_model
 from models.tracking.video import sampled_frames
 from models.training.trainer import TrainConfig, prepare_training
 from render.gl.raster import Rasterizer
@@ -45,6 +46,7 @@ def test_d3_video_tracks(d3_dataset):
     assert report["crop"]["whole_frame"] and 62 < report["face_width_px"]["median"] < 82, report["face_width_px"]
     # d3 was filmed on a tripod before a plain wall: its room is still (1.8 levels at 256 px, all its frames)
     assert report["background_plate"]["room"] == "still", report["background_plate"]
+    assert report["masks_by"] == ("selfie" if installed_model() is not None else "grabcut")  # the default, auto
     test = load_split(d3_dataset, "test")
     train = load_split(d3_dataset, "train")
     assert len(test.frames) == int(np.ceil(0.1 * report["frames_kept"]))

@@ -14,8 +14,14 @@ import torch
 from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig
 from models.avatars.prior.avatar import PriorAvatar
 from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image
-from models.avatars.whole.avatar import (FACING_FADE_DEG, SWEEP_DEG, VIEW_FADE_DEG, WholeHeadAvatar, beyond_cone_deg,
-                                         sphere_points)
+from models.avatars.whole.avatar import (
+    FACING_FADE_DEG,
+    SWEEP_DEG,
+    VIEW_FADE_DEG,
+    WholeHeadAvatar,
+    beyond_cone_deg,
+    sphere_points,
+)
 from models.head.controls import Controls
 from models.head.sources import load_builtin
 from render.camera import orbit_camera

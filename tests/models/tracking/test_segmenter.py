@@ -57,6 +57,20 @@ def test_the_way_of_cutting_masks(monkeypatch, tmp_path):
         mask_way("best")
 
 
+def test_track_asked_for_the_segmenter_without_its_model_says_so(monkeypatch, tmp_path, capsys):
+    """`track --masks selfie` where the model is not installed: one line naming the option, status 2, before any
+    work, nothing written."""
+    from app.cli import main
+
+    monkeypatch.setattr(segmenter_module, "MODEL_PATH", tmp_path / "absent.tflite")
+    video = tmp_path / "clip.mp4"
+    video.write_bytes(b"")
+    assert main(["track", str(video), "--masks", "selfie", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "--masks: the selfie segmenter's model is not installed" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
 @needs_model
 @pytest.mark.skipif(not VIDEOS.is_dir(), reason="../shared/data/video is absent")
 def test_masks_on_real_frames_against_true_masks():
