@@ -190,3 +190,24 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, face_video, la
     assert main(["train", str(scan), "--out", str(out), "--steps", "12", "--resume"]) == 0  # finished: more of both
     made = json.loads((out / "avatar.json").read_text())["provenance"]
     assert (made["inside"]["steps"], made["outside"]["steps"], made["steps"]) == (11, 1, 12)
+
+
+def test_the_outside_renders_at_most_the_samples_it_trained_with(whole):
+    """From behind (every ray the outside's), a render at four times the outside's samples is the outside's own
+    render at its samples, bit for bit (an outside of 8^3 voxels, where more samples would change the pixels); at
+    fewer samples than its own, it renders at those."""
+    from dataclasses import replace
+
+    from models.avatars.quality import Quality
+
+    torch.manual_seed(3)
+    outside = PriorAvatar.for_capture(whole.head_model, 1, np.full(3, 0.7, np.float32), (), None,
+                                      replace(SMALL, grid=8, voxels=8))
+    wide = WholeHeadAvatar(whole.inside, outside).eval()
+    cam, _, _, w = rays_and_weights(wide, 180.0)
+    assert torch.all(w == 0.0)
+    own = outside.cfg.samples
+    at = lambda avatar, n: render_image(avatar, cam, Controls(), RenderOptions(buffers=(), quality=Quality(1.0, n)))
+    assert not np.array_equal(at(outside, 4 * own)["rgb"], at(outside, own)["rgb"])
+    np.testing.assert_array_equal(at(wide, 4 * own)["rgb"], at(outside, own)["rgb"])
+    np.testing.assert_array_equal(at(wide, own // 2)["rgb"], at(outside, own // 2)["rgb"])
