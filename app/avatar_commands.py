@@ -25,7 +25,7 @@ from models.avatars.registry import load_avatar, load_prior, training_start
 from models.avatars.rendering import RenderOptions, preset_options, render_image
 from models.avatars.whole.avatar import WholeHeadAvatar
 from models.capture.dataset import check_images, is_capture, load_split
-from models.capture.frames import background_plate, frame_camera, load_rgb
+from models.capture.frames import background_plate, frame_camera, frame_room, load_mask, load_rgb
 from models.capture.synthetic import read_png16
 from models.device import device_of
 from models.files import FolderBusy, WriterLock, atomic_write_bytes, foreign_files
@@ -303,13 +303,18 @@ def run_eval(cfg: EvalConfig) -> int:
     for f in frames:
         truth = load_rgb(f.image_path, avatar.background.numpy())
         t0 = time.perf_counter()
-        out = render_image(avatar, frame_camera(split, f), f.controls, rasterizer=raster)
+        out = render_image(avatar, frame_camera(split, f), f.controls, RenderOptions(room=frame_room(f)),
+                           rasterizer=raster)
         times.append(time.perf_counter() - t0)
         face = face_mask_of(f, truth.shape)
         dx, dy = image_offset_px(out["rgb"], truth)
         row = {"frame": f.index, "psnr": psnr(out["rgb"], truth), "ssim": ssim(out["rgb"], truth),
                "face_mse": face_mse(out["rgb"], truth, face), "offset_px": float(np.hypot(dx, dy)),
                "offset_xy_px": [round(dx, 2), round(dy, 2)]}
+        if "mask_path" in f.extra:  # the person alone: where a frame's own room stands behind it, the rest is exact
+            person = load_mask(f.extra["mask_path"]) > 0.5
+            if person.any():
+                row["psnr_person"] = psnr(out["rgb"], truth, person)
         panels = [truth, out["rgb"], np.clip(np.abs(out["rgb"] - truth) * 4, 0, 1)]
         if "normals" in out:
             panels.append(out["normals"] * 0.5 + 0.5)
@@ -325,7 +330,7 @@ def run_eval(cfg: EvalConfig) -> int:
         save_png(cfg.out / f"{cfg.split}_{f.index:04d}.png",
                  (np.concatenate(panels, 1) * 255).round().astype(np.uint8))
     metrics = {k: float(np.mean([r[k] for r in rows if k in r])) for k in (
-        "psnr", "ssim", "face_mse", "offset_px", "normal_deg", "normal_median_deg", *SHADOW_METRICS)
+        "psnr", "psnr_person", "ssim", "face_mse", "offset_px", "normal_deg", "normal_median_deg", *SHADOW_METRICS)
         if any(k in r for r in rows)}
     metrics["render_ms"] = 1e3 * float(np.median(times))
     report = {"avatar": str(cfg.avatar), "dataset": str(cfg.dataset), "split": cfg.split, "frames": len(rows),

@@ -33,7 +33,7 @@ from models.avatars.quality import PRESET_NAMES, Preset, Quality, pareto, save_p
 from models.avatars.registry import BASELINE_MODEL, DEFAULT_MODEL, load_avatar, untrained_avatar
 from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
-from models.capture.frames import frame_camera, load_rgb
+from models.capture.frames import frame_camera, frame_room, load_rgb
 from models.files import atomic_write_bytes, foreign_files
 from models.head.sources import load_head
 from models.training.metrics import face_mse, psnr
@@ -139,7 +139,7 @@ def measure(avatar: Avatar, quality: Quality, frames: TestFrames, raster: Raster
     for i, (f, cam) in enumerate(zip(frames.frames, frames.cameras, strict=True)):
         size = quality.size(cam.width_px)
         c = cam.resized(size, max(8, round(cam.height_px * size / cam.width_px)))
-        options = RenderOptions(buffers=(), quality=quality)  # the colour, as the studio shows
+        options = RenderOptions(buffers=(), quality=quality, room=frame_room(f))  # the colour, as the studio shows
         if i == 0:
             render_image(avatar, c, f.controls, options, raster)
         t0 = time.perf_counter()

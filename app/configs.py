@@ -121,6 +121,10 @@ class TrackConfig:
     """Frames whose face is sharper than this fraction of the video's median sharpness are kept."""
     overlay: bool = True
     """Write tracking/overlay.mp4: the fitted mesh over the frames."""
+    room: Literal["auto", "plate", "frames"] = "auto"
+    """What stands behind the person: plate, one background plate made of every frame's room (a camera that stood
+    still); frames, each frame's own room (the frame with the person filled from around: a camera that moved, or
+    water or traffic behind); auto: frames where the room moved (the report's room_residual_levels over 5)."""
     masks: Literal["auto", "selfie", "grabcut"] = "auto"
     """How the person's masks are cut: selfie, MediaPipe's selfie segmenter (the set-up installs its model);
     grabcut, OpenCV's GrabCut seeded by the face; auto: the segmenter where its model is installed."""

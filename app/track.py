@@ -109,11 +109,9 @@ def run_track(cfg: TrackConfig) -> int:
     if small:
         print(small)
     plate = report["background_plate"]
-    if plate.get("room") == "moving":
-        print(f"the room moves behind the person (it differs from the one background plate by "
-              f"{plate['room_residual_levels']:.0f} levels of 255 in the median frame: a camera that moves, or water "
-              "or traffic behind): the avatar is trained over that plate, which is blurred where the room moved, "
-              "and the held-out frames' room will not match it")
+    if plate.get("room") == "moving" or "rooms" in plate.get("behind_frames", ""):
+        print(f"behind the person: {plate['behind_frames']} ({plate['why']}"
+              + ("; a camera that moves, or water or traffic behind" if plate.get("room") == "moving" else "") + ")")
     print(next_train(cfg.out))
     return 0
 

@@ -45,6 +45,9 @@ class RenderOptions:
     quality: Quality | None = None
     """The render's samples (and a second pass, bf16) where the model has such knobs: a preset's (preset_options);
     None: the avatar's own, those it trained with. The image size is the camera's."""
+    room: np.ndarray | None = None
+    """(H,W,3) what this camera saw behind the person, at the camera's size: a frame's own room, where the capture's
+    camera moved (frame_room); None: the avatar's plate where the camera is the capture's, else its colour."""
 
 
 def preset_options(card: AvatarCard, preset: str, size: int, options: RenderOptions = RenderOptions()
@@ -63,7 +66,7 @@ def render_image(avatar: Avatar, camera: Camera, controls: Controls, options: Re
     geo = avatar.frame_geometry(controls, rasterizer).to(device)
     camera = clipping_around(camera, geo.posed.cpu().numpy())  # the head may be anywhere (a translation)
     rays, idx = pixel_rays_of(avatar, geo, camera, rasterizer)
-    plate = avatar.plate.for_camera(camera)
+    plate = avatar.plate.for_camera(camera) if options.room is None else room_pixels(options.room, camera, device)
     if plate is not None:
         rays = replace(rays, background=plate[torch.as_tensor(idx, device=plate.device)].cpu())
     rays = rays.to(device)
@@ -90,6 +93,16 @@ def render_image(avatar: Avatar, camera: Camera, controls: Controls, options: Re
     if surface:
         images["normals"] = surface_normals(avatar, images["depth"], geo, camera, rasterizer)
     return images
+
+
+def room_pixels(room: np.ndarray, camera: Camera, device) -> torch.Tensor:
+    """(H*W,3) a frame's room (h,w,3) at the camera's image size (area-averaged where it is another)."""
+    room = np.asarray(room, np.float32)
+    if room.shape[:2] != (camera.height_px, camera.width_px):
+        import cv2
+
+        room = cv2.resize(room, (camera.width_px, camera.height_px), interpolation=cv2.INTER_AREA)
+    return torch.as_tensor(room.reshape(-1, 3), device=device)
 
 
 def pixel_rays_of(avatar: Avatar, geometry, camera: Camera, rasterizer: Rasterizer | None) -> tuple[Rays, np.ndarray]:

@@ -19,8 +19,9 @@ from models.head.controls import Controls, ControlsError, controls_from_dict
 from models.head.sources import HEAD_KINDS, HEAD_SPECS
 
 SPLITS = ("train", "val", "test")
-#: Optional per-frame paths of synthetic captures.
-EXTRA_PATHS = ("mask_path", "normal_path", "shadow_path", "depth_path", "albedo_path", "unshadowed_path")
+#: Optional per-frame paths: synthetic captures' buffers; a tracked video's masks, and its frames' own rooms where its
+#: camera moved (room_path: the frame with the person taken out and filled from around).
+EXTRA_PATHS = ("mask_path", "normal_path", "shadow_path", "depth_path", "albedo_path", "unshadowed_path", "room_path")
 NERFACE_EXPRESSION_DIM = 76
 
 

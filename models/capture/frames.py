@@ -115,6 +115,19 @@ def background_plate(split: CaptureSplit) -> tuple[np.ndarray, Camera] | None:
     return plate, camera_of(split, c2w[0] if c2w else np.eye(4))
 
 
+def frame_room(frame: Frame) -> np.ndarray | None:
+    """(H,W,3) float the room behind this frame's person as its own camera saw it, where the capture keeps one a
+    frame (a tracked video whose camera moved: the frame with the person filled from around); None where the
+    capture's plate stands behind every frame."""
+    path = frame.extra.get("room_path")
+    if path is None:
+        return None
+    try:
+        return load_rgb(path)
+    except (OSError, ValueError) as e:
+        raise DatasetError(f"{path}: the frame's room cannot be read ({e})") from None
+
+
 def load_mask(path) -> np.ndarray:
     """(H,W) coverage in [0,1]: 8-bit levels / 255, 16-bit grey ones / 65535."""
     with Image.open(path) as im:

@@ -193,6 +193,32 @@ def background_plate(frames: list[np.ndarray], masks: list[np.ndarray], grow_px:
     return plate, float(hole.mean())
 
 
+def own_room(frame: np.ndarray, mask: np.ndarray, grow_px: int, work_px: int = 64) -> np.ndarray:
+    """(H,W,3) uint8 the room behind the person as this frame saw it: the frame where the person's mask (H,W), grown
+    by grow_px, leaves it free; under the person, the room filled from around it (OpenCV's Telea inpainting at
+    work_px, scaled up: the avatar covers most of it, and only its soft edges and hair show the fill).
+
+    >>> f = np.zeros((32, 32, 3), np.uint8); f[:, :16] = (200, 0, 0); f[:, 16:] = (0, 0, 200)
+    >>> m = np.zeros((32, 32), np.float32); m[8:24, 12:20] = 1; f[m > 0] = (0, 255, 0)
+    >>> room = own_room(f, m, 1, work_px=16)
+    >>> room[16, 4].tolist(), room[16, 28].tolist(), int(room[16, 13, 1]) < 60  # the room kept; no green left
+    ([200, 0, 0], [0, 0, 200], True)
+    """
+    h, w = mask.shape
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow_px + 1, 2 * grow_px + 1))
+    person = cv2.dilate((mask > 0.5).astype(np.uint8), kernel)
+    if not person.any():
+        return frame.copy()
+    if person.all():
+        return np.zeros_like(frame) + np.median(frame.reshape(-1, 3), 0).astype(np.uint8)
+    scale = work_px / max(h, w)
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    small = cv2.resize(frame, size, interpolation=cv2.INTER_AREA)
+    hole = cv2.dilate(cv2.resize(person, size, interpolation=cv2.INTER_NEAREST), np.ones((3, 3), np.uint8))
+    filled = cv2.resize(cv2.inpaint(small, hole, 3, cv2.INPAINT_TELEA), (w, h), interpolation=cv2.INTER_LINEAR)
+    return np.where(person[..., None] > 0, filled, frame)
+
+
 STILL_ROOM_LEVELS = 5.0
 """A room that differs from its plate by more than this (8-bit levels, the frames' median of their mean) is not
 still: measured on the tracked clips of ../shared/data/video at 256 px, cameras on a tripod 0.3-2.3 (d3, d19,

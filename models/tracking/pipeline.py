@@ -37,7 +37,14 @@ from models.tracking.correspond import correspond, skin_vertices
 from models.tracking.finder import FaceFinder
 from models.tracking.fit import FitConfig, Intrinsics, fit, project
 from models.tracking.landmarker import Face
-from models.tracking.masks import STILL_ROOM_LEVELS, background_plate, foreground_masks, mask_way, room_residual
+from models.tracking.masks import (
+    STILL_ROOM_LEVELS,
+    background_plate,
+    foreground_masks,
+    mask_way,
+    own_room,
+    room_residual,
+)
 from models.tracking.splits import frame_splits
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames
 from render.video import write_video
@@ -290,9 +297,17 @@ def write_frames(cfg, partial: Path, kept: list[dict], crops: list[np.ndarray], 
     write_png8(partial / "background.png", plate / 255.0)
     residual = room_residual([crops[j] for j in train], [masks[j] for j in train], plate,
                              grow_px=max(1, round(0.03 * cfg.size)), offsets=framing.offsets[train])
+    moving = residual > STILL_ROOM_LEVELS
+    own_rooms = cfg.room == "frames" or (cfg.room == "auto" and moving)
     plate_report = {"file": "background.png", "inpainted_share": round(inpainted, 4),
                     "frames": len(train), "room_residual_levels": round(residual, 2),
-                    "room": "still" if residual <= STILL_ROOM_LEVELS else "moving"}
+                    "room": "moving" if moving else "still",
+                    "behind_frames": "their own rooms (rooms/)" if own_rooms else "the plate",
+                    "why": f"--room {cfg.room}" if cfg.room != "auto" else
+                    f"the room {'moved' if moving else 'stood still'}: {residual:.1f} levels from the plate "
+                    f"({'over' if moving else 'within'} {STILL_ROOM_LEVELS:g})"}
+    if own_rooms:
+        (partial / "rooms").mkdir()
     own = [[k.fx, k.fy, k.cx - float(ox), k.cy - float(oy)] for ox, oy in framing.offsets]  # each window's camera
     header = split_header(cfg, framing, k, own[0], result.shape, video_fps)
     splits: dict[str, list[dict]] = {"train": [], "val": [], "test": []}
@@ -301,6 +316,8 @@ def write_frames(cfg, partial: Path, kept: list[dict], crops: list[np.ndarray], 
         name = f"{j:04d}.png"
         write_png8(partial / "images" / name, img / 255.0)
         write_png8(partial / "masks" / name, mask)
+        if own_rooms:
+            write_png8(partial / "rooms" / name, own_room(img, mask, max(1, round(0.01 * cfg.size))) / 255.0)
         lm = framing.points(f["face"].landmarks_px[:468]) - framing.offsets[j]
         lo, hi = lm.min(0), lm.max(0)
         pad = 0.1 * (hi - lo)
@@ -308,6 +325,7 @@ def write_frames(cfg, partial: Path, kept: list[dict], crops: list[np.ndarray], 
         split = split_list[j]
         splits[split].append({
             "file_path": f"images/{name}", "mask_path": f"masks/{name}", "transform_matrix": np.eye(4).tolist(),
+            **({"room_path": f"rooms/{name}"} if own_rooms else {}),
             "expression": c.expression.tolist(),
             "controls": {key: v for key, v in controls_to_dict(c).items() if key != "shape"},
             "bbox": [float(lo[1]), float(hi[1]), float(lo[0]), float(hi[0])],

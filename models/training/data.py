@@ -14,7 +14,16 @@ import torch
 from models.avatars.base import Avatar
 from models.avatars.components.plate import camera_key, plate_window
 from models.capture.dataset import CaptureSplit, DatasetError
-from models.capture.frames import camera_of, foreground_reach_m, frame_camera, has_alpha, load_mask, load_rgb, load_rgb8
+from models.capture.frames import (
+    camera_of,
+    foreground_reach_m,
+    frame_camera,
+    frame_room,
+    has_alpha,
+    load_mask,
+    load_rgb,
+    load_rgb8,
+)
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 from render.rays import Rays, camera_directions, pixel_directions
@@ -35,6 +44,7 @@ class FrameSet:
     active_index: list[torch.Tensor]  # per frame, the flat indices of the pixels training draws rays from (the
     # avatar's training_pixels)
     plate: torch.Tensor | None = None  # (Hp*Wp,3) the background plate behind the frames' rays, if the capture has one
+    # (uint8: the frames' own rooms stacked, a frame's window each)
     own_intrinsics: list[tuple[float, float, float, float] | None] | None = None  # per frame, where not the split's
     plate_windows: list[tuple[int, int]] | None = None  # per frame, its image's top-left in the plate (x0, y0)
     plate_width: int = 0  # Wp
@@ -68,8 +78,10 @@ class FrameSet:
             d_cam = torch.from_numpy(pixel_directions(own, self.images.shape[2], pixels.numpy()).astype(np.float32))
             d_cam = d_cam.double()
         d = (d_cam @ self.rotations[frame].T).float()
-        return Rays(self.origins[frame].expand(len(pixels), 3), d, self.surface_t[frame].reshape(-1)[pixels],
-                    None if self.plate is None else self.plate[self.plate_pixels(frame, pixels)])
+        behind = None if self.plate is None else self.plate[self.plate_pixels(frame, pixels)]
+        if behind is not None and behind.dtype == torch.uint8:  # frames' own rooms, kept as their bytes
+            behind = behind.float() / 255.0
+        return Rays(self.origins[frame].expand(len(pixels), 3), d, self.surface_t[frame].reshape(-1)[pixels], behind)
 
     def plate_pixels(self, frame: int, pixels: torch.Tensor) -> torch.Tensor:
         """A frame's pixels (flat indices) as the plate's (its window's place in the plate)."""
@@ -87,6 +99,7 @@ class ValidationFrame:
     controls: Any
     camera: Any
     image: np.ndarray  # (H,W,3)
+    room: np.ndarray | None = None  # (H,W,3) its own room, where the capture keeps one a frame (frame_room)
 
 
 def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
@@ -142,7 +155,23 @@ def frames_on_plate(split: CaptureSplit, avatar: Avatar, cameras: list
                     ) -> tuple[torch.Tensor | None, list[tuple[int, int]] | None, int]:
     """The avatar's plate (Hp*Wp,3) and where each frame's image lies in it (None where every frame sees it whole,
     as a fixed crop's do), its width; (None, None, 0) without a plate. A frame whose camera sees no part of the
-    plate is an error naming it (its rays would composite over nothing the capture recorded)."""
+    plate is an error naming it (its rays would composite over nothing the capture recorded). Where the capture
+    keeps each frame's own room (a camera that moved: frame_room), the rooms stacked one below the other are the
+    plate, each frame its own window of it."""
+    if split.frames and all("room_path" in f.extra for f in split.frames):
+        rooms = []
+        for f in split.frames:  # kept as their bytes, as the frames are (rays() makes the colours of a batch's)
+            try:
+                rooms.append(load_rgb8(f.extra["room_path"])[..., :3])
+            except (OSError, ValueError) as e:
+                raise DatasetError(f"{f.extra['room_path']}: the frame's room cannot be read ({e})") from None
+            if rooms[-1].shape[:2] != (split.height, split.width):
+                h, w = rooms[-1].shape[:2]
+                raise DatasetError(f"{f.extra['room_path']}: the frame's room is {w}x{h} pixels; the capture's "
+                                   f"images are {split.width}x{split.height}")
+        h = rooms[0].shape[0]
+        return torch.from_numpy(np.concatenate(rooms, 0).reshape(-1, 3)), [(0, k * h) for k in range(len(rooms))], \
+            split.width
     if all(f.intrinsics is None for f in split.frames):
         plate = avatar.plate.for_camera(cameras[0]) if cameras else None
         return None if plate is None else plate.cpu(), None, 0
@@ -162,4 +191,4 @@ def frames_on_plate(split: CaptureSplit, avatar: Avatar, cameras: list
 def validation_frame(split: CaptureSplit, background: np.ndarray) -> ValidationFrame:
     """The split's first frame, read."""
     f = split.frames[0]
-    return ValidationFrame(f.controls, frame_camera(split, f), load_rgb(f.image_path, background))
+    return ValidationFrame(f.controls, frame_camera(split, f), load_rgb(f.image_path, background), frame_room(f))

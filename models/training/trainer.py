@@ -19,7 +19,7 @@ from models.avatars.base import Avatar, TrainingBatch
 from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from models.avatars.effects import parse_effects
 from models.avatars.registry import DEFAULT_MODEL, avatar_class, default_model
-from models.avatars.rendering import render_image
+from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import DatasetError, check_images, load_split
 from models.capture.frames import background_plate, view_range
 from models.device import device_of
@@ -234,7 +234,7 @@ class Trainer:
     def validation_psnr(self, gl: GLContext) -> float:
         v = self.validation
         r = Rasterizer(gl)
-        img = render_image(self.avatar, v.camera, v.controls, rasterizer=r)["rgb"]
+        img = render_image(self.avatar, v.camera, v.controls, RenderOptions(room=v.room), rasterizer=r)["rgb"]
         r.release()
         return psnr(img, v.image)
 

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from app.cli import main
 from models.avatars.registry import load_avatar
-from models.avatars.rendering import render_image
+from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
@@ -571,3 +571,47 @@ def test_a_small_face_in_a_large_frame_is_found(face_video, landmarker, tmp_path
     assert 95 < report["source_face_px"] < 130, report["source_face_px"]
     assert report["landmark_error_px"]["median"] < 2.0
     assert "the face is small in the video" in capsys.readouterr().out
+
+
+def test_a_room_per_frame_stands_behind_each_frame(face_video, landmarker, tmp_path, gl, capsys):
+    """`--room frames` on d3's first 2 s (its room is still, so auto would keep the plate; asked, each frame keeps
+    its own): every frame's room is the frame where its grown mask leaves it free and carries no face where the
+    person stood; the report and a line say so; training reads each frame's rays over its own room (the batch's
+    background is that room's pixels); eval renders each held-out frame over its room, which shows as it is
+    where the avatar is clear, and scores the person apart."""
+    from app.avatar_commands import EvalConfig, run_eval
+    from models.capture.frames import frame_room, load_mask, load_rgb
+
+    out = tmp_path / "rooms"
+    assert main(["track", str(face_video), "--out", str(out), "--landmarker", str(landmarker), "--size", "64",
+                 "--fps", "10", "--seconds", "2", "--room", "frames", "--no-overlay"]) == 0
+    assert "behind the person: their own rooms (rooms/) (--room frames)" in capsys.readouterr().out
+    report = json.loads((out / "tracking" / "report.json").read_text())
+    assert report["background_plate"]["behind_frames"] == "their own rooms (rooms/)"
+    assert report["background_plate"]["room"] == "still"
+    train = load_split(out, "train")
+    for f in train.frames:
+        room, frame, mask = frame_room(f), load_rgb(f.image_path), load_mask(f.extra["mask_path"])
+        free = cv2.dilate((mask > 0.5).astype(np.uint8), np.ones((5, 5), np.uint8)) == 0
+        assert free.mean() > 0.1 and np.abs(room - frame)[free].max() < 1e-6
+        top, bottom, left, right = (np.array(f.bbox) * 64).astype(int)
+        assert np.abs(room - frame)[top:bottom, left:right].mean() > 0.1  # the face is gone from it
+    avatar_out = tmp_path / "avatar"
+    trainer = prepare_training(TrainConfig(dataset=out, out=avatar_out, model="primitives", effects="none", steps=3),
+                               gl)
+    for k in (0, len(train.frames) - 1):
+        pixels = torch.arange(0, 64 * 64, 97)
+        behind = trainer.frames.rays(k, pixels).background
+        np.testing.assert_allclose(behind.numpy(), frame_room(train.frames[k]).reshape(-1, 3)[pixels.numpy()],
+                                   atol=1e-6)
+    trainer.run(gl)
+    assert run_eval(EvalConfig(avatar=avatar_out, dataset=out, out=tmp_path / "eval")) == 0
+    metrics = json.loads((tmp_path / "eval" / "metrics.json").read_text())["metrics"]
+    assert "psnr_person" in metrics and metrics["psnr_person"] < metrics["psnr"]
+    avatar, _ = load_avatar(avatar_out)
+    test = load_split(out, "test")
+    f = test.frames[0]
+    img = render_image(avatar, frame_camera(test, f), f.controls, RenderOptions(room=frame_room(f)))
+    clear = img["opacity"] < 1e-4
+    assert clear.mean() > 0.05
+    np.testing.assert_allclose(img["rgb"][clear], frame_room(f)[clear], atol=1e-4)
