@@ -36,10 +36,11 @@ def run(args: list[str], log: Path) -> None:
         subprocess.run(CLI + args, check=True, cwd=REPO, stdout=f, stderr=subprocess.STDOUT, env=env)
 
 
-def capture_of(clip: str, work: Path) -> Path:
+def capture_of(clip: str, work: Path, split: str = "view") -> Path:
+    """The clip tracked into work/NAME (split by view, or by time), once."""
     capture = work / Path(clip).name
     if not (capture / "transforms_test.json").is_file():
-        run(["track", str(VIDEOS / f"{clip}.mp4"), "--split", "view", "--no-overlay", "--out", str(capture)],
+        run(["track", str(VIDEOS / f"{clip}.mp4"), "--split", split, "--no-overlay", "--out", str(capture)],
             work / f"track_{Path(clip).name}.log")
     return capture
 
@@ -59,7 +60,7 @@ def train_and_measure(clip: str, way: str, capture: Path, work: Path, minutes: f
         if not (out / "metrics.json").is_file():
             run(["eval", str(avatar), str(capture), "--split", split, "--out", str(out)], work / f"eval_{out.name}.log")
         m = json.loads((out / "metrics.json").read_text())["metrics"]
-        keys = ("psnr", "ssim", "face_mse", "offset_px", "render_ms")
+        keys = ("psnr", "psnr_person", "ssim", "face_mse", "offset_px", "render_ms")
         row[split] = {k: round(float(m[k]), 4) for k in keys if k in m}
     return row
 
