@@ -471,8 +471,12 @@ def test_a_head_that_travels_gets_a_crop_that_follows_it(face_video, landmarker,
     runs = {}
     for crop in ("auto", "fixed"):
         out = tmp_path / crop
+        # GrabCut's masks: the strip pasted into the room has no body below it, which the selfie segmenter (made
+        # for people) adds down to the frame's edge, and the plate below the strip is then inpainted. The plate
+        # asked for: the strip carries d3's own wall across the room, which tells `auto` that the room moves.
         assert main(["track", str(video), "--head", "builtin", "--out", str(out), "--landmarker", str(landmarker),
-                     "--size", "64", "--no-overlay", "--iterations", "50", "--crop", crop]) == 0
+                     "--size", "64", "--no-overlay", "--iterations", "50", "--crop", crop, "--masks", "grabcut",
+                     "--room", "plate"]) == 0
         runs[crop] = json.loads((out / "tracking" / "report.json").read_text())
     follow, fixed = runs["auto"]["crop"], runs["fixed"]["crop"]
     assert follow["following"] and not fixed["following"] and fixed["side"] > 1.8 * follow["side"], (follow, fixed)
