@@ -161,10 +161,7 @@ def frames_on_plate(split: CaptureSplit, avatar: Avatar, cameras: list
     if split.frames and all("room_path" in f.extra for f in split.frames):
         rooms = []
         for f in split.frames:  # kept as their bytes, as the frames are (rays() makes the colours of a batch's)
-            try:
-                rooms.append(load_rgb8(f.extra["room_path"])[..., :3])
-            except (OSError, ValueError) as e:
-                raise DatasetError(f"{f.extra['room_path']}: the frame's room cannot be read ({e})") from None
+            rooms.append(np.round(frame_room(f) * 255.0).astype(np.uint8))
             if rooms[-1].shape[:2] != (split.height, split.width):
                 h, w = rooms[-1].shape[:2]
                 raise DatasetError(f"{f.extra['room_path']}: the frame's room is {w}x{h} pixels; the capture's "
