@@ -111,7 +111,8 @@ def upsample(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 
 
 class TestFrames:
-    """The held-out frames a bench measures: cameras at the bench size, ground truth and face masks."""
+    """The held-out frames a bench measures: cameras at the bench size, ground truth and face masks, and each frame's
+    own room where the capture keeps one (frame_room; render_image resizes it to a setting's size)."""
 
     def __init__(self, dataset: Path, count: int, size: int, background: np.ndarray):
         split = load_split(dataset, "test")
@@ -119,6 +120,7 @@ class TestFrames:
             raise UserInputError(f"{dataset}: the capture has no test frames to measure on")
         pick = np.unique(np.linspace(0, len(split.frames) - 1, min(count, len(split.frames))).round().astype(int))
         self.frames = [split.frames[i] for i in pick]
+        self.rooms = [frame_room(f) for f in self.frames]
         self.cameras, self.truth, self.face = [], [], []
         for f in self.frames:
             cam = frame_camera(split, f)
@@ -139,7 +141,7 @@ def measure(avatar: Avatar, quality: Quality, frames: TestFrames, raster: Raster
     for i, (f, cam) in enumerate(zip(frames.frames, frames.cameras, strict=True)):
         size = quality.size(cam.width_px)
         c = cam.resized(size, max(8, round(cam.height_px * size / cam.width_px)))
-        options = RenderOptions(buffers=(), quality=quality, room=frame_room(f))  # the colour, as the studio shows
+        options = RenderOptions(buffers=(), quality=quality, room=frames.rooms[i])  # the colour, as the studio shows
         if i == 0:
             render_image(avatar, c, f.controls, options, raster)
         t0 = time.perf_counter()

@@ -17,7 +17,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
-from models.tracking.segmenter import PersonSegmenter, installed_model
+from models.tracking.segmenter import PersonSegmenter, face_piece, installed_model
 
 MASK_WAYS = ("auto", "selfie", "grabcut")
 """How `track` cuts its masks: auto is the selfie segmenter where its model is installed, else GrabCut."""
@@ -91,7 +91,6 @@ def grabcut(rgb: np.ndarray, mask: np.ndarray, landmarks_px: np.ndarray, iterati
     """GrabCut from seeds (mask (H,W) of cv2.GC_* labels): the foreground's piece holding the face (its landmarks
     (N,2)), closed over 5 px, as a float32 {0,1} mask. A frame with too few pixels of either kind to model keeps the
     seeds as they are."""
-    h, w = mask.shape
     room = np.count_nonzero((mask == cv2.GC_BGD) | (mask == cv2.GC_PR_BGD))
     if room < GRABCUT_SAMPLES or mask.size - room < GRABCUT_SAMPLES:  # the person fills the frame, or left it
         return ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.float32)  # the seeds, as they are
@@ -99,14 +98,8 @@ def grabcut(rgb: np.ndarray, mask: np.ndarray, landmarks_px: np.ndarray, iterati
     cv2.setRNGSeed(0)  # GrabCut's k-means draws from OpenCV's global generator: each frame's mask its own, in any order
     cv2.grabCut(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), mask, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
     fg = ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.uint8)
-    # Keep the piece holding the face; fill its holes (eyes, mouth are foreground).
-    n, labels = cv2.connectedComponents(fg)
-    if n > 2:
-        lo, hi = landmarks_px.min(0), landmarks_px.max(0)
-        centre = np.clip(np.round(0.5 * (lo + hi)).astype(int), 0, [w - 1, h - 1])
-        keep = labels[centre[1], centre[0]]
-        fg = (labels == keep).astype(np.uint8) if keep else fg
-    fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+    # Keep the piece holding the face; close its gaps (eyes, mouth are foreground).
+    fg = cv2.morphologyEx(face_piece(fg, landmarks_px), cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
     return fg.astype(np.float32)
 
 

@@ -92,15 +92,22 @@ def person_piece(confidence: np.ndarray, landmarks_px: np.ndarray | None = None)
     28
     """
     fg = (confidence > THRESHOLD).astype(np.uint8)
-    if landmarks_px is not None and fg.any():
-        h, w = fg.shape
-        n, labels = cv2.connectedComponents(fg)
-        lo, hi = landmarks_px.min(0), landmarks_px.max(0)
-        centre = np.clip(np.round(0.5 * (lo + hi)).astype(int), 0, [w - 1, h - 1])
-        keep = labels[centre[1], centre[0]]
-        if n > 2 and keep:
-            fg = (labels == keep).astype(np.uint8)
+    if landmarks_px is not None:
+        fg = face_piece(fg, landmarks_px)
     return fill_holes(fg).astype(np.float32)
+
+
+def face_piece(fg: np.ndarray, landmarks_px: np.ndarray) -> np.ndarray:
+    """(H,W) uint8 {0,1}: of a foreground in several pieces, the one holding the middle of the face's landmarks
+    (N,2); the foreground as it is where it is one piece, or the face's middle lies on none."""
+    h, w = fg.shape
+    n, labels = cv2.connectedComponents(fg)
+    if n <= 2:
+        return fg
+    lo, hi = landmarks_px.min(0), landmarks_px.max(0)
+    centre = np.clip(np.round(0.5 * (lo + hi)).astype(int), 0, [w - 1, h - 1])
+    keep = labels[centre[1], centre[0]]
+    return (labels == keep).astype(np.uint8) if keep else fg
 
 
 def fill_holes(mask: np.ndarray) -> np.ndarray:
