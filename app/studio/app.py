@@ -94,6 +94,8 @@ class Studio:
         self.exporter = Exporter()
         self.gui_ms: deque = deque(maxlen=240)
         """Time the window's own Python code takes a frame (the rest of a frame is drawing and presenting)."""
+        self.frame_cpu_ms: deque = deque(maxlen=240)
+        """The window process's CPU time of each recent frame, its GL driver's drawing threads included (FrameCpu)."""
         self.last_submit_id = 0
         self.last_submit_time = 0.0
         self.latency_ms: float | None = None
@@ -476,6 +478,7 @@ class Studio:
                 "loading_s": [round(x, 2) for x in self.loading_s],
                 "fps_loading": round(self.clock.fps("loading"), 1),
                 "gui_ms_median": round(float(np.median(self.gui_ms)), 2) if self.gui_ms else None,
+                "frame_cpu_ms_median": round(float(np.median(self.frame_cpu_ms)), 2) if self.frame_cpu_ms else None,
                 "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 1),
                 "pass_latency_ms": {k: round(v, 1) for k, v in self.pass_latency_ms.items()},
                 "last_pass": None if r is None else {"pass": r.pass_name, "ms": round(r.ms, 1)},
@@ -506,12 +509,14 @@ class FrameCpu:
 
     def __init__(self) -> None:
         self.last = time.process_time()
+        self.used = 0.0
+        """The last frame's, unsmoothed."""
         self.seconds = 0.0
 
     def tick(self) -> float:
         now = time.process_time()
-        used, self.last = now - self.last, now
-        self.seconds = used if self.seconds == 0.0 else 0.8 * self.seconds + 0.2 * used
+        self.used, self.last = now - self.last, now
+        self.seconds = self.used if self.seconds == 0.0 else 0.8 * self.seconds + 0.2 * self.used
         return self.seconds
 
 
@@ -562,6 +567,13 @@ def run_studio(cfg: StudioConfig, live: str | None = None) -> int:
     params.callbacks.show_gui = studio.gui
     params.callbacks.confirm_exit = studio.confirm_exit
     params.fps_idling.enable_idling = False
+    # No multisampling for the window (hello_imgui asks for 8 samples a pixel by default): ImGui anti-aliases its
+    # own shapes and the guide is drawn in a framebuffer of its own, so the samples bought nothing, and on a software
+    # GL (llvmpipe) they tripled a window frame's CPU (25 ms against 8.5 at 1280x800; the frame_cpu_ms figure).
+    # Live, the whole head's pixels came 121 ms after the camera frame against 153 (docs/live.md).
+    gl_options = hello_imgui.OpenGlOptions()
+    gl_options.anti_aliasing_samples = 0
+    params.renderer_backend_options.open_gl_options = gl_options
     # The panels tile the whole window: hello_imgui's own full-window background under them would be drawn
     # for nothing, and on a software GL (llvmpipe) filling the window once more costs ~12 ms a frame.
     params.imgui_window_params.default_imgui_window_type = hello_imgui.DefaultImGuiWindowType.no_default_window
@@ -586,6 +598,7 @@ def run_studio(cfg: StudioConfig, live: str | None = None) -> int:
         # rasterizes: at 1920x1080 that is most of a 34 ms frame).
         studio.presented()
         cpu_s = frame_cpu.tick()
+        studio.frame_cpu_ms.append(1e3 * frame_cpu.used)
         cap = cfg.fps_cap
         worker = studio.worker
         if worker.busy:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
@@ -56,6 +57,14 @@ person seen from the front 23.62 / 21.17 / 24.01 dB at 45 / 90 / 135 degrees aga
 held-out turns 25.23 against 25.21, and by eye fewer of the inside's speckles on the cheeks at 30-60 degrees."""
 EPS = 1e-3
 """Weights within this of 0 or 1 render one model only."""
+_AHEAD = ThreadPoolExecutor(1, thread_name_prefix="whole-outside")
+"""The outside's decode beside the inside's (WholeHeadAvatar.outside_ahead)."""
+OUTSIDE_STOP_BELOW = 1e-2
+"""The outside's rays take no more primitives once less than this share of their light gets through (its own
+stop_below where that is higher). The prior's primitives are larger and fainter than the inside's, so its rays cross
+more of them before they are opaque. On the child's whole head (`python -m benchmarks.bench_whole AVATAR
+--outside-settings`; at rest from 20, 90 and 160 degrees, 8 samples): 69 ms a frame against 78 at its own 1e-3, and
+51.5 dB from 16 samples marched to 1e-4 against 51.6 (3e-2: 67 ms, 50.6 dB)."""
 
 
 def smooth_fall(x: torch.Tensor, lo: float, hi: float) -> torch.Tensor:
@@ -133,6 +142,9 @@ class WholeHeadAvatar(Avatar):
     reads_raster: ClassVar[bool] = False
     quality_knobs: ClassVar[tuple[str, ...]] = PrimitivesAvatar.quality_knobs
     rays_per_step: ClassVar[int] = PrimitivesAvatar.rays_per_step
+    decode_ahead: bool = True
+    """Where both parts render a frame, the outside decoded on a thread of its own beside the inside (outside_ahead);
+    off, after it (benchmarks/bench_whole.py --poses compares the two)."""
 
     def __init__(self, inside: PrimitivesAvatar, outside: PriorAvatar):
         if inside.head_model.name != outside.head_model.name:
@@ -141,6 +153,9 @@ class WholeHeadAvatar(Avatar):
         super().__init__(inside.head_model, inside.n_frames, inside.background.cpu().numpy().copy())
         self.inside = inside
         self.outside = outside
+        # The outside's display stops sooner (training composites every candidate); the inside renders as its own
+        # folder does.
+        outside.cfg = replace(outside.cfg, stop_below=max(outside.cfg.stop_below, OUTSIDE_STOP_BELOW))
         with torch.no_grad():  # one room behind both: the inside's
             outside.background.copy_(inside.background)
 
@@ -256,8 +271,14 @@ class WholeHeadAvatar(Avatar):
             return rays.origins.new_ones(len(rays.origins))
         R = geometry.inside.rotation.to(rays.directions)  # head -> world: a world direction d is d @ R in the head's
         axis, cos_half = views.axis.to(rays.directions), float(views.cos)
-        towards = F.normalize(rays.origins - geometry.inside.translation.to(rays.origins), dim=-1)  # as view_of
+        origins = rays.origins
+        pinhole = len(origins) > 0 and bool((origins - origins[0]).abs().max() == 0)
+        if pinhole:  # one camera: its view once, and a camera within the cone is all inside
+            origins = origins[:1]
+        towards = F.normalize(origins - geometry.inside.translation.to(origins), dim=-1)  # as view_of
         view = beyond_cone_deg(towards @ R, axis, cos_half)
+        if pinhole and float(view[0]) <= 0.0:
+            return rays.origins.new_ones(len(rays.origins))
         centre = geometry.centre.to(rays.origins)
         facing = F.normalize(sphere_points(rays.origins, rays.directions, centre, geometry.radius) - centre, dim=-1)
         side = beyond_cone_deg(facing @ R, axis, cos_half)
@@ -271,17 +292,40 @@ class WholeHeadAvatar(Avatar):
             return self.inside.render_rays(rays, geometry.inside, frame, generator, training=True, options=options)
         w = self.inside_weight(rays, geometry)
         w = torch.where(w >= 1.0 - EPS, 1.0, torch.where(w <= EPS, 0.0, w))  # a ray one part renders is all its
+        idxs = [torch.nonzero(keep).squeeze(1) for keep in (w > 0.0, w < 1.0)]  # the inside's, the outside's
+        sub = [rays[idx] if len(idx) else None for idx in idxs]
+        ahead = self.outside_ahead(sub[1], geometry, options) \
+            if self.decode_ahead and all(r is not None for r in sub) else None
         parts = []
-        for outside, keep, code in ((False, w > 0.0, frame), (True, w < 1.0, None)):
-            idx = torch.nonzero(keep).squeeze(1)
+        for outside, idx, code in ((False, idxs[0], frame), (True, idxs[1], None)):
             if len(idx) == 0:  # the outside's geometry is not even made
                 parts.append((idx, None))
                 continue
+            if outside and ahead is not None:
+                ahead.result()
             model, geo = self.part(outside, geometry)
-            parts.append((idx, model.render_rays(rays[idx], geo, code, options=self.outside_options(options)
+            parts.append((idx, model.render_rays(sub[outside], geo, code, options=self.outside_options(options)
                                                  if outside else options)))
         return RayOutput(self.mixed(w, parts, ("rgb", "opacity", "depth"), lambda out: out.buffers),
                          (w, parts))
+
+    def outside_ahead(self, rays: Rays, geometry: WholeGeometry, options: Any) -> Future | None:  # its rays
+        """Where both parts render rays of a frame, the outside's geometry and decode made on a thread of their own
+        while the inside poses, decodes and marches (a decode is one thread's work: the other core stood idle);
+        None where the outside's is made already or needs the GL rasterizer (its context is this thread's). The
+        child's whole head in the studio's view posed by d3's frames, on two cores: 61-63 ms a frame (median)
+        against 71-73 (`python -m benchmarks.bench_whole AVATAR --poses CAPTURE`)."""
+        if geometry._outside is not None or self.outside.casts_shadows or not rays.origins.is_cpu:
+            return None
+        eye = rays.origins.mean(0)  # as the outside's render_rays takes it: its decode is found made
+        outside_options = self.outside_options(options)
+        inference = torch.is_inference_mode_enabled()  # grad modes are a thread's own
+
+        def make() -> None:
+            with torch.inference_mode(inference), torch.no_grad():
+                self.outside.decoded(geometry.outside, None, eye, False, options=outside_options)
+
+        return _AHEAD.submit(make)
 
     def outside_options(self, options: Any) -> Any:
         """The render options the outside renders with: at most the samples a segment it was trained with. More
