@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from models.avatars.prior.avatar import PriorAvatar
 from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image
 from models.avatars.whole.avatar import (
     FACING_FADE_DEG,
+    OUTSIDE_STOP_BELOW,
     SWEEP_DEG,
     VIEW_FADE_DEG,
     WholeHeadAvatar,
@@ -211,3 +213,48 @@ def test_the_outside_renders_at_most_the_samples_it_trained_with(whole):
     assert not np.array_equal(at(outside, 4 * own)["rgb"], at(outside, own)["rgb"])
     np.testing.assert_array_equal(at(wide, 4 * own)["rgb"], at(outside, own)["rgb"])
     np.testing.assert_array_equal(at(wide, own // 2)["rgb"], at(outside, own // 2)["rgb"])
+
+
+def test_the_outside_decoded_ahead_renders_as_decoded_after(whole):
+    """Where both parts render a frame, the outside decoded on its own thread beside the inside gives the frame bit
+    for bit, and is decoded once a frame either way (its render finds the decode made)."""
+    cam, _, _, w = rays_and_weights(whole, 50.0)
+    assert bool((w > 0.0).any()) and bool((w < 1.0).any())  # both parts render
+    decodes = []
+    own = whole.outside.decode
+
+    def counted(*args, **kwargs):
+        decodes.append(threading.current_thread().name)
+        return own(*args, **kwargs)
+
+    whole.outside.decode = counted
+    try:
+        images = []
+        for ahead in (True, False):
+            whole.decode_ahead = ahead
+            images.append(render_image(whole, cam, Controls(), RenderOptions(buffers=()))["rgb"])
+    finally:
+        whole.decode_ahead = True
+        del whole.outside.decode
+    np.testing.assert_array_equal(images[0], images[1])
+    assert len(decodes) == 2 and decodes[0].startswith("whole-outside") and decodes[1] == "MainThread", decodes
+
+
+def test_the_outside_stops_its_rays_at_a_hundredth_of_their_light(whole):
+    """The outside's display stops a ray once less than OUTSIDE_STOP_BELOW of its light gets through, where the
+    inside keeps its own threshold: from behind (every ray the outside's), the frame is within that share of the
+    colour range of the outside's marched to 1e-4."""
+    from dataclasses import replace
+
+    assert whole.inside.cfg.stop_below == PrimitivesConfig().stop_below < OUTSIDE_STOP_BELOW
+    assert whole.outside.cfg.stop_below == OUTSIDE_STOP_BELOW
+    cam, _, _, w = rays_and_weights(whole, 180.0)
+    assert torch.all(w == 0.0)
+    frame = render_image(whole, cam, Controls(), RenderOptions(buffers=()))["rgb"]
+    kept = whole.outside.cfg
+    whole.outside.cfg = replace(kept, stop_below=1e-4)
+    try:
+        deep = render_image(whole.outside, cam, Controls(), RenderOptions(buffers=()))["rgb"]
+    finally:
+        whole.outside.cfg = kept
+    assert 0.0 < np.abs(frame - deep).max() <= OUTSIDE_STOP_BELOW + 1e-6  # 0.003 here: rays did stop sooner
