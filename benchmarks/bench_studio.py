@@ -102,7 +102,8 @@ def main() -> None:
                     results["windows"][f"{size[0]}x{size[1]}"] = window
                     continue
                 r = studio_run(display, avatars[0], [
-                    {"train": {"dataset": str(a.dataset), "out": str(work / "job"), "minutes": 10, "effects": "all"}},
+                    {"train": {"dataset": str(a.dataset), "out": str(work / f"job_{size[0]}x{size[1]}"), "minutes": 10,
+                               "effects": "all"}},  # a folder a window: the first job leaves its avatar
                     {"wait_frames": 600}, *orbit, {"cancel_jobs": True}, {"wait_job": True}], work, size)
                 window["fps_training"] = r["fps_training"]
                 r = studio_run(display, avatars[0], [

@@ -332,7 +332,7 @@ class Studio:
         if live and s.display.live_pass != "auto":
             passes = (s.display.live_pass,)
         self.last_submit_id = self.worker.submit(Request(s.controls(), cam, passes, frame, inspect=inspect,
-                                                         buffers=buffers, live=live))
+                                                         buffers=buffers, live=live, room=s.render_room()))
         self.last_submit_time = time.perf_counter()
         self.live_figures.submitted(self.last_submit_id, s.live.index, s.live.stamp)
         if live and self.live is not None:  # the next pose, tracked to be ready when this render should be done

@@ -9,6 +9,7 @@ the window's thread."""
 from __future__ import annotations
 
 import contextlib
+import functools
 import multiprocessing as mp
 import os
 import queue
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from models.avatars.rendering import RenderOptions, render_image
+from models.capture.frames import read_room
 from models.head.controls import Controls
 from render.camera import Camera, framing_camera
 
@@ -33,6 +35,7 @@ class Request:
     inspect: bool = False  # also the colour variants behind the shadow and shading buffers
     buffers: tuple[str, ...] | None = None  # the avatar's optional buffers to make (render_image's; None: all)
     live: bool = False  # a live pose: one pass (live_pass), the next pose follows at once
+    room: str | None = None  # a capture frame's own room (its file: the capture's camera moved), behind the render
 
 
 @dataclass
@@ -343,13 +346,19 @@ def render_passes(avatar, raster, request: Request, rid: int, stale, results,
         t0 = time.perf_counter()
         options = RenderOptions(frame=request.frame, inspect=request.inspect, buffers=request.buffers,
                                 chunk_rays=avatar.interactive_chunk_rays, should_stop=lambda: stale(rid), cores=CORES,
-                                quality=qualities[i])
+                                quality=qualities[i], room=None if request.room is None else room_image(request.room))
         buffers = render_image(avatar, cam, request.controls, options, raster)
         ms = 1e3 * (time.perf_counter() - t0)
         if stale(rid):
             return
         timed[name, size] = [*timed.get((name, size), [])[1 - TIMES_KEPT:], ms]
         results.put(("result", rid, name, buffers, ms))
+
+
+@functools.lru_cache(maxsize=2)
+def room_image(path: str) -> np.ndarray:
+    """(H,W,3) a capture frame's room, read once while its frame is shown (each of its passes renders it)."""
+    return read_room(path)
 
 
 def warm_up(avatar, raster) -> None:

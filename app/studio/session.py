@@ -244,6 +244,12 @@ class Session:
             return frame_camera(cap, cap.frames[self.timeline_frame]).resized(size, height)
         return self.view.camera(self.avatar.rest_vertices(), size, size)
 
+    def render_room(self) -> str | None:
+        """The file of the room behind the capture frame shown, where its capture keeps one a frame (the camera
+        moved: `track --room`); None: the plate, or the avatar's background colour, as the avatar has it."""
+        path = self.capture.frames[self.timeline_frame].extra.get("room_path") if self.on_capture_frame else None
+        return None if path is None else str(path)
+
     def controls(self) -> Controls:
         """What the avatar is shown with: a capture frame's controls on the timeline, else the sliders'."""
         if self.on_capture_frame:

@@ -120,8 +120,11 @@ def frame_room(frame: Frame) -> np.ndarray | None:
     frame (a tracked video whose camera moved: the frame with the person filled from around); None where the
     capture's plate stands behind every frame."""
     path = frame.extra.get("room_path")
-    if path is None:
-        return None
+    return None if path is None else read_room(path)
+
+
+def read_room(path) -> np.ndarray:
+    """(H,W,3) float a frame's room from its file (frame_room); DatasetError naming the file where it cannot be read."""
     try:
         return load_rgb(path)
     except (OSError, ValueError) as e:

@@ -84,3 +84,30 @@ def test_the_quality_panel_says_which_march_displays(gl, monkeypatch):
         assert shown() == "torch (AVATAR_STUDIO_NATIVE=0)"
     raster.release()
     assert load_avatar(CODYNERF_DEMO)[0].describe_display() == ""
+
+
+@pytest.mark.gl
+def test_a_capture_frames_own_room_stands_behind_its_render(gl, tmp_path):
+    """A request that names its frame's room (a capture whose camera moved) is rendered over that room, scaled to
+    the pass's size, where the avatar shows nothing; without one, over the avatar's own background."""
+    import numpy as np
+    from PIL import Image
+
+    avatar, _ = load_avatar(DEMO)
+    raster = Rasterizer(gl)
+    cam = framing_camera(avatar.card.rest_vertices(), 20, 5, fov_y_deg=18.0, width_px=48, height_px=48)
+    room = np.zeros((96, 96, 3), np.uint8)
+    room[:, :48] = (200, 30, 160)  # left half magenta, right half green: the render's corners show which
+    room[:, 48:] = (20, 180, 40)
+    Image.fromarray(room).save(tmp_path / "room.png")
+    results: queue.Queue = queue.Queue()
+    corners = {}
+    for name, path in (("room", str(tmp_path / "room.png")), ("none", None)):
+        request = Request(avatar.card.at_rest(Controls()), cam, ("final",), room=path)
+        render_passes(avatar, raster, request, 1, lambda rid: False, results, {})
+        rgb = [m for m in (results.get_nowait() for _ in range(results.qsize())) if m[0] == "result"][0][3]["rgb"]
+        corners[name] = np.round(255 * rgb[[0, 0, -1, -1], [0, -1, 0, -1]]).astype(int)
+    np.testing.assert_allclose(corners["room"], [[200, 30, 160], [20, 180, 40], [200, 30, 160], [20, 180, 40]],
+                               atol=2)
+    assert not np.allclose(corners["none"], corners["room"], atol=20)
+    raster.release()
