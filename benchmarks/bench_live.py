@@ -3,7 +3,7 @@ deliver it) drives each avatar; for every live render shown, the time from its s
 avatar's pixels on screen (median, 90th percentile, worst), and how many such renders a second the window shows;
 the tracker's time per frame, frames dropped, and the pass each render was. Beside them, in the same window, the
 studio's own slider-to-final-pixels latency (benchmarks/bench_studio.py's, 5 moves): on a machine others share,
-it shows how far the load has slowed everything (about 100 ms on this one idle).
+it shows how far the load has slowed everything (about 70 ms on this one idle).
 
     .venv/bin/python -m benchmarks.bench_live [--avatar resources/demo_avatar --avatar out/real/d3_view_win]
         [--video ../shared/data/video/expressions_d3.mp4] [--size 1440x900] [--runs 1]
