@@ -151,7 +151,7 @@ def foreground_reach_m(hit: np.ndarray, depth: np.ndarray, mask: np.ndarray, foc
 
 
 def view_range(split: CaptureSplit, head_centre: np.ndarray) -> dict[str, list[float]]:
-    """The directions the capture saw the head from, in the head's own frame (its root rotation undone): the
+    """The directions the capture saw the head from, in the head's own frame (its turn undone: head_rotation): the
     cameras' yaw (0: in front, positive: the subject's left) and pitch, least and most over the frames, degrees.
     head_centre (3,): the head model's template centre (the root rotation turns about about there)."""
     from scipy.spatial.transform import Rotation
@@ -160,7 +160,7 @@ def view_range(split: CaptureSplit, head_centre: np.ndarray) -> dict[str, list[f
     for f in split.frames:
         c = f.camera_to_world[:3, 3]
         centre = np.asarray(head_centre, np.float64) + np.asarray(f.controls.translation, np.float64)
-        p = Rotation.from_rotvec(np.asarray(f.controls.root, np.float64)).inv().apply(c - centre)
+        p = Rotation.from_rotvec(f.controls.head_rotation().astype(np.float64)).inv().apply(c - centre)
         yaws.append(math.degrees(math.atan2(p[0], p[2])))
         pitches.append(math.degrees(math.atan2(p[1], math.hypot(p[0], p[2]))))
     if not yaws:

@@ -40,6 +40,18 @@ class Controls:
         return {"root": self.root, "neck": self.neck, "jaw": self.jaw,
                 "eye_l": self.gaze_left, "eye_r": self.gaze_right}[joint]
 
+    def head_rotation(self) -> np.ndarray:
+        """(3,) axis-angle: the head's own turn, the root's and the neck's composed (R_root R_neck: the neck hangs
+        from the root). A tracked video's frames keep the body's slow turn in the root and the head's own in the
+        neck (models/tracking/torso.py); where the neck is still, the root's."""
+        from scipy.spatial.transform import Rotation
+
+        if not np.any(self.neck):
+            return np.asarray(self.root, np.float32)
+        turn = Rotation.from_rotvec(np.asarray(self.root, np.float64)) * Rotation.from_rotvec(
+            np.asarray(self.neck, np.float64))
+        return turn.as_rotvec().astype(np.float32)
+
     def with_expression(self, head: HeadModel, weights: dict[str, float]) -> Controls:
         """A copy with named expression weights set (others kept)."""
         expr = fit_length(self.expression, head.num_expression, "expression")

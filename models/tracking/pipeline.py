@@ -47,6 +47,7 @@ from models.tracking.masks import (
     room_residual,
 )
 from models.tracking.splits import frame_splits
+from models.tracking.torso import TORSO_SIGMA_S, torso_still
 from models.tracking.video import Framing, VideoInfo, cropped_frames, face_framing, sampled_frames
 from render.video import write_video
 
@@ -186,6 +187,9 @@ def track_video(cfg, model, bundle: Path, info: VideoInfo, feedback: Feedback = 
     faces: list[Face] = [f["face"] for f in kept]
     targets = np.stack([framing.points(f.landmarks_px[corr.mp_ids]) for f in faces])
     result = fit_frames(cfg, model, corr.vertex_ids, faces, targets, k, feedback)
+    times = np.array([f["time_s"] for f in kept], np.float64)
+    rate = (len(times) - 1) / max(float(times[-1] - times[0]), 1e-6) if len(times) > 1 else 1.0
+    result = replace(result, controls=torso_still(result.controls, model, rate))  # the body stays, the neck turns
     # The error that counts: the full head model's forward pass with the fitted controls, projected.
     with torch.inference_mode():
         verts = Head(model).pose(result.controls)[0]
@@ -252,6 +256,16 @@ def write_capture(cfg, tr: Tracked, model, folder: Path, feedback: Feedback = Fe
     return {**track_report(cfg, tr, splits, per_frame, plate_report, t_masks), "masks_by": way}
 
 
+def neck_turns(controls) -> dict | None:
+    """How far the head turned on the body (the neck's turn, degrees: torso.py), median and most over the frames;
+    None for a head model without a neck, whose root carries the whole turn."""
+    turns = np.degrees([float(np.linalg.norm(c.neck)) for c in controls])
+    if not np.any(turns):
+        return None
+    return {"median": round(float(np.median(turns)), 2), "max": round(float(np.max(turns)), 2),
+            "torso_sigma_s": TORSO_SIGMA_S}
+
+
 def track_report(cfg, tr: Tracked, splits: dict[str, list[dict]], per_frame: list[dict], plate_report: dict,
                  t_masks: float) -> dict:
     """What tracking/report.json says of a run: frames kept and dropped, the crop, the plate, the landmark error
@@ -274,6 +288,7 @@ def track_report(cfg, tr: Tracked, splits: dict[str, list[dict]], per_frame: lis
         "landmark_error_px": {"median": round(float(np.median(errors)), 3),
                               "p95": round(float(np.percentile(errors, 95)), 3),
                               "worst_frame_median": round(float(max(p["median_px"] for p in per_frame)), 3)},
+        "neck_turn_deg": neck_turns(tr.result.controls),
         "seconds": {"landmarks": round(tr.seconds_landmarks, 2), "fit": round(tr.result.seconds, 2),
                     "masks": round(t_masks, 2)},
         "seconds_per_frame": None, "per_frame": per_frame,
@@ -290,7 +305,8 @@ def write_frames(cfg, partial: Path, kept: list[dict], crops: list[np.ndarray], 
     (partial / "images").mkdir()
     (partial / "masks").mkdir()
     n_test = max(1, math.ceil(cfg.test_fraction * len(kept)))
-    split_list = frame_splits(cfg.split, np.stack([np.asarray(c.root, np.float64) for c in result.controls]), n_test)
+    split_list = frame_splits(cfg.split, np.stack([c.head_rotation().astype(np.float64) for c in result.controls]),
+                              n_test)
     train = [j for j in range(len(kept)) if split_list[j] == "train"]
     plate, inpainted = background_plate([crops[j] for j in train], [masks[j] for j in train],
                                         grow_px=max(1, round(0.01 * cfg.size)), offsets=framing.offsets[train],

@@ -86,14 +86,15 @@ class Carry:
                       for j in range(avatar.num_expression))
         rot = lambda v: Rotation.from_rotvec(np.asarray(v, np.float64)).inv()
         return Carry(rest, mapping, names, "jaw" in avatar.joint_names, {"eye_l", "eye_r"} <= set(avatar.joint_names),
-                     rot(rest.root), (rot(rest.gaze_left), rot(rest.gaze_right)))
+                     rot(rest.head_rotation()), (rot(rest.gaze_left), rot(rest.gaze_right)))
 
 
 def frame_channels(c: Controls, carry: Carry, limits: Limits) -> dict[str, float]:
     """One driver frame's controls as the avatar's channel values, relative to the neutral frame (carry.rest).
 
     expression.NAME = w - w_rest; jaw.open = degrees(jaw_x - jaw_x_rest); head.yaw|pitch|roll = the YXZ Euler
-    angles (degrees) of R_root R_root_rest^-1 (the turn since the neutral frame in the camera's axes, which are the
+    angles (degrees) of R_head R_head_rest^-1 (R_head: the root's and the neck's turns composed, head_rotation; the
+    turn since the neutral frame in the camera's axes, which are the
     avatar's world axes seen from the front); gaze.yaw|pitch = the mean over both eyes of the same for the eyes."""
     lo_hi = lambda key: limits.get(key, (-np.inf, np.inf))
     rest = carry.rest
@@ -103,7 +104,7 @@ def frame_channels(c: Controls, carry: Carry, limits: Limits) -> dict[str, float
                                                             *lo_hi("expression")))
     if carry.jaw:
         out["jaw.open"] = float(np.clip(np.degrees(float(c.jaw[0]) - float(rest.jaw[0])), *lo_hi("jaw.open")))
-    yaw, pitch, roll = (Rotation.from_rotvec(np.asarray(c.root, np.float64)) * carry.root_rest_inv).as_euler(
+    yaw, pitch, roll = (Rotation.from_rotvec(c.head_rotation().astype(np.float64)) * carry.root_rest_inv).as_euler(
         "YXZ", degrees=True)
     out["head.yaw"], out["head.pitch"], out["head.roll"] = float(yaw), float(pitch), float(roll)
     if carry.eyes:

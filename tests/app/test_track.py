@@ -210,8 +210,8 @@ def test_synthetic_capture_recovers_pose_and_expression(synth_ict_video, landmar
     for t, f in zip(truth, tracked, strict=True):
         # The head's rotation as the camera sees it: camera_from_world @ root.
         view = np.linalg.inv(t.camera_to_world)[:3, :3]
-        true_rel = Rotation.from_matrix(view) * Rotation.from_rotvec(t.controls.root)
-        got = Rotation.from_rotvec(f.controls.root)  # the tracked camera is the identity
+        true_rel = Rotation.from_matrix(view) * Rotation.from_rotvec(t.controls.head_rotation())
+        got = Rotation.from_rotvec(f.controls.head_rotation())  # the tracked camera is the identity
         angles.append(np.degrees((true_rel.inv() * got).magnitude()))
         expr_err.append(np.abs(f.controls.expression - t.controls.expression).mean())
     print(f"head rotation error: median {np.median(angles):.2f} deg, max {np.max(angles):.2f}; expression "
@@ -541,7 +541,7 @@ def test_split_by_view_holds_out_the_furthest_turns(face_video, landmarker, tmp_
     assert report["split_by"] == "view"
     splits = {s: load_split(out, s).frames for s in ("train", "val", "test")}
     every = sorted((f for fs in splits.values() for f in fs), key=lambda f: int(Path(f.image_path).stem))
-    turns = turn_from_usual_deg(Rotation.from_rotvec(np.stack([f.controls.root for f in every])).as_matrix())
+    turns = turn_from_usual_deg(Rotation.from_rotvec(np.stack([f.controls.head_rotation() for f in every])).as_matrix())
     turn_of = {f.image_path: t for f, t in zip(every, turns, strict=True)}
     held = [turn_of[f.image_path] for f in splits["test"]]
     trained = [turn_of[f.image_path] for f in splits["train"] + splits["val"]]

@@ -1,9 +1,14 @@
-"""The best rigid motion between two point sets: how models that read a frame in the head's own frame (NerFACE,
-the primitives' view direction) get the head's pose from the posed mesh, whatever the head model's joints."""
+"""The head's rigid motion in a frame: how models that read a frame in the head's own frame (NerFACE, the primitives'
+view direction) get the head's pose from the posed mesh and joints, whatever the head model's joints."""
 
 from __future__ import annotations
 
+import numpy as np
 import torch
+
+from models.head.controls import Controls
+from models.head.lbs import rotation_matrix_from_axis_angle
+from models.head.model import HeadModel
 
 
 def kabsch(source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -13,3 +18,17 @@ def kabsch(source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, to
     d = torch.sign(torch.linalg.det(vh.T @ u.T))
     r = (vh.T @ torch.diag(torch.tensor([1.0, 1.0, float(d)], dtype=torch.float64, device=vh.device)) @ u.T).float()
     return r, ct - r @ cs
+
+
+def head_pose(head_model: HeadModel, controls: Controls, vertices: torch.Tensor, joints: torch.Tensor
+              ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The head's rigid motion R, t from its rest (vertices[0], joints[0]: the controls without any turn) to the
+    frame (vertices[1], joints[1]). Where the neck turned (a tracked video keeps the body still and turns the head on
+    it: models/tracking/torso.py), exactly the head's own turn (Controls.head_rotation) about the neck joint and
+    where that joint went: a fit to the whole mesh would take in the still shoulders. Else the best rigid motion of
+    the whole mesh (kabsch), as avatars trained before the neck turned were."""
+    if not np.any(controls.neck) or "neck" not in head_model.joint_names:
+        return kabsch(vertices[0], vertices[1])
+    neck = head_model.joint_names.index("neck")
+    rotation = rotation_matrix_from_axis_angle(torch.as_tensor(controls.head_rotation())[None])[0].to(vertices)
+    return rotation, joints[1, neck] - rotation @ joints[0, neck]

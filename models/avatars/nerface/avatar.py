@@ -28,7 +28,7 @@ from models.avatars.components import losses
 from models.avatars.components.codes import CodeKeys, frame_code
 from models.avatars.components.encoding import encoded_size, frequency_encoding
 from models.avatars.components.plate import Plate
-from models.avatars.components.rigid import kabsch
+from models.avatars.components.rigid import head_pose
 from models.avatars.components.views import CaptureViews
 from models.head.controls import Controls
 from models.head.model import HeadModel
@@ -188,8 +188,8 @@ class NerfaceAvatar(Avatar):
     @torch.no_grad()
     def geometry(self, controls: Controls) -> NerfaceGeometry:
         unposed = Controls(shape=controls.shape, expression=controls.expression)
-        v, _, _ = self.head.pose([unposed, controls])
-        rotation, translation = kabsch(v[0], v[1])
+        v, joints, _ = self.head.pose([unposed, controls])
+        rotation, translation = head_pose(self.head_model, controls, v, joints)
         expr = np.zeros(self.expression_dim, np.float32)
         n = min(len(controls.expression), self.head_model.num_expression)
         expr[:n] = controls.expression[:n]

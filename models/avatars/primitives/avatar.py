@@ -29,7 +29,7 @@ from models.avatars.components import losses
 from models.avatars.components.codes import CodeKeys, frame_code, left_out_weights
 from models.avatars.components.plate import Plate
 from models.avatars.components.poses import PoseCorrected
-from models.avatars.components.rigid import kabsch
+from models.avatars.components.rigid import head_pose
 from models.avatars.components.views import CaptureViews
 from models.avatars.effects import key_light_dir
 from models.avatars.mesh import MeshField
@@ -177,17 +177,18 @@ class PrimitivesGeometry:
                                   None if self.expression is None else self.expression.to(device))
 
 
-def root_rotation(controls: Controls) -> torch.Tensor:
-    """(3,3) the rotation of the controls' root joint."""
-    return rotation_matrix_from_axis_angle(torch.as_tensor(np.asarray(controls.root, np.float32))[None])[0]
+def head_turn(controls: Controls) -> torch.Tensor:
+    """(3,3) the rotation of the controls' head: the root's and the neck's turns composed (Controls.head_rotation)."""
+    return rotation_matrix_from_axis_angle(torch.as_tensor(controls.head_rotation())[None])[0]
 
 
 def head_frame(controls: Controls, posed: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
-    """(V,3) a posed mesh with the controls' own rigid pose taken out exactly, in the head's frame: every joint hangs
-    from the root, so the root's rotation R about its posed place r (the root joint, which carries the translation
-    t) moves every vertex alike, v = R (u - r + t) + r, and u = R^T (v - r) + r - t. A fit of one rigid motion to
-    the whole mesh, as the geometry's `rotation` is, would take in part of an opened jaw."""
-    R = root_rotation(controls).to(posed)
+    """(V,3) a posed mesh with the controls' own rigid pose taken out exactly, in the head's frame, where the neck
+    has not turned (a turned neck's frame is posed anew: PrimitivesAvatar.geometry): every joint hangs from the
+    root, so the root's rotation R about its posed place r (the root joint, which carries the translation t) moves
+    every vertex alike, v = R (u - r + t) + r, and u = R^T (v - r) + r - t. A fit of one rigid motion to the whole
+    mesh, as the geometry's `rotation` is, would take in part of an opened jaw."""
+    R = head_turn(controls).to(posed)
     shift = torch.as_tensor(np.asarray(controls.translation), dtype=posed.dtype, device=posed.device)
     return (posed - root) @ R + (root - shift)
 
@@ -378,8 +379,11 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     @torch.no_grad()
     def geometry(self, controls: Controls) -> PrimitivesGeometry:
         unposed = Controls(shape=controls.shape, expression=controls.expression)
-        v, joints, _ = self.head.pose([unposed, controls])
-        rotation, translation = kabsch(v[0], v[1])
+        turned = bool(np.any(controls.neck))  # the head turned on the body: its own frame posed anew
+        still = np.zeros(3, np.float32)
+        v, joints, _ = self.head.pose([unposed, controls, *([replace(controls, root=still, neck=still,
+                                                                     translation=still)] if turned else [])])
+        rotation, translation = head_pose(self.head_model, controls, v, joints)
         E = self.head_model.num_expression
         cond = np.zeros(self.condition_dim, np.float32)
         n = min(len(controls.expression), E)
@@ -389,7 +393,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
         return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_keys.weights(controls),
                                   controls=controls,
-                                  expression=self.controls_expression_map(controls, v[1], joints[1, 0]))
+                                  expression=self.controls_expression_map(
+                                      controls, v[2] if turned else head_frame(controls, v[1], joints[1, 0])))
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> PrimitivesGeometry:
         """The frame's geometry; where the avatar casts shadows, with the posed mesh's depth map from the key light
@@ -448,14 +453,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return geometry_map(self.chart, self.triangles, vertices)[None] * (GEOMETRY_SCALE_M / EXPRESSION_MAP_UNIT_M)
 
     @torch.no_grad()
-    def controls_expression_map(self, controls: Controls, posed: torch.Tensor, root: torch.Tensor
-                                ) -> torch.Tensor | None:
+    def controls_expression_map(self, controls: Controls, local: torch.Tensor) -> torch.Tensor | None:
         """Delta G, the frame's expression map (`expression_maps`; None where the decoder reads none): the texels on
-        its posed mesh (V,3) with the controls' own rigid pose taken out exactly (head_frame; root: the posed root
-        joint), less those on the person's neutral face."""
+        its mesh (V,3) with the controls' own rigid pose taken out exactly (geometry: head_frame, or posed without
+        root, neck and translation), less those on the person's neutral face."""
         if not self.decoder.geometry_channels:
             return None
-        local = head_frame(controls, posed, root)
         key = np.asarray(controls.shape, np.float32).tobytes()
         if self._neutral is None or self._neutral[0] != key:  # the face expressions are measured from
             neutral, _, _ = self.head.pose([Controls(shape=controls.shape)])
@@ -468,7 +471,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         if posed is geo.posed:
             return geo.expression
         centre = torch.as_tensor(self.chart.centre, dtype=posed.dtype, device=posed.device)
-        return geo.expression + self.texel_map((posed - geo.posed) @ root_rotation(geo.controls).to(posed) + centre)
+        return geo.expression + self.texel_map((posed - geo.posed) @ head_turn(geo.controls).to(posed) + centre)
 
     def decode_slabs(self, geo: PrimitivesGeometry, condition: torch.Tensor, light: torch.Tensor | None,
                      training: bool, posed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

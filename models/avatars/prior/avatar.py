@@ -21,7 +21,7 @@ import torch
 
 from models.avatars.base import TrainingBatch
 from models.avatars.components import losses
-from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, PrimitivesGeometry, head_frame
+from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, PrimitivesGeometry
 from models.avatars.primitives.chart import chart_sampler, geometry_map
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.prior.encoders import ExpressionEncoder, IdentityEncoder, kl_divergence
@@ -123,13 +123,12 @@ class PriorAvatar(PrimitivesAvatar):
 
     # ---- per frame -------------------------------------------------------------------------------------
     @torch.no_grad()
-    def controls_expression_map(self, controls: Controls, posed: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
-        """Delta G, what the expression encoder reads: the geometry map of the posed mesh (V,3) with the controls'
-        rigid pose taken out exactly (head_frame: root, the posed root joint), less the person's neutral face's."""
+    def controls_expression_map(self, controls: Controls, local: torch.Tensor) -> torch.Tensor:
+        """Delta G, what the expression encoder reads: the geometry map of the frame's mesh (V,3) with the controls'
+        rigid pose taken out exactly (PrimitivesAvatar.geometry), less the person's neutral face's."""
         key = np.asarray(controls.shape, np.float32).tobytes()
         if self._neutral is None or self._neutral[0] != key:  # one person's frames follow each other: kept
             self._neutral = key, self.neutral_geometry_of(controls.shape)
-        local = head_frame(controls, posed, root)
         return geometry_map(self.sampler, self.triangles, local)[None] - self._neutral[1]
 
     def geometry(self, controls: Controls) -> PriorGeometry:

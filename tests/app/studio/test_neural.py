@@ -105,7 +105,8 @@ def test_a_capture_frames_own_room_stands_behind_its_render(gl, tmp_path):
     for name, path in (("room", str(tmp_path / "room.png")), ("none", None)):
         request = Request(avatar.card.at_rest(Controls()), cam, ("final",), room=path)
         render_passes(avatar, raster, request, 1, lambda rid: False, results, {})
-        rgb = [m for m in (results.get_nowait() for _ in range(results.qsize())) if m[0] == "result"][0][3]["rgb"]
+        sent = [results.get_nowait() for _ in range(results.qsize())]
+        rgb = next(m for m in sent if m[0] == "result")[3]["rgb"]
         corners[name] = np.round(255 * rgb[[0, 0, -1, -1], [0, -1, 0, -1]]).astype(int)
     np.testing.assert_allclose(corners["room"], [[200, 30, 160], [20, 180, 40], [200, 30, 160], [20, 180, 40]],
                                atol=2)
