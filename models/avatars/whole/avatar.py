@@ -309,12 +309,12 @@ class WholeHeadAvatar(Avatar):
         return RayOutput(self.mixed(w, parts, ("rgb", "opacity", "depth"), lambda out: out.buffers),
                          (w, parts))
 
-    def outside_ahead(self, rays: Rays, geometry: WholeGeometry, options: Any) -> Future | None:  # its rays
-        """Where both parts render rays of a frame, the outside's geometry and decode made on a thread of their own
-        while the inside poses, decodes and marches (a decode is one thread's work: the other core stood idle);
-        None where the outside's is made already or needs the GL rasterizer (its context is this thread's). The
-        child's whole head in the studio's view posed by d3's frames, on two cores: 61-63 ms a frame (median)
-        against 71-73 (`python -m benchmarks.bench_whole AVATAR --poses CAPTURE`)."""
+    def outside_ahead(self, rays: Rays, geometry: WholeGeometry, options: Any) -> Future | None:
+        """Where both parts render rays of a frame, the outside's geometry and decode (for its `rays`) made on a
+        thread of their own while the inside poses, decodes and marches (a decode is one thread's work: the other
+        core stood idle); None where the outside's is made already or needs the GL rasterizer (its context is this
+        thread's). The child's whole head in the studio's view posed by d3's frames, on two cores: 61-63 ms a frame
+        (median) against 71-73 (`python -m benchmarks.bench_whole AVATAR --poses CAPTURE`)."""
         if geometry._outside is not None or self.outside.casts_shadows or not rays.origins.is_cpu:
             return None
         eye = rays.origins.mean(0)  # as the outside's render_rays takes it: its decode is found made
