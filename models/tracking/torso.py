@@ -9,7 +9,8 @@ the torso's turn, its rotation smoothed over TORSO_SIGMA_S of the video (a turni
 followed), the neck the rest of the head's turn, and the translation the offset that keeps the neck's pivot, and so
 the face, exactly where it was: the root's rotation R about the root joint r, the neck's N about the neck joint n,
 send a head vertex x to R (N (x - n) + n - r) + r + t; with R' N' = R N, t' = t + (R - R') (n - r) sends it to the
-same place. Every frame of the video is treated alike (training, validation and held-out)."""
+same place (FLAME's pose-corrective shapes, which follow the neck's turn, move it by their own small amount; the
+built-in head has none). Every frame of the video is treated alike (training, validation and held-out)."""
 
 from __future__ import annotations
 
