@@ -14,6 +14,7 @@ built-in head has none). Every frame of the video is treated alike (training, va
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -28,11 +29,16 @@ TORSO_SIGMA_S = 1.5
 camera turning over seconds, the root's)."""
 
 
-def rest_joints(model: HeadModel, controls: Controls) -> np.ndarray:
-    """(J,3) the joints of the frame's shaped and expressive mesh before any turn (lbs's step 2)."""
-    shaped = model.template + model.shape_basis @ fit_length(controls.shape, model.num_shape, "shape") \
-        + model.expr_basis @ fit_length(controls.expression, model.num_expression, "expression")
-    return model.J_regressor @ shaped
+def joint_arm(model: HeadModel, a: str, b: str) -> Callable[[Controls], np.ndarray]:
+    """The rest vector from joint a to joint b (3,) of a frame's shaped and expressive mesh before any turn (lbs's
+    step 2), as a function of its controls: the joint regressor applied to the bases once, not to every frame's
+    mesh."""
+    rows = model.J_regressor[model.joint_names.index(b)] - model.J_regressor[model.joint_names.index(a)]  # (V,)
+    base = rows @ model.template
+    by_shape = np.einsum("v,vcs->cs", rows, model.shape_basis)
+    by_expression = np.einsum("v,vce->ce", rows, model.expr_basis)
+    return lambda c: base + by_shape @ fit_length(c.shape, model.num_shape, "shape") \
+        + by_expression @ fit_length(c.expression, model.num_expression, "expression")
 
 
 def torso_still(controls: list[Controls], model: HeadModel, fps: float, sigma_s: float = TORSO_SIGMA_S
@@ -41,7 +47,7 @@ def torso_still(controls: list[Controls], model: HeadModel, fps: float, sigma_s:
     docstring); unchanged where the head model has no neck joint, or for a single frame."""
     if "neck" not in model.joint_names or len(controls) < 2:
         return controls
-    root_j, neck_j = model.joint_names.index("root"), model.joint_names.index("neck")
+    arm_of = joint_arm(model, "root", "neck")
     head = Rotation.from_rotvec(np.stack([c.head_rotation() for c in controls]).astype(np.float64))
     q = head.as_quat()
     q[np.sum(q * q[0], axis=1) < 0] *= -1.0  # one hemisphere, so that the average of nearby turns is a turn
@@ -49,8 +55,7 @@ def torso_still(controls: list[Controls], model: HeadModel, fps: float, sigma_s:
     torso = Rotation.from_quat(q / np.linalg.norm(q, axis=1, keepdims=True))
     out = []
     for k, c in enumerate(controls):
-        joints = rest_joints(model, c)
-        arm = joints[neck_j] - joints[root_j]
+        arm = arm_of(c)
         before = Rotation.from_rotvec(np.asarray(c.root, np.float64))
         shift = before.apply(arm) - torso[k].apply(arm)
         out.append(replace(c, root=torso[k].as_rotvec().astype(np.float32),

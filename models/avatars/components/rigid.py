@@ -30,5 +30,10 @@ def head_pose(head_model: HeadModel, controls: Controls, vertices: torch.Tensor,
     if not np.any(controls.neck) or "neck" not in head_model.joint_names:
         return kabsch(vertices[0], vertices[1])
     neck = head_model.joint_names.index("neck")
-    rotation = rotation_matrix_from_axis_angle(torch.as_tensor(controls.head_rotation())[None])[0].to(vertices)
+    rotation = head_turn(controls).to(vertices)
     return rotation, joints[1, neck] - rotation @ joints[0, neck]
+
+
+def head_turn(controls: Controls) -> torch.Tensor:
+    """(3,3) the rotation of the controls' head: the root's and the neck's turns composed (Controls.head_rotation)."""
+    return rotation_matrix_from_axis_angle(torch.as_tensor(controls.head_rotation())[None])[0]

@@ -29,7 +29,7 @@ from models.avatars.components import losses
 from models.avatars.components.codes import CodeKeys, frame_code, left_out_weights
 from models.avatars.components.plate import Plate
 from models.avatars.components.poses import PoseCorrected
-from models.avatars.components.rigid import head_pose
+from models.avatars.components.rigid import head_pose, head_turn
 from models.avatars.components.views import CaptureViews
 from models.avatars.effects import key_light_dir
 from models.avatars.mesh import MeshField
@@ -177,14 +177,9 @@ class PrimitivesGeometry:
                                   None if self.expression is None else self.expression.to(device))
 
 
-def head_turn(controls: Controls) -> torch.Tensor:
-    """(3,3) the rotation of the controls' head: the root's and the neck's turns composed (Controls.head_rotation)."""
-    return rotation_matrix_from_axis_angle(torch.as_tensor(controls.head_rotation())[None])[0]
-
-
 def head_frame(controls: Controls, posed: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
     """(V,3) a posed mesh with the controls' own rigid pose taken out exactly, in the head's frame, where the neck
-    has not turned (a turned neck's frame is posed anew: PrimitivesAvatar.geometry): every joint hangs from the
+    has not turned (a turned neck's frame is posed anew: PrimitivesAvatar.head_local): every joint hangs from the
     root, so the root's rotation R about its posed place r (the root joint, which carries the translation t) moves
     every vertex alike, v = R (u - r + t) + r, and u = R^T (v - r) + r - t. A fit of one rigid motion to the whole
     mesh, as the geometry's `rotation` is, would take in part of an opened jaw."""
@@ -379,10 +374,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     @torch.no_grad()
     def geometry(self, controls: Controls) -> PrimitivesGeometry:
         unposed = Controls(shape=controls.shape, expression=controls.expression)
-        turned = bool(np.any(controls.neck))  # the head turned on the body: its own frame posed anew
-        still = np.zeros(3, np.float32)
-        v, joints, _ = self.head.pose([unposed, controls, *([replace(controls, root=still, neck=still,
-                                                                     translation=still)] if turned else [])])
+        v, joints, _ = self.head.pose([unposed, controls])
         rotation, translation = head_pose(self.head_model, controls, v, joints)
         E = self.head_model.num_expression
         cond = np.zeros(self.condition_dim, np.float32)
@@ -393,8 +385,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
         return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_keys.weights(controls),
                                   controls=controls,
-                                  expression=self.controls_expression_map(
-                                      controls, v[2] if turned else head_frame(controls, v[1], joints[1, 0])))
+                                  expression=self.controls_expression_map(controls, v[1], joints[1, 0]))
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> PrimitivesGeometry:
         """The frame's geometry; where the avatar casts shadows, with the posed mesh's depth map from the key light
@@ -452,13 +443,24 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
             self.chart = chart_sampler(self.head_model, self.cfg.grid * self.cfg.voxels, self.cfg.front)
         return geometry_map(self.chart, self.triangles, vertices)[None] * (GEOMETRY_SCALE_M / EXPRESSION_MAP_UNIT_M)
 
+    def head_local(self, controls: Controls, posed: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
+        """(V,3) the frame's posed mesh with its own rigid pose taken out exactly, in the head's frame: head_frame
+        where the neck is still; where the head turned on the body (a tracked video: models/tracking/torso.py), the
+        frame posed anew without root, neck and translation (the shoulders stayed: no one rigid motion undoes it)."""
+        if not np.any(controls.neck):
+            return head_frame(controls, posed, root)
+        still = np.zeros(3, np.float32)
+        return self.head.pose(replace(controls, root=still, neck=still, translation=still))[0][0]
+
     @torch.no_grad()
-    def controls_expression_map(self, controls: Controls, local: torch.Tensor) -> torch.Tensor | None:
+    def controls_expression_map(self, controls: Controls, posed: torch.Tensor, root: torch.Tensor
+                                ) -> torch.Tensor | None:
         """Delta G, the frame's expression map (`expression_maps`; None where the decoder reads none): the texels on
-        its mesh (V,3) with the controls' own rigid pose taken out exactly (geometry: head_frame, or posed without
-        root, neck and translation), less those on the person's neutral face."""
+        its posed mesh (V,3) in the head's frame (head_local; root: the posed root joint), less those on the
+        person's neutral face."""
         if not self.decoder.geometry_channels:
             return None
+        local = self.head_local(controls, posed, root)
         key = np.asarray(controls.shape, np.float32).tobytes()
         if self._neutral is None or self._neutral[0] != key:  # the face expressions are measured from
             neutral, _, _ = self.head.pose([Controls(shape=controls.shape)])

@@ -123,12 +123,13 @@ class PriorAvatar(PrimitivesAvatar):
 
     # ---- per frame -------------------------------------------------------------------------------------
     @torch.no_grad()
-    def controls_expression_map(self, controls: Controls, local: torch.Tensor) -> torch.Tensor:
-        """Delta G, what the expression encoder reads: the geometry map of the frame's mesh (V,3) with the controls'
-        rigid pose taken out exactly (PrimitivesAvatar.geometry), less the person's neutral face's."""
+    def controls_expression_map(self, controls: Controls, posed: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
+        """Delta G, what the expression encoder reads: the geometry map of the posed mesh (V,3) in the head's frame
+        (head_local: root, the posed root joint), less the person's neutral face's."""
         key = np.asarray(controls.shape, np.float32).tobytes()
         if self._neutral is None or self._neutral[0] != key:  # one person's frames follow each other: kept
             self._neutral = key, self.neutral_geometry_of(controls.shape)
+        local = self.head_local(controls, posed, root)
         return geometry_map(self.sampler, self.triangles, local)[None] - self._neutral[1]
 
     def geometry(self, controls: Controls) -> PriorGeometry:
