@@ -153,7 +153,7 @@ def foreground_reach_m(hit: np.ndarray, depth: np.ndarray, mask: np.ndarray, foc
 def view_range(split: CaptureSplit, head_centre: np.ndarray) -> dict[str, list[float]]:
     """The directions the capture saw the head from, in the head's own frame (its turn undone: head_rotation): the
     cameras' yaw (0: in front, positive: the subject's left) and pitch, least and most over the frames, degrees.
-    head_centre (3,): the head model's template centre (the root rotation turns about about there)."""
+    head_centre (3,): the head model's template centre (taken as where the head turns about)."""
     from scipy.spatial.transform import Rotation
 
     yaws, pitches = [], []

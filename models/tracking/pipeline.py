@@ -6,7 +6,8 @@ Frames are decoded at a chosen rate; MediaPipe's face landmarker finds 478 landm
 pose in each; one face-centred square crop serves every frame (fixed intrinsics), or where the head travels so far
 that one crop would leave the face small, a crop that follows it (each frame its own window of one canvas, and its
 own principal point: video.py); the head model is fitted (identity once, then per frame head pose, jaw and
-expression, from landmark reprojection with temporal smoothness; gaze from the blendshape scores); MediaPipe's
+expression, from landmark reprojection with temporal smoothness; gaze from the blendshape scores), and each
+frame's turn split into the torso's slow one and the head's own on the neck (torso.py); MediaPipe's
 selfie segmenter (segmenter.py; or GrabCut) cuts a foreground mask per frame, and the room behind the person becomes
 a background plate (masks.py) that avatars composite over, or where the room moved, each frame's own room; the
 frames are written as the camera saw them; the last part of the video (or with split "view",

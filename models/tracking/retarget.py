@@ -76,7 +76,7 @@ class Carry:
     """The avatar's expression channel names (its expression names, else indices)."""
     jaw: bool
     eyes: bool
-    root_rest_inv: Rotation
+    head_rest_inv: Rotation
     eyes_rest_inv: tuple[Rotation, Rotation]
 
     @staticmethod
@@ -94,8 +94,8 @@ def frame_channels(c: Controls, carry: Carry, limits: Limits) -> dict[str, float
 
     expression.NAME = w - w_rest; jaw.open = degrees(jaw_x - jaw_x_rest); head.yaw|pitch|roll = the YXZ Euler
     angles (degrees) of R_head R_head_rest^-1 (R_head: the root's and the neck's turns composed, head_rotation; the
-    turn since the neutral frame in the camera's axes, which are the
-    avatar's world axes seen from the front); gaze.yaw|pitch = the mean over both eyes of the same for the eyes."""
+    turn since the neutral frame in the camera's axes, which are the avatar's world axes seen from the front);
+    gaze.yaw|pitch = the mean over both eyes of the same for the eyes."""
     lo_hi = lambda key: limits.get(key, (-np.inf, np.inf))
     rest = carry.rest
     out: dict[str, float] = {}
@@ -104,7 +104,7 @@ def frame_channels(c: Controls, carry: Carry, limits: Limits) -> dict[str, float
                                                             *lo_hi("expression")))
     if carry.jaw:
         out["jaw.open"] = float(np.clip(np.degrees(float(c.jaw[0]) - float(rest.jaw[0])), *lo_hi("jaw.open")))
-    yaw, pitch, roll = (Rotation.from_rotvec(c.head_rotation().astype(np.float64)) * carry.root_rest_inv).as_euler(
+    yaw, pitch, roll = (Rotation.from_rotvec(c.head_rotation().astype(np.float64)) * carry.head_rest_inv).as_euler(
         "YXZ", degrees=True)
     out["head.yaw"], out["head.pitch"], out["head.roll"] = float(yaw), float(pitch), float(roll)
     if carry.eyes:

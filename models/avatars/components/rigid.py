@@ -27,11 +27,17 @@ def head_pose(head_model: HeadModel, controls: Controls, vertices: torch.Tensor,
     it: models/tracking/torso.py), exactly the head's own turn (Controls.head_rotation) about the neck joint and
     where that joint went: a fit to the whole mesh would take in the still shoulders. Else the best rigid motion of
     the whole mesh (kabsch), as avatars trained before the neck turned were."""
-    if not np.any(controls.neck) or "neck" not in head_model.joint_names:
+    if not turned_on_body(head_model, controls):
         return kabsch(vertices[0], vertices[1])
     neck = head_model.joint_names.index("neck")
     rotation = head_turn(controls).to(vertices)
     return rotation, joints[1, neck] - rotation @ joints[0, neck]
+
+
+def turned_on_body(head_model: HeadModel, controls: Controls) -> bool:
+    """Whether the controls turn the head on a still body (a neck joint, turned): the head's own frame is then not
+    the whole mesh's."""
+    return "neck" in head_model.joint_names and bool(np.any(controls.neck))
 
 
 def head_turn(controls: Controls) -> torch.Tensor:

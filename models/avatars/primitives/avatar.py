@@ -29,7 +29,7 @@ from models.avatars.components import losses
 from models.avatars.components.codes import CodeKeys, frame_code, left_out_weights
 from models.avatars.components.plate import Plate
 from models.avatars.components.poses import PoseCorrected
-from models.avatars.components.rigid import head_pose, head_turn
+from models.avatars.components.rigid import head_pose, head_turn, turned_on_body
 from models.avatars.components.views import CaptureViews
 from models.avatars.effects import key_light_dir
 from models.avatars.mesh import MeshField
@@ -447,7 +447,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """(V,3) the frame's posed mesh with its own rigid pose taken out exactly, in the head's frame: head_frame
         where the neck is still; where the head turned on the body (a tracked video: models/tracking/torso.py), the
         frame posed anew without root, neck and translation (the shoulders stayed: no one rigid motion undoes it)."""
-        if not np.any(controls.neck):
+        if not turned_on_body(self.head_model, controls):
             return head_frame(controls, posed, root)
         still = np.zeros(3, np.float32)
         return self.head.pose(replace(controls, root=still, neck=still, translation=still))[0][0]
