@@ -29,7 +29,7 @@ from models.avatars.checkpoint import load_checkpoint, save_checkpoint
 from models.avatars.components.plate import Plate
 from models.avatars.effects import parse_effects
 from models.avatars.prior.avatar import PriorAvatar, PriorConfig
-from models.avatars.prior.maps import average_texture, texture_map, texture_tensor
+from models.avatars.prior.maps import average_texture, eye_heights, texture_map, texture_tensor
 from models.capture.dataset import CaptureSplit, load_split
 from models.capture.frames import background_plate, frame_camera, load_rgb
 from models.device import DeviceError, device_of
@@ -64,7 +64,8 @@ class Identity:
 def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frames: int = NEUTRAL_FRAMES
                     ) -> torch.Tensor:
     """(1,3,S,S) the colours of the split's `frames` least expressive frames, unprojected onto the chart and
-    averaged (the seed's view-averaged neutral texture; texels none sees take the seen ones' mean)."""
+    averaged (the seed's view-averaged neutral texture; the back of the head none sees takes the crown's colour,
+    the rest of what none sees is filled from around: average_texture)."""
     amount = [float(np.abs(f.controls.expression).sum() + np.abs(f.controls.rotation("jaw")).sum())
               for f in split.frames]
     raster = Rasterizer(gl)
@@ -80,7 +81,7 @@ def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, fra
         colours.append(c)
         weights.append(w)
     raster.release()
-    texture, _ = average_texture(colours, weights)
+    texture, _ = average_texture(colours, weights, heights=eye_heights(avatar.head_model, avatar.sampler))
     return texture_tensor(texture)[None]
 
 

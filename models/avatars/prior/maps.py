@@ -13,7 +13,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from models.avatars.primitives.chart import ChartSampler, texel_points
+from models.avatars.primitives.chart import GAZE_JOINTS, ChartSampler, texel_points
+from models.head.model import HeadModel
 from render.camera import Camera
 from render.fill import push_pull
 from render.rays import Raster
@@ -52,13 +53,57 @@ def texture_map(sampler: ChartSampler, triangles: torch.Tensor, vertices: torch.
     return rgb.reshape(S, S, 3), weight.reshape(S, S).astype(np.float32)
 
 
-def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, np.ndarray]:
+CROWN_ABOVE_EYES_M = 0.085
+"""Texels this far above the eyes (on the template: the top of the skull, above a tall forehead; a child's rose to 7
+cm) are the crown: what a frontal video sees of them is the hair's colour (a bald head's skin), taken for the back
+of the head (average_texture)."""
+
+NAPE_BELOW_EYES_M = 0.06
+"""Texels no frame saw down to this far below the eyes are the back of the head and take the crown's colour; below
+(the nape, the back of the neck) they are filled from around, hair and neck alike."""
+
+
+def eye_heights(model: HeadModel, sampler: ChartSampler) -> np.ndarray:
+    """(S,S) each texel's height above the eyes on the template, metres (the eyes: the mean of the vertices the eye
+    joints carry; a head model without them has its eyes 0.35 of its half-height above its middle, where ICT's
+    and the built-in head's lie); nan off the head."""
+    verts = np.asarray(model.template, np.float64)
+    names = [j for j in GAZE_JOINTS if j in model.joint_names]
+    carried = np.zeros(len(verts), bool)
+    for name in names:
+        carried |= model.weights[:, model.joint_names.index(name)] > 0.5
+    low, high = verts[:, 1].min(), verts[:, 1].max()
+    eyes = verts[carried, 1].mean() if carried.any() else 0.5 * (low + high) + 0.35 * 0.5 * (high - low)
+    tri = np.asarray(model.triangles)[np.maximum(sampler.triangles, 0)]
+    y = (verts[tri, 1] * sampler.bary).sum(1) - eyes
+    S = sampler.size
+    return np.where(sampler.valid, y, np.nan).reshape(S, S)
+
+
+def weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(C,) each channel's weighted median of values (N,C) with weights (N,) > 0.
+
+    >>> weighted_median(np.array([[0.0], [1.0], [5.0]]), np.array([1.0, 3.0, 1.0])).tolist()
+    [1.0]
+    """
+    out = []
+    for c in values.T:
+        order = np.argsort(c)
+        cum = np.cumsum(weights[order])
+        out.append(c[order][np.searchsorted(cum, 0.5 * cum[-1])])
+    return np.array(out)
+
+
+def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: np.ndarray | None = None,
+                    heights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The weighted mean of frames' unprojected colours (S,S,3) and where any frame saw the texel (S,S) bool;
     texels none saw take `fill` where given, else are filled from the seen ones around them (render/fill.py's
-    push-pull: a video that saw the front gives the back of the head the colours at the edge of what it saw, the
-    hair's about the crown and the sides, where the seed's mean of every seen texel gave it the face's skin); grey
-    where none was seen."""
+    push-pull: a video that saw the front gives the back of the head the colours at the edge of what it saw, where
+    the seed's mean of every seen texel gave it the face's skin); grey where none was seen. heights (S,S), each
+    texel's height above the eyes (eye_heights): the unseen back of the head, down to NAPE_BELOW_EYES_M below the
+    eyes, takes the colour seen on the crown (the weighted median of the texels CROWN_ABOVE_EYES_M above them),
+    before the fill: the edge of a frontal video's view is the ears and cheeks as much as the hair, and from them
+    the back came out skin-coloured under dark hair."""
     w = np.stack(weights)[..., None]
     total = w.sum(0)
     seen = total[..., 0] > 1e-6
@@ -67,7 +112,14 @@ def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: 
         return np.where(seen[..., None], mean, fill).astype(np.float32), seen
     if not seen.any():
         return np.full_like(mean, 0.5, dtype=np.float32), seen
-    return push_pull(mean.astype(np.float64), seen).astype(np.float32), seen
+    known = seen
+    if heights is not None:
+        crown = seen & (np.nan_to_num(heights, nan=-1.0) > CROWN_ABOVE_EYES_M)
+        back = ~seen & (np.nan_to_num(heights, nan=-1.0) > -NAPE_BELOW_EYES_M)
+        if crown.any():
+            mean = np.where(back[..., None], weighted_median(mean[crown], total[crown][:, 0]), mean)
+            known = seen | back
+    return push_pull(mean.astype(np.float64), known).astype(np.float32), seen
 
 
 def texture_tensor(texture: np.ndarray) -> torch.Tensor:

@@ -133,6 +133,28 @@ def test_gaze_enters_apart_from_expression():
 SMALL = PrimitivesConfig(grid=8, voxels=4, width=16)
 
 
+def test_kept_size_primitives_never_shrink_below_their_places(builtin_model):
+    """keep_size: a decoder asking every primitive to shrink to e^-0.5 of its size (the offsets' scale channels)
+    leaves them at their layout size, where without it they take e^-0.5 of it; one asking them to grow gets its way
+    with or without. The volume prior then has nothing below the layout to pull towards: its gradient there is 0."""
+    from dataclasses import replace
+
+    for keep, scale in ((False, -0.5), (True, -0.5), (True, 0.25)):
+        avatar = PrimitivesAvatar(builtin_model, replace(SMALL, keep_size=keep), 1, np.zeros(3, np.float32))
+        with torch.no_grad():
+            avatar.decoder.offsets.weight.zero_()
+            avatar.decoder.offsets.bias.zero_()
+            avatar.decoder.offsets.bias[6:9] = scale
+        geo = avatar.geometry(Controls())
+        prims, offsets = avatar.decode(geo, avatar.codes(0), torch.tensor([0.0, 0.0, 1.0]), training=True)
+        assert float(offsets[:, 6:9].detach().sub(scale).abs().max()) < 1e-6
+        want = avatar.layout_half[:, None] * float(np.exp(scale) if scale > 0 or not keep else 1.0)
+        torch.testing.assert_close(prims.half_sizes, want.expand(-1, 3))
+        (prims.half_sizes.prod(1) / avatar.layout_half.pow(3)).mean().backward()  # the volume prior
+        pull = float(avatar.decoder.offsets.bias.grad[6:9].abs().max())
+        assert (pull == 0.0) == (keep and scale < 0), (keep, scale, pull)
+
+
 @pytest.mark.gl
 def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     capture = synth_capture("studio", 16, 32)

@@ -14,7 +14,7 @@ import torch
 
 from models.avatars.primitives.chart import GEOMETRY_SCALE_M, chart_sampler, eye_cells, geometry_map, texel_points
 from models.avatars.prior.avatar import PriorAvatar, PriorConfig
-from models.avatars.prior.maps import texture_map
+from models.avatars.prior.maps import CROWN_ABOVE_EYES_M, NAPE_BELOW_EYES_M, average_texture, eye_heights, texture_map
 from models.avatars.rendering import render_image
 from models.capture.synthetic import SynthConfig, synthesize
 from models.head.controls import Controls
@@ -479,6 +479,38 @@ def test_a_frontal_scans_back_of_the_head_takes_the_hair_colour(tmp_path, gl):
     back = np.concatenate([lum[middle, :2], lum[middle, -2:]], 1).mean()
     face = lum[middle, S // 2 - 1:S // 2 + 1].mean()
     assert face > 0.3 and back < 0.3 * face, (back, face)
+
+
+def test_the_unseen_back_of_the_head_takes_the_crowns_colour_hand_worked():
+    """A frontal view of 8 x 8 texels: the middle columns seen, dark hair (0.1) on the crown rows, skin (0.8) below;
+    the outer columns unseen. With the texels' heights above the eyes, the unseen ones down to the nape take the
+    crown's colour exactly (0.1, where the fill from around gave them 0.57 on average, the skin beside them); below the nape
+    they are filled from around as before; the seen ones keep theirs."""
+    S = 8
+    heights = np.repeat(np.linspace(0.12, -0.12, S)[:, None], S, 1)  # rows top (crown) first
+    colour = np.where(heights[..., None] > CROWN_ABOVE_EYES_M, 0.1, 0.8) * np.ones((S, S, 3))
+    weight = np.zeros((S, S), np.float32)
+    weight[:, 3:5] = 1.0
+    plain, seen = average_texture([colour], [weight])
+    hair, _ = average_texture([colour], [weight], heights=heights)
+    back = ~seen & (heights > -NAPE_BELOW_EYES_M)
+    assert back.sum() == 6 * 6 and np.allclose(hair[back], 0.1)
+    assert float(plain[back].mean()) > 0.5  # the fill from around: mostly the skin beside (0.57)
+    np.testing.assert_array_equal(hair[seen], colour[seen].astype(np.float32))
+    nape = ~seen & ~back
+    assert np.all((hair[nape] > 0.1) & (hair[nape] < 0.8))  # between the hair above and the neck beside
+
+
+def test_eye_heights_are_the_templates_heights_above_its_eyes():
+    """The built-in head's texels: the crown 11 cm above the eyes (its top, 0.174 m over its middle, the eyes 0.061),
+    heights falling from the chart's top row to its bottom, and nan where the chart's ray misses the head."""
+    head = load_builtin()
+    sampler = chart_sampler(head, 32, 2.0)
+    h = eye_heights(head, sampler)
+    assert abs(np.nanmax(h) - (0.174 - 0.061)) < 0.01
+    rows = np.nanmean(h, 1)
+    assert np.all(np.diff(rows[np.isfinite(rows)]) < 0)
+    np.testing.assert_array_equal(np.isnan(h).ravel(), ~sampler.valid)
 
 
 def test_the_prior_sits_on_a_flame_head_as_on_its_own(tmp_path):
