@@ -61,11 +61,10 @@ class Identity:
     geometry: torch.Tensor
 
 
-def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frames: int = NEUTRAL_FRAMES
-                    ) -> torch.Tensor:
-    """(1,3,S,S) the colours of the split's `frames` least expressive frames, unprojected onto the chart and
-    averaged (the seed's view-averaged neutral texture; the back of the head none sees takes the crown's colour,
-    the rest of what none sees is filled from around: average_texture)."""
+def neutral_views(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frames: int = NEUTRAL_FRAMES
+                  ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The colours (S,S,3) and weights (S,S) of the split's `frames` least expressive frames unprojected onto the
+    chart (maps.texture_map), a pair a frame."""
     amount = [float(np.abs(f.controls.expression).sum() + np.abs(f.controls.rotation("jaw")).sum())
               for f in split.frames]
     raster = Rasterizer(gl)
@@ -81,7 +80,16 @@ def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, fra
         colours.append(c)
         weights.append(w)
     raster.release()
-    texture, _ = average_texture(colours, weights, heights=eye_heights(avatar.head_model, avatar.sampler))
+    return colours, weights
+
+
+def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frames: int = NEUTRAL_FRAMES
+                    ) -> torch.Tensor:
+    """(1,3,S,S) the colours of the split's `frames` least expressive frames, unprojected onto the chart and
+    averaged (the seed's view-averaged neutral texture; the back of the head none sees takes the crown's colour,
+    the rest of what none sees is filled from around: average_texture)."""
+    texture, _ = average_texture(*neutral_views(split, avatar, gl, frames),
+                                 heights=eye_heights(avatar.head_model, avatar.sampler))
     return texture_tensor(texture)[None]
 
 

@@ -113,13 +113,19 @@ def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: 
     if not seen.any():
         return np.full_like(mean, 0.5, dtype=np.float32), seen
     known = seen
-    if heights is not None:
-        crown = seen & (np.nan_to_num(heights, nan=-1.0) > CROWN_ABOVE_EYES_M)
+    hair = None if heights is None else crown_colour(mean, total[..., 0], heights)
+    if hair is not None:
         back = ~seen & (np.nan_to_num(heights, nan=-1.0) > -NAPE_BELOW_EYES_M)
-        if crown.any():
-            mean = np.where(back[..., None], weighted_median(mean[crown], total[crown][:, 0]), mean)
-            known = seen | back
+        mean = np.where(back[..., None], hair, mean)
+        known = seen | back
     return push_pull(mean.astype(np.float64), known).astype(np.float32), seen
+
+
+def crown_colour(mean: np.ndarray, weight: np.ndarray, heights: np.ndarray) -> np.ndarray | None:
+    """(3,) the colour seen on the crown: the weighted median of the texels (S,S,3) seen (weight (S,S) > 0) that lie
+    CROWN_ABOVE_EYES_M above the eyes (heights (S,S): eye_heights); None where none of them was seen."""
+    crown = (weight > 1e-6) & (np.nan_to_num(heights, nan=-1.0) > CROWN_ABOVE_EYES_M)
+    return weighted_median(mean[crown], weight[crown]) if crown.any() else None
 
 
 def texture_tensor(texture: np.ndarray) -> torch.Tensor:

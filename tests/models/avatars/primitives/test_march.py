@@ -170,25 +170,6 @@ def test_one_slab_of_known_density_hand_worked():
     torch.testing.assert_close(out.depth, torch.tensor([1.0]), atol=0.02, rtol=0)  # the slab's middle, near enough
 
 
-def test_light_from_beyond_a_distance_hand_worked():
-    # The slab above, 5 samples 0.02 m apart at t = 0.96 ... 1.04 (optical depth 0.4 each): beyond 1.01 lie the last
-    # two, which the light reaches through 1.2 and which take 1 - e^-0.8 of it: e^-1.2 - e^-2. Nothing beyond 2 m;
-    # everything beyond 0 (the opacity); the sum carries gradients to the density.
-    P, M = 1, 2
-    density = torch.full((P, M, M, M), 20.0, requires_grad=True)
-    prims = march.Primitives(torch.zeros(1, 3), torch.eye(3)[None], torch.full((1, 3), 0.05), density,
-                             torch.tensor([1.0, 0, 0]).expand(P, M, M, M, 3))
-    o, d = torch.tensor([[0.01, -0.02, -1.0]]).expand(3, 3), torch.tensor([[0.0, 0.0, 1.0]]).expand(3, 3)
-    out = march.march(o, d, torch.zeros(3), prims, march.every_primitive(o, prims), samples=5,
-                      beyond=torch.tensor([1.01, 2.0, 0.0]))
-    want = torch.tensor([math.exp(-1.2) - math.exp(-2.0), 0.0, 1 - math.exp(-2.0)])
-    torch.testing.assert_close(out.behind, want)
-    torch.testing.assert_close(out.opacity, torch.full((3,), 1 - math.exp(-2.0)))
-    out.behind[0].backward()
-    assert density.grad is not None and float(density.grad.abs().sum()) > 0
-    assert march.march(o, d, torch.zeros(3), prims, march.every_primitive(o, prims), samples=5).behind is None
-
-
 def test_hard_cases_stay_finite():
     """Primitives of zero size, rays along a face, densities of 0 and 1e6, the camera inside a primitive."""
     prims = random_primitives(P=20, M=4, seed=7, dtype=torch.float32)

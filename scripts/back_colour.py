@@ -1,0 +1,64 @@
+"""How near the back of an avatar's head comes to the colour its video saw on the crown: the avatar at rest seen from
+behind (yaw 180, 5 degrees up, 256 px), the mean colour of the upper half of its opaque silhouette (the head, not
+the shoulders), against the crown's colour in the capture (the weighted median of the chart's texels 8.5 cm and more
+above the eyes that its least expressive frames saw: models/avatars/prior/maps.py crown_colour). A whole head's
+back is its outside's.
+
+    .venv/bin/python scripts/back_colour.py AVATAR CAPTURE [AVATAR CAPTURE ...]"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from models.avatars.prior.avatar import PriorAvatar
+from models.avatars.prior.maps import crown_colour, eye_heights
+from models.avatars.registry import load_avatar
+from models.avatars.rendering import RenderOptions, render_image
+from models.capture.dataset import load_split
+from models.head.controls import Controls
+from models.training.prior import neutral_views
+from render.camera import turntable_camera
+from render.gl.context import GLContext
+from render.gl.raster import Rasterizer
+
+
+def back_colour(avatar, raster: Rasterizer, size: int = 256) -> np.ndarray:
+    """(3,) the mean colour of the upper half of the avatar's opaque silhouette (opacity > 0.9) seen from behind."""
+    cam = turntable_camera(avatar.card.rest_vertices(), 180.0, 5.0, fov_y_deg=18.0, width_px=size, height_px=size)
+    with torch.inference_mode():
+        out = render_image(avatar, cam, avatar.card.at_rest(Controls()), RenderOptions(buffers=()), raster)
+    solid = np.asarray(out["opacity"]) > 0.9
+    rows = np.nonzero(solid.any(1))[0]
+    solid[rows.min() + (rows.max() - rows.min()) // 2:] = False
+    return np.asarray(out["rgb"])[solid].mean(0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("pairs", nargs="+", type=Path, help="AVATAR CAPTURE, as many pairs as wanted")
+    a = ap.parse_args()
+    if len(a.pairs) % 2:
+        ap.error("give each avatar its capture: AVATAR CAPTURE [AVATAR CAPTURE ...]")
+    gl = GLContext.headless()
+    raster = Rasterizer(gl)
+    for folder, capture in zip(a.pairs[::2], a.pairs[1::2]):
+        avatar = load_avatar(folder)[0]
+        prior = getattr(avatar, "outside", avatar)
+        if not isinstance(prior, PriorAvatar):
+            raise SystemExit(f"{folder}: neither a whole head nor a personalised prior")
+        colours, weights = neutral_views(load_split(capture, "train"), prior, gl)
+        total = np.stack(weights).sum(0)
+        mean = (np.stack(colours) * np.stack(weights)[..., None]).sum(0) / np.maximum(total, 1e-6)[..., None]
+        crown = crown_colour(mean, total, eye_heights(prior.head_model, prior.sampler))
+        back = back_colour(avatar, raster)
+        rgb = lambda c: "-" if c is None else "(" + ", ".join(f"{float(x):.3f}" for x in c) + ")"
+        gap = "-" if crown is None else f"{np.linalg.norm(back - crown):.3f}"
+        print(f"{folder}: back of the head {rgb(back)}, crown {rgb(crown)}, distance {gap}")
+
+
+if __name__ == "__main__":
+    main()
