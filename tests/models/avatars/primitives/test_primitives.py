@@ -258,9 +258,10 @@ def test_a_newer_request_stops_a_frame_within_its_one_batch(gl):
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (--device cuda); torch sees none here")
 def test_cuda_trains_and_renders_as_the_cpu_does(synth_capture, gl, tmp_path):
     """`train --device cuda`: the same steps (same seed and rays) give the same losses and weights to float
-    tolerance, with every effect and expression maps on; a render on the GPU (the torch march) matches the CPU's
-    (the C march where a compiler is found: within 2e-3 of the torch march, tests of test_native.py)."""
-    options = ("grid=8", "voxels=4", "width=16", "expression_maps=true")
+    tolerance, with every effect, expression maps, the opacity window and kept sizes on; a render on the GPU (the
+    torch march) matches the CPU's (the C march where a compiler is found: within 2e-3 of the torch march, tests of
+    test_native.py)."""
+    options = ("grid=8", "voxels=4", "width=16", "expression_maps=true", "opacity_window=true", "keep_size=true")
     gpu_run_matches_cpu(TrainConfig(dataset=synth_capture("sun", 12, 32), out=tmp_path / "cpu", model="primitives",
                                     steps=4, checkpoint_seconds=1e9, model_options=options), gl, 0.5,
                         ("rgb", "normals", "opacity"))
