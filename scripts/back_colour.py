@@ -45,7 +45,7 @@ def main() -> None:
         ap.error("give each avatar its capture: AVATAR CAPTURE [AVATAR CAPTURE ...]")
     gl = GLContext.headless()
     raster = Rasterizer(gl)
-    for folder, capture in zip(a.pairs[::2], a.pairs[1::2]):
+    for folder, capture in zip(a.pairs[::2], a.pairs[1::2], strict=True):
         avatar = load_avatar(folder)[0]
         prior = getattr(avatar, "outside", avatar)
         if not isinstance(prior, PriorAvatar):

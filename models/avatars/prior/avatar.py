@@ -29,7 +29,6 @@ from models.head.controls import Controls
 from models.head.model import HeadModel
 from models.ranges import Range
 
-
 PERSONAL_SETTINGS = {"opacity_window": True, "keep_size": True}
 """What a personalised prior's primitives take on (personalize), whatever the corpus's prior had: MVP's opacity
 window and at least their places' size, as a video's own primitives have them (PrimitivesConfig). The shipped prior

@@ -496,8 +496,8 @@ def test_a_frontal_scans_back_of_the_head_takes_the_hair_colour(tmp_path, gl):
 def test_the_unseen_back_of_the_head_takes_the_crowns_colour_hand_worked():
     """A frontal view of 8 x 8 texels: the middle columns seen, dark hair (0.1) on the crown rows, skin (0.8) below;
     the outer columns unseen. With the texels' heights above the eyes, the unseen ones down to the nape take the
-    crown's colour exactly (0.1, where the fill from around gave them 0.57 on average, the skin beside them); below the nape
-    they are filled from around as before; the seen ones keep theirs."""
+    crown's colour exactly (0.1, where the fill from around gave them 0.57 on average, the skin beside them); below
+    the nape they are filled from around as before; the seen ones keep theirs."""
     S = 8
     heights = np.repeat(np.linspace(0.12, -0.12, S)[:, None], S, 1)  # rows top (crown) first
     colour = np.where(heights[..., None] > CROWN_ABOVE_EYES_M, 0.1, 0.8) * np.ones((S, S, 3))
