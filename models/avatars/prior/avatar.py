@@ -13,7 +13,7 @@ chart's eye cells (the seed's masked gaze)."""
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -28,14 +28,6 @@ from models.avatars.prior.encoders import ExpressionEncoder, IdentityEncoder, kl
 from models.head.controls import Controls
 from models.head.model import HeadModel
 from models.ranges import Range
-
-PERSONAL_SETTINGS = {"opacity_window": True, "keep_size": True}
-"""What a personalised prior's primitives take on (personalize), whatever the corpus's prior had: MVP's opacity
-window and at least their places' size, as a video's own primitives have them (PrimitivesConfig). The shipped prior
-has neither, and its square boxes showed at the shoulders and the nape, and from 60 degrees the face's boxes as a
-second face beside the first. On the child's video (3 minutes of personalising, 637 steps with, 690 without): the
-back of the head 0.013 from the crown's colour against 0.045 (`scripts/back_colour.py`), soft box edges and one face
-at 60 degrees (docs/results.md)."""
 
 
 @dataclass(frozen=True)
@@ -116,9 +108,7 @@ class PriorAvatar(PrimitivesAvatar):
 
     # ---- the person --------------------------------------------------------------------------------------
     def personalize(self, texture: torch.Tensor, geometry: torch.Tensor) -> None:
-        """Make this avatar the person whose neutral texture and geometry maps (1,3,S,S) these are (Eq. 2); its
-        primitives take PERSONAL_SETTINGS (the fine-tuning that follows fits the decoder to them)."""
-        self.cfg = replace(self.cfg, **PERSONAL_SETTINGS)
+        """Make this avatar the person whose neutral texture and geometry maps (1,3,S,S) these are (Eq. 2)."""
         self.neutral_texture.copy_(texture.reshape(self.neutral_texture.shape))
         self.neutral_geometry.copy_(geometry.reshape(self.neutral_geometry.shape))
         self._own_biases = None
