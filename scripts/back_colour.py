@@ -1,8 +1,8 @@
 """How near the back of an avatar's head comes to the colour its video saw on the crown: the avatar at rest seen from
 behind (yaw 180, 5 degrees up, 256 px), the mean colour of the upper half of its opaque silhouette (the head, not
 the shoulders), against the crown's colour in the capture (the weighted median of the chart's texels 8.5 cm and more
-above the eyes that its least expressive frames saw: models/avatars/prior/maps.py crown_colour). A whole head's
-back is its outside's.
+above the eyes that its least expressive frames saw: models/avatars/prior/maps.py crown_colour, in the chart of the
+shipped prior placed on the capture's head model).
 
     .venv/bin/python scripts/back_colour.py AVATAR CAPTURE [AVATAR CAPTURE ...]"""
 
@@ -14,9 +14,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from models.avatars.prior.avatar import PriorAvatar
 from models.avatars.prior.maps import crown_colour, eye_heights
-from models.avatars.registry import load_avatar
+from models.avatars.registry import SHIPPED_PRIOR, load_avatar, load_prior
 from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
 from models.head.controls import Controls
@@ -47,10 +46,9 @@ def main() -> None:
     raster = Rasterizer(gl)
     for folder, capture in zip(a.pairs[::2], a.pairs[1::2], strict=True):
         avatar = load_avatar(folder)[0]
-        prior = getattr(avatar, "outside", avatar)
-        if not isinstance(prior, PriorAvatar):
-            raise SystemExit(f"{folder}: neither a whole head nor a personalised prior")
-        colours, weights = neutral_views(load_split(capture, "train"), prior, gl)
+        split = load_split(capture, "train")
+        prior = load_prior(SHIPPED_PRIOR, split.head_model)[0]  # its chart: the texels' places on the head model
+        colours, weights = neutral_views(split, prior, gl)
         total = np.stack(weights).sum(0)
         mean = (np.stack(colours) * np.stack(weights)[..., None]).sum(0) / np.maximum(total, 1e-6)[..., None]
         crown = crown_colour(mean, total, eye_heights(prior.head_model, prior.sampler))
