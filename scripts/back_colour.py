@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from models.avatars.prior.maps import crown_colour, eye_heights
+from models.avatars.prior.maps import crown_colour, eye_heights, weighted_mean
 from models.avatars.registry import SHIPPED_PRIOR, load_avatar, load_prior
 from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
@@ -48,9 +48,7 @@ def main() -> None:
         avatar = load_avatar(folder)[0]
         split = load_split(capture, "train")
         prior = load_prior(SHIPPED_PRIOR, split.head_model)[0]  # its chart: the texels' places on the head model
-        colours, weights = neutral_views(split, prior, gl)
-        total = np.stack(weights).sum(0)
-        mean = (np.stack(colours) * np.stack(weights)[..., None]).sum(0) / np.maximum(total, 1e-6)[..., None]
+        mean, total = weighted_mean(*neutral_views(split, prior, gl))
         crown = crown_colour(mean, total, eye_heights(prior.head_model, prior.sampler))
         back = back_colour(avatar, raster)
         rgb = lambda c: "-" if c is None else "(" + ", ".join(f"{float(x):.3f}" for x in c) + ")"

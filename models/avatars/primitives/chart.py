@@ -68,15 +68,22 @@ def geometry_map(sampler: ChartSampler, triangles: torch.Tensor, head_vertices: 
     return p.T.reshape(3, S, S)
 
 
+def carried_by(model: HeadModel, names: tuple[str, ...]) -> np.ndarray:
+    """(V,) the vertices that the joints of these names carry (skin weight over 0.5); names the model lacks carry
+    none."""
+    carried = np.zeros(model.num_vertices, bool)
+    for name in names:
+        if name in model.joint_names:
+            carried |= model.weights[:, model.joint_names.index(name)] > 0.5
+    return carried
+
+
 def eye_cells(model: HeadModel, size: int, cells: int = 8, front: float = 0.0) -> torch.Tensor:
     """(1,1,cells,cells): 1 on the chart's cells whose texels lie on an eyeball (and their neighbours), where the
     seed lets gaze act; ones everywhere for a head without eye joints."""
-    names = [j for j in GAZE_JOINTS if j in model.joint_names]
-    if not names:
+    if not any(j in model.joint_names for j in GAZE_JOINTS):
         return torch.ones(1, 1, cells, cells)
-    on_eye = np.zeros(model.num_vertices, bool)
-    for name in names:
-        on_eye |= model.weights[:, model.joint_names.index(name)] > 0.5
+    on_eye = carried_by(model, GAZE_JOINTS)
     s = chart_sampler(model, size, front)
     texel = np.zeros(size * size, np.float32)
     ok = s.valid
@@ -96,9 +103,7 @@ def expression_share(model: HeadModel, size: int, cells: int, front: float = 0.0
     or an eye carries); 0 on the crown, the back and the sides of the neck."""
     moved = np.abs(np.asarray(model.expr_basis)).max(axis=(1, 2)) > EXPRESSION_REACH_M \
         if model.expr_basis.shape[-1] else np.zeros(model.num_vertices, bool)
-    for name in (*GAZE_JOINTS, "jaw"):
-        if name in model.joint_names:
-            moved |= model.weights[:, model.joint_names.index(name)] > 0.5
+    moved |= carried_by(model, (*GAZE_JOINTS, "jaw"))
     s = chart_sampler(model, size, front)
     texel = np.zeros(size * size, np.float32)
     texel[s.valid] = moved[np.asarray(model.triangles)[s.triangles[s.valid]]].all(1)

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from models.avatars.primitives.chart import GAZE_JOINTS, ChartSampler, texel_points
+from models.avatars.primitives.chart import GAZE_JOINTS, ChartSampler, carried_by, texel_points
 from models.head.model import HeadModel
 from render.camera import Camera
 from render.fill import push_pull
@@ -68,10 +68,7 @@ def eye_heights(model: HeadModel, sampler: ChartSampler) -> np.ndarray:
     joints carry; a head model without them has its eyes 0.35 of its half-height above its middle, where ICT's
     and the built-in head's lie); nan off the head."""
     verts = np.asarray(model.template, np.float64)
-    names = [j for j in GAZE_JOINTS if j in model.joint_names]
-    carried = np.zeros(len(verts), bool)
-    for name in names:
-        carried |= model.weights[:, model.joint_names.index(name)] > 0.5
+    carried = carried_by(model, GAZE_JOINTS)
     low, high = verts[:, 1].min(), verts[:, 1].max()
     eyes = verts[carried, 1].mean() if carried.any() else 0.5 * (low + high) + 0.35 * 0.5 * (high - low)
     tri = np.asarray(model.triangles)[np.maximum(sampler.triangles, 0)]
@@ -94,6 +91,14 @@ def weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
+def weighted_mean(colours: list[np.ndarray], weights: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Frames' unprojected colours (S,S,3 each) averaged with their weights (S,S each): the mean (S,S,3), 0 where no
+    frame saw the texel, and the weights' sum (S,S)."""
+    w = np.stack(weights)[..., None]
+    total = w.sum(0)
+    return (np.stack(colours) * w).sum(0) / np.maximum(total, 1e-6), total[..., 0]
+
+
 def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: np.ndarray | None = None,
                     heights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The weighted mean of frames' unprojected colours (S,S,3) and where any frame saw the texel (S,S) bool;
@@ -104,16 +109,14 @@ def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: 
     eyes, takes the colour seen on the crown (the weighted median of the texels CROWN_ABOVE_EYES_M above them),
     before the fill: the edge of a frontal video's view is the ears and cheeks as much as the hair, and from them
     the back came out skin-coloured under dark hair."""
-    w = np.stack(weights)[..., None]
-    total = w.sum(0)
-    seen = total[..., 0] > 1e-6
-    mean = (np.stack(colours) * w).sum(0) / np.maximum(total, 1e-6)
+    mean, total = weighted_mean(colours, weights)
+    seen = total > 1e-6
     if fill is not None:
         return np.where(seen[..., None], mean, fill).astype(np.float32), seen
     if not seen.any():
         return np.full_like(mean, 0.5, dtype=np.float32), seen
     known = seen
-    hair = None if heights is None else crown_colour(mean, total[..., 0], heights)
+    hair = None if heights is None else crown_colour(mean, total, heights)
     if hair is not None:
         back = ~seen & (np.nan_to_num(heights, nan=-1.0) > -NAPE_BELOW_EYES_M)
         mean = np.where(back[..., None], hair, mean)
