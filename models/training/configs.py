@@ -99,6 +99,9 @@ class PriorTrainConfig:
     """Channels of the decoder's first feature maps (halved down to 16 as they grow)."""
     kl: Annotated[float, Range(0)] = 1e-5
     """The expression code's KL weight."""
+    model_options: tuple[str, ...] = ()
+    """The prior's other settings, KEY=VALUE each, the fields of its config (the primitives': opacity_window,
+    keep_size, samples, ...: README); the rest keep the prior's defaults."""
     checkpoint_seconds: Annotated[float, Range(0, above=True)] = 120.0
     """How often rank 0 checkpoints, seconds."""
     grad_clip: Annotated[float, Range(0, above=True)] = 1.0

@@ -25,7 +25,7 @@ import torch.distributed as dist
 from torch import nn
 
 from models.avatars.base import TrainingBatch
-from models.avatars.checkpoint import load_checkpoint, save_checkpoint
+from models.avatars.checkpoint import load_checkpoint, read_meta, save_checkpoint
 from models.avatars.components.plate import Plate
 from models.avatars.effects import parse_effects
 from models.avatars.prior.avatar import PriorAvatar, PriorConfig
@@ -34,6 +34,7 @@ from models.capture.dataset import CaptureSplit, load_split
 from models.capture.frames import background_plate, frame_camera, load_rgb
 from models.device import DeviceError, device_of
 from models.head.sources import head_kind, load_head
+from models.ranges import OptionError
 from models.training.configs import PriorTrainConfig
 from models.training.data import FrameSet, build_frames
 from models.training.trainer import (
@@ -41,6 +42,7 @@ from models.training.trainer import (
     _load_adam_state,
     finite_terms,
     log_progress,
+    model_options,
     optimiser_step,
     trim_progress,
 )
@@ -312,7 +314,14 @@ def prepare_prior(cfg: PriorTrainConfig, gl: GLContext, rank: int = 0, world: in
     first = load_split(folders[0], "train")
     head = load_head(first.head_model)
     torch.manual_seed(cfg.seed)
-    pcfg = PriorConfig(grid=cfg.grid, voxels=cfg.voxels, width=cfg.width, kl=cfg.kl)
+    if cfg.resume:  # the settings the prior was begun with
+        if cfg.model_options:
+            raise OptionError(f"{cfg.out}: --model-options with --resume; the prior keeps the settings it was begun "
+                              "with (its avatar.json)")
+        pcfg = PriorConfig(**read_meta(cfg.out)[PriorAvatar.config_key])
+    else:
+        pcfg = model_options(PriorAvatar, cfg.model_options,
+                             PriorConfig(grid=cfg.grid, voxels=cfg.voxels, width=cfg.width, kl=cfg.kl))
     avatar = PriorAvatar.for_capture(head, 1, first.background, parse_effects(cfg.effects), first.lighting, pcfg)
     identities = []
     for f in folders:

@@ -267,9 +267,17 @@ def test_corpus_prior_and_personalize_from_the_command_line(tmp_path, capsys):
     assert yaws == [0.0, 180.0]  # each script frame from the rig's two cameras, in front and behind
     assert main(["corpus", "--first", "999", "--identities", "2", "--out", str(tmp_path / "c2")]) == 2
     assert "held-out" in capsys.readouterr().err
-    assert main(["prior-train", str(corpus), "--out", str(prior), "--steps", "3", "--grid", "8", "--voxels", "2",
-                 "--width", "16", "--rays-per-frame", "64", "--frames-per-step", "2"]) == 0
+    small = ["--grid", "8", "--voxels", "2", "--width", "16", "--rays-per-frame", "64", "--frames-per-step", "2"]
+    assert main(["prior-train", str(corpus), "--out", str(prior), "--steps", "2", *small,
+                 "--model-options", "opacity_window=true", "keep_size=true"]) == 0
     assert "reading the corpus: 2/2 identities" in capsys.readouterr().err  # minutes on a large corpus: shown
+    assert main(["prior-train", str(corpus), "--out", str(prior), "--steps", "3", "--resume",
+                 "--model-options", "opacity_window=false"]) == 2
+    assert "--model-options with --resume" in capsys.readouterr().err
+    assert main(["prior-train", str(corpus), "--out", str(prior), "--steps", "3", "--resume"]) == 0
+    prior_meta = json.loads((prior / "avatar.json").read_text())
+    assert prior_meta["step"] == 3 and prior_meta["prior"]["opacity_window"] and prior_meta["prior"]["keep_size"]
+    assert prior_meta["prior"]["grid"] == 8  # resumed with the sizes it was begun with, not the defaults
     assert main(["synth", "--identity", "1000", "--frames", "10", "--size", "32", "--scene", "ambient",
                  "--out", str(scan)]) == 0
     assert main(["personalize", str(scan), "--prior", str(DEMO), "--out", str(person)]) == 2
@@ -277,6 +285,7 @@ def test_corpus_prior_and_personalize_from_the_command_line(tmp_path, capsys):
     assert main(["personalize", str(scan), "--prior", str(prior), "--out", str(person), "--steps", "2"]) == 0
     avatar, meta = load_avatar(person)
     assert meta["model"] == "prior" and meta["provenance"]["steps"] == 2
+    assert meta["prior"]["opacity_window"] and meta["prior"]["keep_size"]  # the person's avatar has the prior's
     assert meta["view_range"]["yaw_deg"] == [-180.0, 180.0]  # the prior saw heads all round: turntables go round
     assert float(avatar.neutral_texture.abs().sum()) > 0 and float(avatar.neutral_geometry.abs().sum()) > 0
     prior_avatar, _ = load_avatar(prior)
@@ -409,6 +418,7 @@ def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_pa
     assert main(["train", str(scan), "--out", str(tmp_path / "a"), "--steps", "2", "--resume"]) == 0
     meta = json.loads((tmp_path / "a" / "avatar.json").read_text())
     assert meta["model"] == "prior" and meta["provenance"]["steps"] == 2
+    assert meta["prior"]["opacity_window"] and meta["prior"]["keep_size"]  # the person's avatar has the prior's
     assert meta["view_range"]["yaw_deg"] == [-180.0, 180.0]  # resumed, it still turns all the way round
     assert main(["train", str(scan), "--prior", str(prior), "--from-scratch", "--out", str(tmp_path / "b"),
                  "--steps", "1"]) == 0
