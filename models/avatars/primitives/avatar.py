@@ -15,6 +15,7 @@ offsets' L2 (primitives stay near their places on the mesh), and the per-frame c
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, replace
 from typing import Annotated, ClassVar
 
@@ -120,6 +121,8 @@ class PrimitivesConfig:
     steps), every box shrank to about 0.8 of its size, the overlap fell to about 1.04 and, under the opacity window,
     the seams between the boxes emptied: the rays of a camera a few degrees beyond the captured views slipped
     through them onto colours inside the head (dark speckles on the cheeks, on a lattice)."""
+    grow_at_most: Annotated[float, Range(1, 20)] | None = None
+    """A primitive grows to at most this many times its place's size along each of its axes (None: e^3, about 20)."""
     opacity_window: bool = False
     """Each primitive's opacity is weighted by MVP's window exp(-8 (x^8 + y^8 + z^8)) over its box (x, y, z in
     [-1, 1]): 1 in its middle, 0.26 at 0.8 of the way out, nothing on its faces, so no box's edge shows from any
@@ -593,7 +596,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         density_raw, colour_raw, offsets = self.decode_slabs(geo, torch.cat(inputs, -1), light, training, posed)
         cells = self.layout_cells
         density_raw, colour_raw, offsets = density_raw[cells], colour_raw[cells], offsets[cells]
-        half = self.layout_half[:, None] * torch.exp(offsets[:, 6:9].clamp(0.0 if self.cfg.keep_size else -3.0, 3.0))
+        grow = 3.0 if self.cfg.grow_at_most is None else math.log(self.cfg.grow_at_most)
+        half = self.layout_half[:, None] * torch.exp(offsets[:, 6:9].clamp(0.0 if self.cfg.keep_size else -3.0, grow))
         centres = centres + (rotations @ (offsets[:, :3] * self.layout_half[:, None])[..., None])[..., 0]
         rotations = rotations @ rotation_matrix_from_axis_angle(offsets[:, 3:6])
         density = F.softplus(density_raw - 1.0) * self.cfg.density_scale

@@ -13,7 +13,7 @@ chart's eye cells (the seed's masked gaze)."""
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -46,6 +46,14 @@ class PriorConfig(PrimitivesConfig):
     """Unused: the prior reads Delta G through its expression encoder (Eq. 1), not beside its condition."""
     gaze_at_eyes: bool = True
     """Gaze joins the decoder only over the chart's eye cells (the seed's masked gaze)."""
+
+
+PERSONAL_GROWTH = 2.0
+"""How far a person's primitives may grow beyond their places' size, along each axis. The prior lets its boxes grow
+twentyfold (PrimitivesConfig.grow_at_most); personalised on a video, the boxes about the neck stretched up to 9
+times along one axis to cover the shoulders the video showed, and turned into long dark slabs behind the head from
+30 degrees round (the grimacing man; 1% of the boxes grew more than 4.3 times, half of them stayed under their
+size)."""
 
 
 @dataclass
@@ -108,7 +116,9 @@ class PriorAvatar(PrimitivesAvatar):
 
     # ---- the person --------------------------------------------------------------------------------------
     def personalize(self, texture: torch.Tensor, geometry: torch.Tensor) -> None:
-        """Make this avatar the person whose neutral texture and geometry maps (1,3,S,S) these are (Eq. 2)."""
+        """Make this avatar the person whose neutral texture and geometry maps (1,3,S,S) these are (Eq. 2); its
+        primitives grow to at most PERSONAL_GROWTH times their places' size from now on."""
+        self.cfg = replace(self.cfg, grow_at_most=PERSONAL_GROWTH)
         self.neutral_texture.copy_(texture.reshape(self.neutral_texture.shape))
         self.neutral_geometry.copy_(geometry.reshape(self.neutral_geometry.shape))
         self._own_biases = None

@@ -155,6 +155,23 @@ def test_kept_size_primitives_never_shrink_below_their_places(builtin_model):
         assert (pull == 0.0) == (keep and scale < 0), (keep, scale, pull)
 
 
+def test_primitives_grow_at_most_as_told(builtin_model):
+    """grow_at_most: a decoder asking every primitive to grow e^2 (7.4) times along its axes gets 2 times where
+    grow_at_most is 2 (a personalised prior's: prior/avatar.py PERSONAL_GROWTH), e^2 where it is left out (the cap
+    of e^3 then), and 1.5 times where it asks for that under a cap of 2."""
+    from dataclasses import replace
+
+    for cap, scale, want in ((2.0, 2.0, 2.0), (None, 2.0, float(np.exp(2.0))), (2.0, float(np.log(1.5)), 1.5)):
+        avatar = PrimitivesAvatar(builtin_model, replace(SMALL, grow_at_most=cap), 1, np.zeros(3, np.float32))
+        with torch.no_grad():
+            avatar.decoder.offsets.weight.zero_()
+            avatar.decoder.offsets.bias.zero_()
+            avatar.decoder.offsets.bias[6:9] = scale
+            prims, _ = avatar.decode(avatar.geometry(Controls()), avatar.codes(0), torch.tensor([0.0, 0.0, 1.0]),
+                                     training=True)
+        torch.testing.assert_close(prims.half_sizes, (avatar.layout_half[:, None] * want).expand(-1, 3))
+
+
 @pytest.mark.gl
 def test_tiny_primitives_run(synth_capture, gl, tmp_path):
     capture = synth_capture("studio", 16, 32)
