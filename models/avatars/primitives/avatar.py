@@ -121,8 +121,9 @@ class PrimitivesConfig:
     steps), every box shrank to about 0.8 of its size, the overlap fell to about 1.04 and, under the opacity window,
     the seams between the boxes emptied: the rays of a camera a few degrees beyond the captured views slipped
     through them onto colours inside the head (dark speckles on the cheeks, on a lattice)."""
-    grow_at_most: Annotated[float, Range(1, 20)] | None = None
-    """A primitive grows to at most this many times its place's size along each of its axes (None: e^3, about 20)."""
+    stretch_at_most: Annotated[float, Range(1, 1000)] | None = None
+    """A primitive's longest axis grows to at most this many times its shortest (None: no limit; each grows up to
+    e^3 times its place's size in any case)."""
     opacity_window: bool = False
     """Each primitive's opacity is weighted by MVP's window exp(-8 (x^8 + y^8 + z^8)) over its box (x, y, z in
     [-1, 1]): 1 in its middle, 0.26 at 0.8 of the way out, nothing on its faces, so no box's edge shows from any
@@ -596,8 +597,10 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         density_raw, colour_raw, offsets = self.decode_slabs(geo, torch.cat(inputs, -1), light, training, posed)
         cells = self.layout_cells
         density_raw, colour_raw, offsets = density_raw[cells], colour_raw[cells], offsets[cells]
-        grow = 3.0 if self.cfg.grow_at_most is None else math.log(self.cfg.grow_at_most)
-        half = self.layout_half[:, None] * torch.exp(offsets[:, 6:9].clamp(0.0 if self.cfg.keep_size else -3.0, grow))
+        scale = offsets[:, 6:9].clamp(0.0 if self.cfg.keep_size else -3.0, 3.0)
+        if self.cfg.stretch_at_most is not None:
+            scale = torch.minimum(scale, scale.min(1, keepdim=True).values + math.log(self.cfg.stretch_at_most))
+        half = self.layout_half[:, None] * torch.exp(scale)
         centres = centres + (rotations @ (offsets[:, :3] * self.layout_half[:, None])[..., None])[..., 0]
         rotations = rotations @ rotation_matrix_from_axis_angle(offsets[:, 3:6])
         density = F.softplus(density_raw - 1.0) * self.cfg.density_scale

@@ -155,22 +155,25 @@ def test_kept_size_primitives_never_shrink_below_their_places(builtin_model):
         assert (pull == 0.0) == (keep and scale < 0), (keep, scale, pull)
 
 
-def test_primitives_grow_at_most_as_told(builtin_model):
-    """grow_at_most: a decoder asking every primitive to grow e^2 (7.4) times along its axes gets 2 times where
-    grow_at_most is 2 (a personalised prior's: prior/avatar.py PERSONAL_GROWTH), e^2 where it is left out (the cap
-    of e^3 then), and 1.5 times where it asks for that under a cap of 2."""
+
+def test_primitives_stretch_at_most_as_told(builtin_model):
+    """stretch_at_most: a decoder asking every primitive to grow 7.4 times (e^2) along its first axis, 1.5 times
+    along its second and to shrink to 0.8 along its third gets (3 x 0.8, 1.5, 0.8) of its place's size under a
+    limit of 3 (a personalised prior's: prior/avatar.py PERSONAL_STRETCH), what it asks for without; one asking to
+    grow 7.4 times evenly gets that either way."""
     from dataclasses import replace
 
-    for cap, scale, want in ((2.0, 2.0, 2.0), (None, 2.0, float(np.exp(2.0))), (2.0, float(np.log(1.5)), 1.5)):
-        avatar = PrimitivesAvatar(builtin_model, replace(SMALL, grow_at_most=cap), 1, np.zeros(3, np.float32))
+    asks = (([2.0, np.log(1.5), np.log(0.8)], 3.0, [2.4, 1.5, 0.8]), ([2.0, np.log(1.5), np.log(0.8)], None,
+            [np.exp(2.0), 1.5, 0.8]), ([2.0, 2.0, 2.0], 3.0, [np.exp(2.0)] * 3))
+    for scales, stretch, want in asks:
+        avatar = PrimitivesAvatar(builtin_model, replace(SMALL, stretch_at_most=stretch), 1, np.zeros(3, np.float32))
         with torch.no_grad():
             avatar.decoder.offsets.weight.zero_()
             avatar.decoder.offsets.bias.zero_()
-            avatar.decoder.offsets.bias[6:9] = scale
+            avatar.decoder.offsets.bias[6:9] = torch.tensor(scales)
             prims, _ = avatar.decode(avatar.geometry(Controls()), avatar.codes(0), torch.tensor([0.0, 0.0, 1.0]),
                                      training=True)
-        torch.testing.assert_close(prims.half_sizes, (avatar.layout_half[:, None] * want).expand(-1, 3))
-
+        torch.testing.assert_close(prims.half_sizes, avatar.layout_half[:, None] * torch.tensor(want).float())
 
 @pytest.mark.gl
 def test_tiny_primitives_run(synth_capture, gl, tmp_path):

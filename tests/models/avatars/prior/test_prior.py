@@ -286,7 +286,7 @@ def test_corpus_prior_and_personalize_from_the_command_line(tmp_path, capsys):
     avatar, meta = load_avatar(person)
     assert meta["model"] == "prior" and meta["provenance"]["steps"] == 2
     assert meta["prior"]["opacity_window"] and meta["prior"]["keep_size"]  # the person's avatar has the prior's
-    assert meta["prior"]["grow_at_most"] == 2.0 and prior_meta["prior"]["grow_at_most"] is None  # a person's cap
+    assert meta["prior"]["stretch_at_most"] == 3.0 and prior_meta["prior"]["stretch_at_most"] is None  # a person's
     assert meta["view_range"]["yaw_deg"] == [-180.0, 180.0]  # the prior saw heads all round: turntables go round
     assert float(avatar.neutral_texture.abs().sum()) > 0 and float(avatar.neutral_geometry.abs().sum()) > 0
     prior_avatar, _ = load_avatar(prior)
@@ -419,8 +419,6 @@ def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_pa
     assert main(["train", str(scan), "--out", str(tmp_path / "a"), "--steps", "2", "--resume"]) == 0
     meta = json.loads((tmp_path / "a" / "avatar.json").read_text())
     assert meta["model"] == "prior" and meta["provenance"]["steps"] == 2
-    assert meta["prior"]["opacity_window"] and meta["prior"]["keep_size"]  # the person's avatar has the prior's
-    assert meta["prior"]["grow_at_most"] == 2.0 and prior_meta["prior"]["grow_at_most"] is None  # a person's cap
     assert meta["view_range"]["yaw_deg"] == [-180.0, 180.0]  # resumed, it still turns all the way round
     assert main(["train", str(scan), "--prior", str(prior), "--from-scratch", "--out", str(tmp_path / "b"),
                  "--steps", "1"]) == 0
