@@ -122,8 +122,8 @@ class PrimitivesConfig:
     the seams between the boxes emptied: the rays of a camera a few degrees beyond the captured views slipped
     through them onto colours inside the head (dark speckles on the cheeks, on a lattice)."""
     stretch_at_most: Annotated[float, Range(1, 1000)] | None = None
-    """A primitive's longest axis grows to at most this many times its shortest (None: no limit; each grows up to
-    e^3 times its place's size in any case)."""
+    """Shown, a primitive's longest axis is at most this many times its shortest (None: no limit; each grows up to
+    e^3 times its place's size in any case). Training leaves its boxes as the decoder makes them."""
     opacity_window: bool = False
     """Each primitive's opacity is weighted by MVP's window exp(-8 (x^8 + y^8 + z^8)) over its box (x, y, z in
     [-1, 1]): 1 in its middle, 0.26 at 0.8 of the way out, nothing on its faces, so no box's edge shows from any
@@ -598,7 +598,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         cells = self.layout_cells
         density_raw, colour_raw, offsets = density_raw[cells], colour_raw[cells], offsets[cells]
         scale = offsets[:, 6:9].clamp(0.0 if self.cfg.keep_size else -3.0, 3.0)
-        if self.cfg.stretch_at_most is not None:
+        if self.cfg.stretch_at_most is not None and not training:
             scale = torch.minimum(scale, scale.min(1, keepdim=True).values + math.log(self.cfg.stretch_at_most))
         half = self.layout_half[:, None] * torch.exp(scale)
         centres = centres + (rotations @ (offsets[:, :3] * self.layout_half[:, None])[..., None])[..., 0]

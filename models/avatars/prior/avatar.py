@@ -13,7 +13,7 @@ chart's eye cells (the seed's masked gaze)."""
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -46,16 +46,6 @@ class PriorConfig(PrimitivesConfig):
     """Unused: the prior reads Delta G through its expression encoder (Eq. 1), not beside its condition."""
     gaze_at_eyes: bool = True
     """Gaze joins the decoder only over the chart's eye cells (the seed's masked gaze)."""
-
-
-PERSONAL_STRETCH = 3.0
-"""A person's primitives keep their longest axis within this many times their shortest (the prior's have no limit).
-Personalised on a video, the boxes about the grimacing man's neck stretched up to 9 times along one axis and
-shrank along another (the longest axis 13.7 times the shortest for 1% of the boxes) to cover the shoulders the video
-showed: long dark slabs behind his head from 30 degrees round. A limit of twice the places' size on every axis
-took them away but cost the synthetic person's long hair 0.5-2 dB from 90 degrees round (its boxes grow up to 3.2
-times, evenly: the longest axis at most 2.2 times the shortest for 99% of them), which this limit leaves as it is
-(docs/results.md, "Beyond the captured views")."""
 
 
 @dataclass
@@ -118,9 +108,7 @@ class PriorAvatar(PrimitivesAvatar):
 
     # ---- the person --------------------------------------------------------------------------------------
     def personalize(self, texture: torch.Tensor, geometry: torch.Tensor) -> None:
-        """Make this avatar the person whose neutral texture and geometry maps (1,3,S,S) these are (Eq. 2); its
-        primitives keep within PERSONAL_STRETCH from now on."""
-        self.cfg = replace(self.cfg, stretch_at_most=PERSONAL_STRETCH)
+        """Make this avatar the person whose neutral texture and geometry maps (1,3,S,S) these are (Eq. 2)."""
         self.neutral_texture.copy_(texture.reshape(self.neutral_texture.shape))
         self.neutral_geometry.copy_(geometry.reshape(self.neutral_geometry.shape))
         self._own_biases = None

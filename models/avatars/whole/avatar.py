@@ -66,6 +66,19 @@ more of them before they are opaque. On the child's whole head (`python -m bench
 --outside-settings`; at rest from 20, 90 and 160 degrees, 8 samples): 69 ms a frame against 78 at its own 1e-3, and
 51.5 dB from 16 samples marched to 1e-4 against 51.6 (3e-2: 67 ms, 50.6 dB)."""
 
+OUTSIDE_STRETCH = 3.0
+"""The outside's primitives are shown with their longest axis within this many times their shortest (its training
+leaves them be). Personalised on a video, the boxes about the grimacing man's neck stretched up to 9 times along one
+axis and shrank along another (the longest 13.7 times the shortest for 1% of the boxes) to draw, from the front,
+the shoulders the video showed; beyond the video's views, where a whole head shows its outside, they were long dark
+slabs behind his head from 30 degrees round. The synthetic person's long hair grows its boxes up to 3.2 times,
+evenly (the longest axis at most 2.2 times the shortest for 99% of them): this limit leaves its figures as they
+were at every angle. Not for the personalised prior on its own (`--model prior`): there the outside is the avatar
+in the video's views too, and the limit took the grimacing man's shoulders from his held-out frames (21.88 dB
+against 31.45). Tried and not kept: the limit in training too (the decoder made the neck's boxes larger all round:
+dark blocks in place of the slabs), and a cap of twice the places' size on every axis (it cut the long hair short:
+0.5-2 dB lower from 90 degrees round); docs/results.md, "Beyond the captured views"."""
+
 
 def smooth_fall(x: torch.Tensor, lo: float, hi: float) -> torch.Tensor:
     """1 up to lo, 0 from hi, smoothstep between (lo < hi).
@@ -153,9 +166,10 @@ class WholeHeadAvatar(Avatar):
         super().__init__(inside.head_model, inside.n_frames, inside.background.cpu().numpy().copy())
         self.inside = inside
         self.outside = outside
-        # The outside's display stops sooner (training composites every candidate); the inside renders as its own
-        # folder does.
-        outside.cfg = replace(outside.cfg, stop_below=max(outside.cfg.stop_below, OUTSIDE_STOP_BELOW))
+        # The outside's display stops sooner (training composites every candidate) and keeps its boxes within
+        # OUTSIDE_STRETCH; the inside renders as its own folder does.
+        outside.cfg = replace(outside.cfg, stop_below=max(outside.cfg.stop_below, OUTSIDE_STOP_BELOW),
+                              stretch_at_most=OUTSIDE_STRETCH)
         with torch.no_grad():  # one room behind both: the inside's
             outside.background.copy_(inside.background)
 

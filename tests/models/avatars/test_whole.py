@@ -18,6 +18,7 @@ from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image
 from models.avatars.whole.avatar import (
     FACING_FADE_DEG,
     OUTSIDE_STOP_BELOW,
+    OUTSIDE_STRETCH,
     SWEEP_DEG,
     VIEW_FADE_DEG,
     WholeHeadAvatar,
@@ -238,6 +239,32 @@ def test_the_outside_decoded_ahead_renders_as_decoded_after(whole):
         del whole.outside.decode
     np.testing.assert_array_equal(images[0], images[1])
     assert len(decodes) == 2 and decodes[0].startswith("whole-outside") and decodes[1] == "MainThread", decodes
+
+
+def test_the_outsides_boxes_are_shown_no_longer_than_three_times_their_width():
+    """The slabs behind a head: a prior whose decoder asks every box to grow e^2 (7.4) times along one axis and
+    0.8 times along another is shown that way on its own (`--model prior`: its shoulders in the video's views), and
+    within OUTSIDE_STRETCH (3 x 0.8 = 2.4 times) as a whole head's outside; training's decode keeps what it asks."""
+    head = load_builtin()
+    inside = PrimitivesAvatar.for_capture(head, 4, np.zeros(3, np.float32), (), None,
+                                          PrimitivesConfig(grid=8, voxels=2, width=16))
+    alone = PriorAvatar.for_capture(head, 1, np.zeros(3, np.float32), (), None, SMALL)
+    with torch.no_grad():
+        alone.decoder.offsets.weight.zero_()
+        alone.decoder.offsets.bias.zero_()
+        alone.decoder.offsets.bias[6:9] = torch.tensor([2.0, 0.0, math.log(0.8)])
+    geo = alone.geometry(Controls())
+    eye = torch.tensor([0.0, 0.0, 1.0])
+
+    def largest(avatar, training=False):
+        with torch.no_grad():
+            prims, _ = avatar.decode(geo, avatar.codes(None), eye, training=training)
+        return float((prims.half_sizes / avatar.layout_half[:, None]).max())
+
+    assert largest(alone) == pytest.approx(math.exp(2.0), rel=1e-5)
+    outside = WholeHeadAvatar(inside, alone).outside
+    assert OUTSIDE_STRETCH == 3.0 and largest(outside) == pytest.approx(3.0 * 0.8, rel=1e-5)
+    assert largest(outside, training=True) == pytest.approx(math.exp(2.0), rel=1e-5)
 
 
 def test_the_outside_stops_its_rays_at_a_hundredth_of_their_light(whole):
