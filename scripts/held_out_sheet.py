@@ -53,7 +53,7 @@ def main() -> None:
     for k, p in enumerate(pairs):
         sheet.paste(p, ((k % a.columns) * (w + 4), (k // a.columns) * h))
     a.out.parent.mkdir(parents=True, exist_ok=True)
-    sheet.save(a.out)
+    sheet.save(a.out, optimize=True)
     print(f"wrote {a.out}: {len(pairs)} clips, {np.prod(sheet.size)} px")
 
 
