@@ -11,7 +11,6 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
 from PIL import Image, ImageDraw
 
 
@@ -54,7 +53,7 @@ def main() -> None:
         sheet.paste(p, ((k % a.columns) * (w + 4), (k // a.columns) * h))
     a.out.parent.mkdir(parents=True, exist_ok=True)
     sheet.save(a.out, optimize=True)
-    print(f"wrote {a.out}: {len(pairs)} clips, {np.prod(sheet.size)} px")
+    print(f"wrote {a.out}: {len(pairs)} clips, {sheet.width} x {sheet.height} px")
 
 
 if __name__ == "__main__":
