@@ -4,6 +4,7 @@ enough to read, and a command table that lists every subcommand and no other."""
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import re
 import shlex
 from functools import cache
@@ -180,6 +181,22 @@ def test_heading_fragments_are_the_ones_github_makes():
 def test_the_readme_is_short():
     lines = len(README.read_text().splitlines())
     assert lines <= README_MAX_LINES, f"README.md has {lines} lines; keep it under {README_MAX_LINES}"
+
+
+def test_the_readme_real_video_table_is_the_benchmarks_results():
+    """The README's figures on real videos are the ones benchmarks/results holds (scripts/clips_table.py writes the
+    table from them): a figure changed by hand, or a run kept without its table, fails here."""
+    spec = importlib.util.spec_from_file_location("clips_table", REPO / "scripts" / "clips_table.py")
+    clips_table = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(clips_table)
+    results = REPO / "benchmarks" / "results"
+    lines = clips_table.table(clips_table.rows_by_clip(results / "clips_6min.json"),
+                              clips_table.rows_by_clip(results / "clips_30min.json"))
+    assert len(lines) == 2 + 13, "a row a shared clip"
+    readme = README.read_text().splitlines()
+    assert lines[0] in readme, "the README has no table of the shared clips"
+    start = readme.index(lines[0])
+    assert readme[start:start + len(lines)] == lines, "the README's table is not scripts/clips_table.py's"
 
 
 def test_the_readme_command_table_lists_exactly_the_subcommands():
