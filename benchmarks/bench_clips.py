@@ -5,7 +5,8 @@ landmark error, how its masks were cut, what stands behind its frames). Two runs
 
     .venv/bin/python -m benchmarks.bench_clips --minutes 30 --work out/clips --out benchmarks/results/clips.json
 
-A clip whose capture or avatar exists in --work is not tracked or trained again."""
+A clip whose capture or avatar exists in --work is not tracked or trained again; a run of some clips adds its rows to
+--out's (of the same --minutes), so the table grows a pair at a time."""
 
 from __future__ import annotations
 
@@ -36,6 +37,20 @@ def clip_row(clip: str, work: Path, minutes: float) -> dict:
     return row
 
 
+def merged(kept: list[dict], rows: list[dict]) -> list[dict]:
+    """The rows of a file kept from earlier runs with this run's in place of the same clips', in CLIPS' order
+    (clips not in CLIPS after them).
+
+    >>> [r["clip"] for r in merged([{"clip": "more/man_in_suit", "n": 1}, {"clip": "expressions_d3", "n": 1}],
+    ...                            [{"clip": "more/man_in_suit", "n": 2}])]
+    ['expressions_d3', 'more/man_in_suit']
+    >>> merged([{"clip": "more/man_in_suit", "n": 1}], [{"clip": "more/man_in_suit", "n": 2}])[0]["n"]
+    2
+    """
+    by_clip = {r["clip"]: r for r in kept} | {r["clip"]: r for r in rows}
+    return sorted(by_clip.values(), key=lambda r: (CLIPS.index(r["clip"]) if r["clip"] in CLIPS else len(CLIPS)))
+
+
 def table(rows: list[dict]) -> str:
     lines = ["| clip | frames (train/val/test) | face in the video / dataset (px) | landmark error (median / p95 px) "
              "| room | steps | validation PSNR | held-out PSNR | the person alone | SSIM | FaceMSE | ms a frame |",
@@ -63,6 +78,10 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     with ThreadPoolExecutor(args.parallel) as pool:
         rows = list(pool.map(lambda clip: clip_row(clip, args.work, args.minutes), args.clips))
+    if args.out.is_file():  # a run of some clips adds to the file: the other clips' rows stay
+        kept = json.loads(args.out.read_text())
+        if kept.get("minutes") == args.minutes:
+            rows = merged(kept["rows"], rows)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"minutes": args.minutes, "rows": rows}, indent=1) + "\n")
     print(table(rows))

@@ -13,7 +13,8 @@ from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
 HEADER = ("| clip | frames (train/val/test) | face, video / dataset (px) | landmark error (px) | steps, 6 / 30 min "
-          "| held out, 6 min | validation, 6 min | held out, 30 min | validation, 30 min | SSIM | FaceMSE | ms a frame |")
+          "| held out, 6 min | validation, 6 min | held out, 30 min | validation, 30 min "
+          "| SSIM | FaceMSE | ms a frame |")
 
 
 def rows_by_clip(path: Path) -> dict[str, dict]:

@@ -62,7 +62,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--runs", nargs="+", default=["default"])
     ap.add_argument("--edge", type=int, default=4, help="px each side of the mask's edge that count as its outline")
     args = ap.parse_args(argv)
-    print("| clip | run | held-out PSNR (8-bit) | face | outline | rest of the person | room | PSNR, the outline exact |")
+    print("| clip | run | held-out PSNR (8-bit) | face | outline | rest of the person | room "
+          "| PSNR, the outline exact |")
     print("|---|---|---|---|---|---|---|---|")
     for capture in sorted(p.parent for p in args.work.glob("*/transforms_test.json")):
         for run in args.runs:
