@@ -155,11 +155,10 @@ def test_kept_size_primitives_never_shrink_below_their_places(builtin_model):
         assert (pull == 0.0) == (keep and scale < 0), (keep, scale, pull)
 
 
-
 def test_primitives_stretch_at_most_as_told(builtin_model):
     """stretch_at_most: a decoder asking every primitive to grow 7.4 times (e^2) along its first axis, 1.5 times
     along its second and to shrink to 0.8 along its third is shown (3 x 0.8, 1.5, 0.8) of its place's size under a
-    limit of 3 (a personalised prior's: prior/avatar.py PERSONAL_STRETCH), what it asks for without; training's
+    limit of 3 (a whole head's outside's: whole/avatar.py OUTSIDE_STRETCH), what it asks for without; training's
     decode keeps what it asks for either way; one asking to grow 7.4 times evenly gets that either way."""
     from dataclasses import replace
 
@@ -175,6 +174,7 @@ def test_primitives_stretch_at_most_as_told(builtin_model):
             prims, _ = avatar.decode(avatar.geometry(Controls()), avatar.codes(0), torch.tensor([0.0, 0.0, 1.0]),
                                      training=training)
         torch.testing.assert_close(prims.half_sizes, avatar.layout_half[:, None] * torch.tensor(want).float())
+
 
 @pytest.mark.gl
 def test_tiny_primitives_run(synth_capture, gl, tmp_path):
