@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from render.mesh import vertex_normals
+from render.mesh import cross, vertex_normals
 from render.rays import Raster
 
 MESH_REACH_M = 0.01
@@ -37,13 +37,12 @@ def mesh_normal_image(raster: Raster, vertices: np.ndarray, triangles: np.ndarra
     >>> mesh_normal_image(r, v, t).tolist()  # the triangle in z = 0, counter-clockwise from +z
     [[[0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]]
     """
-    vn = vertex_normals(vertices, triangles).astype(np.float64)
-    out = np.zeros((*raster.triangle.shape, 3))
+    vn = vertex_normals(vertices, triangles)
+    out = np.zeros((*raster.triangle.shape, 3), np.float32)
     hit = raster.hit
     corners = np.asarray(triangles)[raster.triangle[hit]]  # (N,3) vertex ids
-    n = (vn[corners] * raster.bary[hit][..., None]).sum(1)
-    out[hit] = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
-    return out.astype(np.float32)
+    out[hit] = unit(np.einsum("nk,nkc->nc", np.asarray(raster.bary[hit], np.float32), vn[corners]))
+    return out
 
 
 def _smoothed(values: np.ndarray, valid: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -51,33 +50,31 @@ def _smoothed(values: np.ndarray, valid: np.ndarray, sigma_px: float) -> np.ndar
     average of its surface, not of the background."""
     if sigma_px <= 0:
         return values
-    w = gaussian_filter(valid.astype(np.float64), sigma_px, truncate=3.0)
-    blurred = np.stack([gaussian_filter(np.where(valid, values[..., c], 0.0), sigma_px, truncate=3.0)
-                        for c in range(values.shape[-1])], -1)
-    return np.where(valid[..., None], blurred / np.maximum(w, 1e-12)[..., None], values)
+    w = gaussian_filter(valid.astype(np.float32), sigma_px, truncate=3.0)
+    blurred = gaussian_filter(values * valid[..., None], (sigma_px, sigma_px, 0.0), truncate=3.0)
+    blurred /= np.maximum(w, 1e-12)[..., None]
+    return np.where(valid[..., None], blurred, values)
 
 
 def _difference(points: np.ndarray, t: np.ndarray, valid: np.ndarray, axis: int) -> np.ndarray:
     """(H,W,3) the points' derivative along an image axis: central where both neighbours lie on the pixel's surface,
     one-sided where one does, 0 where neither."""
-    def shifted(a, step):
-        out = np.roll(a, -step, axis=axis)
-        edge = [slice(None)] * a.ndim
-        edge[axis] = slice(-1, None) if step > 0 else slice(0, 1)
-        out[tuple(edge)] = np.inf if a.dtype.kind == "f" and a.ndim == 2 else 0
-        return out
-
-    def same(step):
-        tn = shifted(np.where(valid, t, np.inf), step)
-        both = valid & np.isfinite(tn)
-        a, b = np.where(both, tn, 0.0), np.where(both, t, 0.0)
-        return both & (np.abs(a - b) <= DEPTH_JUMP * np.minimum(a, b))
-
-    ahead, behind = same(1), same(-1)
-    pa, pb = shifted(points, 1), shifted(points, -1)
-    central = (pa - pb) * 0.5
-    return np.where((ahead & behind)[..., None], central,
-                    np.where(ahead[..., None], pa - points, np.where(behind[..., None], points - pb, 0.0)))
+    lo, hi = [slice(None)] * 2, [slice(None)] * 2
+    lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+    lo, hi = tuple(lo), tuple(hi)
+    a, b = t[lo], t[hi]  # each pair of neighbours: the pixel and the next along the axis
+    with np.errstate(invalid="ignore"):
+        pair = valid[lo] & valid[hi] & (np.abs(b - a) <= DEPTH_JUMP * np.minimum(a, b))
+    step = points[hi] - points[lo]
+    step *= pair[..., None]
+    out = np.zeros_like(points)
+    out[lo] += step  # the pixel's step ahead
+    out[hi] += step  # and behind
+    sides = np.zeros(t.shape, np.float32)
+    sides[lo] += pair
+    sides[hi] += pair
+    out /= np.maximum(sides, 1.0)[..., None]  # both: their mean, the central difference
+    return out
 
 
 def depth_normal_image(origin: np.ndarray, directions: np.ndarray, distance: np.ndarray,
@@ -85,7 +82,8 @@ def depth_normal_image(origin: np.ndarray, directions: np.ndarray, distance: np.
     """(H,W,3) unit normals, world, of the surface a depth image draws: each pixel's point o + t d (t its distance
     along its unit ray, inf where nothing is drawn), the cross product of its derivatives along the rows and columns
     (none across a depth jump), turned to face the camera, then smoothed over the drawn pixels by sigma_px; 0 where
-    nothing is drawn or the pixel has no neighbour on its surface.
+    nothing is drawn or the pixel has no neighbour on its surface. In float32 (a millimetre's step at half a metre
+    keeps 5 digits).
 
     >>> d = np.stack(np.meshgrid(np.linspace(-0.1, 0.1, 5), np.linspace(0.1, -0.1, 5)), -1)
     >>> d = np.concatenate([d, -np.ones((5, 5, 1))], -1); d /= np.linalg.norm(d, axis=-1, keepdims=True)
@@ -93,22 +91,24 @@ def depth_normal_image(origin: np.ndarray, directions: np.ndarray, distance: np.
     >>> (depth_normal_image(np.zeros(3), d, t)[2, 2].round(6) + 0.0).tolist()
     [0.0, 0.0, 1.0]
     """
-    t = np.asarray(distance, np.float64)
+    t = np.asarray(distance, np.float32)
     valid = np.isfinite(t)
-    points = np.where(valid[..., None], origin + np.where(valid, t, 0.0)[..., None] * directions, 0.0)
-    dx, dy = _difference(points, t, valid, 1), _difference(points, t, valid, 0)
-    n = np.cross(dy, dx)  # rows run down the image, columns right: dy x dx faces the camera
-    n *= np.where((n * directions).sum(-1, keepdims=True) > 0, -1.0, 1.0)
+    d = np.asarray(directions, np.float32)
+    points = np.where(valid, t, np.float32(0.0))[..., None] * d
+    points += np.asarray(origin, np.float32)
+    points *= valid[..., None]
+    n = cross(_difference(points, t, valid, 0), _difference(points, t, valid, 1))  # dy x dx faces the camera
+    n[np.einsum("hwc,hwc->hw", n, d) > 0] *= -1.0
     n = unit(n)
     # smoothed after the differences, not before: a blur of the points would mix two surfaces across a depth jump
     # before the differences could tell them apart (46 degrees of tilt beside a 10 cm step at 2 px)
-    return unit(_smoothed(n, np.linalg.norm(n, axis=-1) > 0, sigma_px)).astype(np.float32)
+    return unit(_smoothed(n, n.any(-1), sigma_px))
 
 
 def unit(v: np.ndarray) -> np.ndarray:
-    """(...,3) vectors scaled to length 1; 0 where they are 0."""
-    length = np.linalg.norm(v, axis=-1, keepdims=True)
-    return np.where(length > 1e-12, v / np.maximum(length, 1e-12), 0.0)
+    """(...,3) vectors scaled to length 1; 0 where they are 0 (in v's floating type)."""
+    length = np.sqrt(np.einsum("...c,...c->...", v, v))[..., None]
+    return np.where(length > 1e-12, v / np.maximum(length, 1e-12), 0.0).astype(v.dtype, copy=False)
 
 
 def surface_normal_image(depth_normals: np.ndarray, distance: np.ndarray, mesh_normals: np.ndarray,
@@ -123,11 +123,11 @@ def surface_normal_image(depth_normals: np.ndarray, distance: np.ndarray, mesh_n
     >>> surface_normal_image(out, np.array([[2.0]]), up, np.array([[np.inf]])).tolist()  # no mesh there: the depth's
     [[[0.0, 0.0, 1.0]]]
     """
-    t = np.asarray(distance, np.float64)
-    both = np.isfinite(t) & np.isfinite(mesh_distance) & (np.abs(mesh_normals).sum(-1) > 0)
+    t = np.asarray(distance, np.float64)  # the gap of a centimetre between two distances of a metre: in float64
+    mesh_normals = np.asarray(mesh_normals, np.float32)
+    both = np.isfinite(t) & np.isfinite(mesh_distance) & mesh_normals.any(-1)
     gap = np.maximum(np.where(both, mesh_distance, 0.0) - np.where(both, t, 0.0), 0.0)  # in front of the mesh
-    w = np.where(both, np.exp(-np.square(gap / reach_m)), 0.0)[..., None]
-    n = w * mesh_normals + (1.0 - w) * depth_normals
-    length = np.linalg.norm(n, axis=-1, keepdims=True)
-    drawn = np.isfinite(t)[..., None] & (length > 1e-12)
-    return np.where(drawn, n / np.maximum(length, 1e-12), 0.0).astype(np.float32)
+    w = np.where(both, np.exp(-np.square(gap / reach_m)), 0.0).astype(np.float32)[..., None]
+    n = w * mesh_normals + (1.0 - w) * np.asarray(depth_normals, np.float32)
+    n[~np.isfinite(t)] = 0.0
+    return unit(n)

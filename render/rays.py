@@ -4,12 +4,15 @@ surface, met with the triangle's plane here); per-ray results go back into image
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from render.camera import Camera
+from render.mesh import cross
 
 
 @dataclass(frozen=True)
@@ -93,12 +96,40 @@ def pixel_directions(intrinsics, width_px: int, pixels: np.ndarray) -> np.ndarra
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+RAYS_KEPT = 2
+"""pixel_rays keeps the rays of this many cameras: a frame asks for its camera's three times (its rays, the guide
+mesh's raster, the normals buffer), 3-6 ms each at 256 px."""
+_kept: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+_kept_lock = threading.Lock()
+
+
 def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """World origin (3,) and unit directions (H,W,3) through pixel centres, rows top first."""
+    """World origin (3,) and unit directions (H,W,3) through pixel centres, rows top first; read-only (the last
+    RAYS_KEPT cameras' are kept and shared).
+
+    >>> from render.camera import look_at
+    >>> cam = Camera(look_at(np.zeros(3), np.array([0.0, 0.0, -1.0])), 30.0, 4, 2)
+    >>> o, d = pixel_rays(cam); again = pixel_rays(Camera(cam.view.copy(), 30.0, 4, 2))
+    >>> again[1] is d, d.flags.writeable, d.shape
+    (True, False, (2, 4, 3))
+    """
+    key = (np.asarray(camera.view, np.float64).tobytes(), camera.fov_y_deg, camera.width_px, camera.height_px,
+           camera.cx_px, camera.cy_px, camera.fx_px)
+    with _kept_lock:
+        if key in _kept:
+            _kept.move_to_end(key)
+            return _kept[key]
     d_cam = camera_directions(camera)
     c2w = np.linalg.inv(camera.view)
     d = d_cam @ c2w[:3, :3].T
-    return c2w[:3, 3], d / np.linalg.norm(d, axis=-1, keepdims=True)
+    rays = c2w[:3, 3], d / np.linalg.norm(d, axis=-1, keepdims=True)
+    for a in rays:
+        a.flags.writeable = False
+    with _kept_lock:
+        _kept[key] = rays
+        while len(_kept) > RAYS_KEPT:
+            _kept.popitem(last=False)
+    return rays
 
 
 def image_rays(camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
@@ -118,12 +149,12 @@ def ray_triangle_hit(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> t
     ([2.0], [[0.25, 0.25, 0.5]])
     """
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    p = np.cross(dirs, e2)
+    p = cross(dirs, e2)
     det = np.einsum("ij,ij->i", e1, p)
     det = np.where(np.abs(det) < 1e-20, 1e-20, det)
     s = origin - tri[:, 0]
     u = np.einsum("ij,ij->i", s, p) / det
-    q = np.cross(s, e1)
+    q = cross(s, e1)
     v = np.einsum("ij,ij->i", dirs, q) / det
     t = np.einsum("ij,ij->i", e2, q) / det
     t = np.where(np.abs(det) > 1e-18, t, np.nan)
