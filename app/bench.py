@@ -79,7 +79,8 @@ PRESET_RULES = {"final": 45.0, "preview": 35.0, "draft": 25.0}
 blurred but faithful picture."""
 
 
-def machine() -> str:
+def processor() -> str:
+    """The processor's name and this machine's cores, e.g. "AMD EPYC, 2 cores"."""
     cpu = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -88,7 +89,11 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    return f"{cpu}, {os.cpu_count()} cores, torch {torch.__version__} with {torch.get_num_threads()} threads"
+    return f"{cpu}, {os.cpu_count()} cores"
+
+
+def machine() -> str:
+    return f"{processor()}, torch {torch.__version__} with {torch.get_num_threads()} threads"
 
 
 def choose_presets(rows: list[dict]) -> dict[str, dict]:

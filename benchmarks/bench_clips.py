@@ -17,6 +17,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from app.bench import processor
 from benchmarks.bench_held_out_views import VIDEOS, capture_of, train_and_measure
 
 CLIPS = ("expressions_d3", "expressions_d19", "talking_hdtf", "more/child_looking_around",
@@ -33,7 +34,7 @@ def clip_row(clip: str, work: Path, minutes: float) -> dict:
     row.update(frames=report["splits"], source_face_px=report["source_face_px"],
                face_px=report["face_width_px"]["median"], landmark_error_px=report["landmark_error_px"],
                masks_by=report.get("masks_by"), room=plate["room"], behind_frames=plate.get("behind_frames"),
-               track_s_per_frame=report["seconds_per_frame"])
+               track_s_per_frame=report["seconds_per_frame"], machine=processor())
     return row
 
 

@@ -5,7 +5,8 @@ lookups (one timed march; with groups on threads, the sum of the threads' lookup
 `render_image` (posing the mesh, rays, images); with the lookups made and the lookups a second. Each row with the
 march in C (native.py, what display runs where it is built) and in torch (the reference). Each size twice:
 the colour render the studio shows first ("rgb": the grids' rgb channels alone) and with every buffer the avatar
-offers ("all": its normals and the key light's visibility composited too).
+offers ("all": its normals and the key light's visibility composited too, and the normals buffer render_image makes
+from the frame's depth and the guide mesh, `normals_ms`, timed apart).
 
     .venv/bin/python -m benchmarks.bench_primitives AVATAR [--out benchmarks/results/primitives.json]
 """
@@ -24,7 +25,7 @@ from benchmarks.bench_render import median_seconds
 from models.avatars.checkpoint import CheckpointError
 from models.avatars.primitives import march, native
 from models.avatars.registry import load_avatar
-from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image
+from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image, surface_normals
 from models.head.controls import Controls
 from render.camera import framing_camera
 from render.gl.context import GLContext
@@ -69,10 +70,15 @@ def measure(avatar, raster: Rasterizer, controls: Controls, size: int, buffers: 
         finally:
             march.lookup = plain
     whole = median_seconds(lambda: render_image(avatar, cam, controls, RenderOptions(buffers=buffers), raster))
+    normals = None
+    if buffers is None and avatar.normals_from_surface:  # the rendered surface's normals (render/normals.py)
+        depth = render_image(avatar, cam, controls, RenderOptions(buffers=()), raster)["depth"]
+        normals = median_seconds(lambda: surface_normals(avatar, depth, geo, cam, raster))
     return {"size": size, "buffers": "all" if buffers is None else "rgb", "march": "C" if in_c else "torch",
             "channels": prims.colour.shape[-1],
             "rays": len(rays), "decode_ms": 1e3 * decode, "lists_ms": 1e3 * lists_s,
-            "march_ms": 1e3 * march_s, "lookup_ms": None if in_c else 1e3 * sum(looked), "render_image_ms": 1e3 * whole,
+            "march_ms": 1e3 * march_s, "lookup_ms": None if in_c else 1e3 * sum(looked),
+            "normals_ms": None if normals is None else 1e3 * normals, "render_image_ms": 1e3 * whole,
             "candidates": lists.pairs, "segments": out.segments, "lookups": out.samples,
             "lookups_per_s": out.samples / march_s}
 
