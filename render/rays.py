@@ -135,7 +135,8 @@ def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 def image_rays(camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
     """The camera's origin (1,3) and its pixels' unit ray directions (H*W,3), float32, rows top first."""
     origin, dirs = pixel_rays(camera)
-    return torch.as_tensor(origin, dtype=torch.float32)[None], torch.as_tensor(dirs.reshape(-1, 3), dtype=torch.float32)
+    return (torch.from_numpy(np.array(origin, np.float32))[None],  # float32 copies of pixel_rays' shared arrays
+            torch.from_numpy(np.array(dirs.reshape(-1, 3), np.float32)))
 
 
 def ray_triangle_hit(origin: np.ndarray, dirs: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -90,6 +90,23 @@ def test_a_source_that_does_not_build_names_itself(tmp_path):
     assert lib.is_file() and native.build(good, tmp_path / "cache") == lib  # built once
 
 
+def test_the_build_is_the_processors_own_where_the_compiler_can_and_portable_where_not(tmp_path, monkeypatch):
+    """NATIVE_FLAGS first, the library named by the processor too (another processor, another file); flags the
+    compiler refuses: the portable build, which works."""
+    import ctypes
+
+    source = tmp_path / "fine.c"
+    source.write_text("int twice(int x) { return 2 * x; }\n")
+    own = native.build(source, tmp_path / "cache")
+    monkeypatch.setattr(native, "processor_key", lambda: "another processor")
+    other = native.build(source, tmp_path / "cache")
+    assert own.is_file() and other.is_file() and own != other
+    monkeypatch.setattr(native, "NATIVE_FLAGS", ("-fno-such-flag-anywhere",))
+    portable = native.build(source, tmp_path / "cache" / "portable")
+    assert portable.is_file() and ctypes.CDLL(str(portable)).twice(21) == 42
+    assert len(list((tmp_path / "cache" / "portable").iterdir())) == 1  # the refused build left nothing behind
+
+
 def test_the_demo_avatar_renders_the_same_frame_either_way(monkeypatch, demo_avatar_and_raster):
     avatar, raster, controls, cam = demo_avatar_and_raster
     with torch.inference_mode():
