@@ -99,9 +99,10 @@ def test_expression_slider_changes_the_face(display, avatar, tmp_path):
     assert (np.abs(sa - sb).max(-1) > 10).mean() > 0.002  # the guide mesh and the render, in the window
     assert report["errors"] == [] and report["fps_idle"] + report["fps_rendering"] > 0
     assert report["latency_ms"] is not None
-    # The window's frame on a software GL, its drawing threads' CPU included: 8.5 ms here with one sample a pixel,
-    # 25 ms with hello_imgui's default of 8 (run_studio asks for one: docs/live.md).
-    assert report["frame_cpu_ms_median"] < 16, report["frame_cpu_ms_median"]
+    # The window's frame on a software GL, its drawing threads' CPU included: 8.5 ms on the Intel Xeon with one
+    # sample a pixel, 25 ms with hello_imgui's default of 8 (run_studio asks for one: docs/live.md); 16.0 ms with one
+    # on the slower AMD EPYC (a clean clone's CI there, 27 November), where the bound of 16 failed it.
+    assert report["frame_cpu_ms_median"] < 22, report["frame_cpu_ms_median"]
     moved = report["latencies"][0]  # the move's passes: the first pixels no later than the preview's
     assert 0 < moved["first"] <= moved["preview"] and moved.get("draft", moved["preview"]) <= moved["preview"], moved
     assert 0 < moved["preview render"] < moved["preview"], moved  # the render is part of the wait for its pixels
