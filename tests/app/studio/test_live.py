@@ -131,8 +131,10 @@ def test_a_video_plays_in_real_time_and_a_slow_reader_gets_the_newest_frame(coun
         while len(seen) < 12:
             frame = feed.next_after(last, timeout_s=1.0)
             assert frame is not None
-            # Frame k is due k / 30 s after the start, and comes then, not before (nor much later).
-            assert -1e-3 <= frame.stamp - (feed.start + frame.index / 30.0) < 0.03, frame.index
+            # Frame k is due k / 30 s after the start, and comes then, not before, nor later than the feed allows:
+            # a frame a whole frame late is skipped, so one that is read comes within a frame and its decode (the
+            # first one took 32 ms on a busy 2-core machine, beside a 33 ms frame).
+            assert -1e-3 <= frame.stamp - (feed.start + frame.index / 30.0) < 2 / 30.0, frame.index
             assert frame.media_ms == round(1000 * frame.index / 30)
             assert abs(int(frame.bgr[0, 0, 0]) - 4 * frame.index) <= 3  # the pixels are that frame's
             seen.append(frame.index)
