@@ -4,7 +4,12 @@ validation PSNR beside it where that clip was run for 30 minutes. SSIM, FaceMSE 
 capture frame are the longest run's of that clip. A 30-minute run on another processor than the 6-minute run's (a
 row's `machine`; rows without one ran on the Intel Xeon of the first runs) has its steps marked with an asterisk.
 
-    .venv/bin/python scripts/clips_table.py [SIX.json [THIRTY.json]]   # prints the markdown table"""
+    .venv/bin/python scripts/clips_table.py [SIX.json [THIRTY.json]]   # prints the markdown table
+
+`--minutes` prints instead docs/results.md's table of the clips run for 3, 10 and 30 minutes on one processor
+(benchmarks/results/clips_{3,10,30}min.json): held-out PSNR and steps at each, and 10 minutes against 30.
+
+    .venv/bin/python scripts/clips_table.py --minutes"""
 
 from __future__ import annotations
 
@@ -52,8 +57,38 @@ def table(six: dict[str, dict], thirty: dict[str, dict]) -> list[str]:
     return lines
 
 
+def minutes_table(runs: dict[int, dict[str, dict]]) -> list[str]:
+    """The lines of a table of the clips of the 10-minute run: held-out PSNR (steps) after each run's minutes
+    (runs: minutes -> rows by clip; "-" where a clip has no such run; "*" where a run's processor is not the
+    10-minute run's), and the 10-minute figure less the 30-minute one.
+
+    >>> row = lambda psnr, steps, **more: {"test": {"psnr": psnr}, "steps": steps, **more}
+    >>> lines = minutes_table({3: {}, 10: {"a": row(29.18, 2023)}, 30: {"a": row(29.24, 3914, machine="x")}})
+    >>> lines[0]
+    '| clip | 3 minutes | 10 minutes | 30 minutes | 10 against 30 |'
+    >>> lines[2]
+    '| `a` | - | 29.18 (2023) | 29.24 (3914)* | -0.06 |'
+    """
+    minutes = sorted(runs)
+    header = "| clip | " + " | ".join(f"{m} minutes" for m in minutes) + " | 10 against 30 |"
+    lines = [header, "|" + "---|" * (len(minutes) + 2)]
+    for clip, ten in runs[10].items():
+        cells = [f"`{clip}`"]
+        for m in minutes:
+            r = runs[m].get(clip)
+            mark = "*" if r and r.get("machine", XEON) != ten.get("machine", XEON) else ""
+            cells.append(f"{r['test']['psnr']:.2f} ({r['steps']}){mark}" if r else "-")
+        thirty = runs.get(30, {}).get(clip)
+        cells.append(f"{ten['test']['psnr'] - thirty['test']['psnr']:.2f}" if thirty else "-")
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
+    if args[:1] == ["--minutes"]:
+        print("\n".join(minutes_table({m: rows_by_clip(RESULTS / f"clips_{m}min.json") for m in (3, 10, 30)})))
+        return
     six = Path(args[0]) if args else RESULTS / "clips_6min.json"
     thirty = Path(args[1]) if len(args) > 1 else RESULTS / "clips_30min.json"
     print("\n".join(table(rows_by_clip(six), rows_by_clip(thirty))))

@@ -183,12 +183,17 @@ def test_the_readme_is_short():
     assert lines <= README_MAX_LINES, f"README.md has {lines} lines; keep it under {README_MAX_LINES}"
 
 
-def test_the_readme_real_video_table_is_the_benchmarks_results():
-    """The README's figures on real videos are the ones benchmarks/results holds (scripts/clips_table.py writes the
-    table from them): a figure changed by hand, or a run kept without its table, fails here."""
+def _clips_table():
     spec = importlib.util.spec_from_file_location("clips_table", REPO / "scripts" / "clips_table.py")
     clips_table = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(clips_table)
+    return clips_table
+
+
+def test_the_readme_real_video_table_is_the_benchmarks_results():
+    """The README's figures on real videos are the ones benchmarks/results holds (scripts/clips_table.py writes the
+    table from them): a figure changed by hand, or a run kept without its table, fails here."""
+    clips_table = _clips_table()
     results = REPO / "benchmarks" / "results"
     lines = clips_table.table(clips_table.rows_by_clip(results / "clips_6min.json"),
                               clips_table.rows_by_clip(results / "clips_30min.json"))
@@ -197,6 +202,19 @@ def test_the_readme_real_video_table_is_the_benchmarks_results():
     assert lines[0] in readme, "the README has no table of the shared clips"
     start = readme.index(lines[0])
     assert readme[start:start + len(lines)] == lines, "the README's table is not scripts/clips_table.py's"
+
+
+def test_the_minutes_table_in_the_results_is_the_benchmarks_results():
+    """docs/results.md's table of 3, 10 and 30 minutes is the one scripts/clips_table.py --minutes writes from
+    benchmarks/results (five clips, each with a figure at every duration)."""
+    clips_table = _clips_table()
+    results = REPO / "benchmarks" / "results"
+    runs = {m: clips_table.rows_by_clip(results / f"clips_{m}min.json") for m in (3, 10, 30)}
+    lines = clips_table.minutes_table(runs)
+    assert len(lines) == 2 + 5 and not any(" - |" in line for line in lines[2:]), lines
+    page = (REPO / "docs" / "results.md").read_text().splitlines()
+    start = page.index(lines[0])
+    assert page[start:start + len(lines)] == lines, "docs/results.md's table is not scripts/clips_table.py's"
 
 
 def test_the_readme_command_table_lists_exactly_the_subcommands():
