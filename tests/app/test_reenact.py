@@ -142,7 +142,7 @@ def test_cancel_leaves_no_video(tmp_path, face_video, landmarker):
     """SIGTERM (the studio's Cancel) while frames render: exit 130, and no mp4 or partial file is left."""
     out = tmp_path / "perf.mp4"
     proc = subprocess.Popen([sys.executable, "-m", "app.cli", "reenact", str(DEMO), str(face_video), "--out", str(out),
-                             "--landmarker", str(landmarker), "--seconds", "4", "--size", "128"], cwd=REPO,
+                             "--landmarker", str(landmarker), "--seconds", "1.5", "--size", "128"], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     for line in proc.stdout:
         if "driver's neutral frame" in line:  # printed as the rendering starts
