@@ -33,7 +33,8 @@ def rows_by_clip(path: Path) -> dict[str, dict]:
 
 
 def other_processor(row: dict, long: dict | None) -> str:
-    """"*" where the 30-minute run ran on another processor than the 6-minute run, else "".
+    """"*" where the longer run (`long`: the 30-minute one beside a 6-minute `row`) ran on another processor than
+    `row`'s, else "".
 
     >>> other_processor({}, {"machine": "AMD EPYC, 2 cores"}), other_processor({}, {}), other_processor({}, None)
     ('*', '', '')
@@ -76,8 +77,7 @@ def minutes_table(runs: dict[int, dict[str, dict]]) -> list[str]:
         cells = [f"`{clip}`"]
         for m in minutes:
             r = runs[m].get(clip)
-            mark = "*" if r and r.get("machine", XEON) != ten.get("machine", XEON) else ""
-            cells.append(f"{r['test']['psnr']:.2f} ({r['steps']}){mark}" if r else "-")
+            cells.append(f"{r['test']['psnr']:.2f} ({r['steps']}){other_processor(ten, r)}" if r else "-")
         thirty = runs.get(30, {}).get(clip)
         cells.append(f"{ten['test']['psnr'] - thirty['test']['psnr']:.2f}" if thirty else "-")
         lines.append("| " + " | ".join(cells) + " |")
