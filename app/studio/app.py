@@ -27,6 +27,7 @@ from app.studio import actions as a
 from app.studio import avatar_panel, controls_panel, export_panel, jobs_panel, live_panel, quality_panel, viewport
 from app.studio.config import LiveConfig, StudioConfig
 from app.studio.context import PanelContext
+from app.studio.display import display_problem
 from app.studio.exporting import Exporter
 from app.studio.live import LiveFigures, LiveWorker, source_problem
 from app.studio.neural import NeuralWorker, Request
@@ -341,6 +342,17 @@ class Studio:
         self.latency_from = "slider" if self.worker.result is not None else "opening"
         s.dirty = False
 
+    def may_idle(self) -> bool:
+        """Whether the window may drop to cfg.idle_fps until the user acts: nothing it shows moves on its own (no
+        render in flight or due, no live performer, no animation playing, nothing opening). A job's or an export's
+        progress is shown at the idle rate, and the cores go to them. A script idles only while it waits for a job
+        or an export; a --screenshot run never does."""
+        s = self.session
+        if self.worker.busy or s.dirty or s.live.running or s.playing or self.opening is not None or \
+                self.pending_viewport_shot is not None or self.cfg.screenshot:
+            return False
+        return self.script is None or self.script.may_idle
+
     def context(self) -> PanelContext:
         return PanelContext(self.session, self.act, self.worker, self.jobs, self.exporter, self.clock.fps(),
                             float(np.median(self.gui_ms)) if self.gui_ms else None, self.latency_ms,
@@ -560,12 +572,18 @@ def run_live(cfg: LiveConfig) -> int:
 
 
 def run_studio(cfg: StudioConfig, live: str | None = None) -> int:
+    problem = display_problem()
+    if problem:
+        raise UserInputError(problem)
     studio = Studio(cfg, live)
     params = hello_imgui.RunnerParams()
     params.app_window_params.window_title = "Avatar Studio"
     params.app_window_params.window_geometry.size = (cfg.width, cfg.height)
     params.callbacks.show_gui = studio.gui
     params.callbacks.confirm_exit = studio.confirm_exit
+    # Idling (hello_imgui waits for input, up to 1 / idle_fps): allowed frame by frame (Studio.may_idle).
+    params.fps_idling.fps_idle = cfg.idle_fps
+    params.fps_idling.fps_idling_mode = hello_imgui.FpsIdlingMode.sleep
     params.fps_idling.enable_idling = False
     # No multisampling for the window (hello_imgui asks for 8 samples a pixel by default): ImGui anti-aliases its
     # own shapes and the guide is drawn in a framebuffer of its own, so the samples bought nothing, and on a software
@@ -608,6 +626,7 @@ def run_studio(cfg: StudioConfig, live: str | None = None) -> int:
             worker.arrived.wait(spare)
         studio.worker.arrived.clear()
         last_swap[0] = time.perf_counter()
+        hello_imgui.get_runner_params().fps_idling.enable_idling = studio.may_idle()
 
     params.callbacks.before_swap = before_swap
     params.callbacks.after_swap = after_swap

@@ -5,6 +5,9 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
+
+from models.ranges import Range
 
 STUDIO_HOME = Path(os.environ.get("AVATAR_STUDIO_HOME") or Path.home() / "AvatarStudio").resolve()
 """Where the studio's default output paths point (new avatars, turntables), whatever folder it was started in;
@@ -25,8 +28,13 @@ class StudioConfig:
     """The window's width, pixels (the viewport's images grow to fill what the panels leave)."""
     height: int = 900
     """The window's height, pixels."""
-    fps_cap: float = 60.0
+    fps_cap: Annotated[float, Range(1.0)] = 60.0
     """The interface's frame rate cap (no display sync here): what is left of the CPU goes to rendering."""
+    idle_fps: Annotated[float, Range(0.0)] = 9.0
+    """The frame rate once nothing on screen moves on its own (no render in flight, no live performer, no animation
+    playing) and the user has not acted for 3 seconds: a job's progress is shown at this rate and the cores go to
+    the job; any input wakes the window at once (0: never idle). On a software GL the idle window at fps_cap took
+    a whole core."""
     rendering_fps_cap: float = 20.0
     """The cap while the neural render works: on a software GL each of the window's frames takes the cores the
     render needs (measured by benchmarks/bench_studio.py: slider to first pixels against the frame rate)."""

@@ -193,6 +193,13 @@ class Script:
         """Every step done, or one failed: the window closes."""
         return bool(self.failed) or (self.index >= len(self.steps) and self.pending_screenshot is None)
 
+    @property
+    def may_idle(self) -> bool:
+        """The window may idle while the step waits on work outside its frames (a job, an export): the other steps
+        need frames to go on."""
+        return not self.over and self.pending_screenshot is None and any(
+            k in self.steps[self.index] for k in ("wait_job", "wait_export"))
+
     def fail(self, message: str) -> bool:
         s = self.steps[self.index]
         action = next((k for k in s if k in STEPS), "?")

@@ -125,8 +125,8 @@ def test_blinks_and_open_jaw_get_their_expression_weights(d3_dataset, landmarker
 def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     """From the real video through training to eval: the masks cover hair above the brows in every frame (the
     rows above the landmark box; measured 12-45% of them at 256 px, median 36%), the background plate is the
-    wall where the frames show it and not the face, the loss falls over 60 steps, the avatar has what a tracked
-    video gets, and eval scores the held-out frames over the plate."""
+    wall where the frames show it and not the face, the loss falls over 30 steps, the avatar has what a tracked
+    video gets, and eval scores the first held-out frames over the plate."""
     from app.avatar_commands import EvalConfig, run_eval
     from models.capture.frames import load_mask, load_rgb
 
@@ -144,7 +144,7 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     face = (slice(top, bottom), slice(left, right))
     assert np.abs(plate[face] - frame[face]).mean() > 0.15  # and not the face
     out = tmp_path / "avatar"
-    prepare_training(TrainConfig(dataset=d3_dataset, out=out, model="codynerf", effects="none", steps=60), gl).run(gl)
+    prepare_training(TrainConfig(dataset=d3_dataset, out=out, model="codynerf", effects="none", steps=30), gl).run(gl)
     log = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
     assert log[-1]["photometric"] < 0.7 * log[0]["photometric"], (log[0], log[-1])
     avatar, _ = load_avatar(out)
@@ -165,7 +165,7 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     img = render_image(avatar, frame_camera(test, test.frames[0]), test.frames[0].controls, rasterizer=raster)
     raster.release()
     assert np.isfinite(img["rgb"]).all() and img["opacity"].max() > 0.1
-    assert run_eval(EvalConfig(avatar=out, dataset=d3_dataset, out=tmp_path / "eval")) == 0
+    assert run_eval(EvalConfig(avatar=out, dataset=d3_dataset, out=tmp_path / "eval", max_frames=3)) == 0
     metrics = json.loads((tmp_path / "eval" / "metrics.json").read_text())["metrics"]
     assert 10 < metrics["psnr"] < 40 and 0 < metrics["face_mse"] < 0.1, metrics
 

@@ -229,8 +229,9 @@ def test_a_tracker_that_dies_fails_live_driving_with_its_exit_code(files, counte
 
 @pytest.mark.skipif(not SHARED_VIDEO.is_file(), reason=f"{SHARED_VIDEO} is not on this machine (../shared)")
 def test_unasked_the_tracker_makes_a_pose_every_quarter_second(files):
-    """Where the window asks for no pose, the tracker makes one only every UNASKED_S (0.25 s): about 47 in the
-    11.8 s video (against more than 177 where each is asked for at once, above); the other frames are dropped."""
+    """Where the window asks for no pose, the tracker makes one only every UNASKED_S (0.25 s): about 17 in the
+    video's first 4 s after the first pose (against more than 15 a second where each is asked for at once, above);
+    the other frames are dropped."""
     from app.studio.live import UNASKED_S
     from app.user_config import find_landmarker
 
@@ -242,8 +243,11 @@ def test_unasked_the_tracker_makes_a_pose_every_quarter_second(files):
             time.sleep(0.01)
             if worker.pose is not None and (not stamps or worker.pose.stamp != stamps[-1]):
                 stamps.append(worker.pose.stamp)
+            if stamps and stamps[-1] - stamps[0] >= 4.0:
+                break
+        state, received = worker.state, worker.received
     finally:
         worker.close()
-    assert worker.state == "ended" and 30 <= worker.received <= 50, worker.received
+    assert state == "running" and 12 <= received <= 20, (state, received)
     gaps = np.diff(stamps[1:])  # after the first pose, which comes at once
     assert np.median(gaps) == pytest.approx(UNASKED_S, abs=0.05), np.median(gaps)
