@@ -451,7 +451,8 @@ class OpenAvatar(Command):
 class StartTraining(Command):
     dataset: str
     out: str
-    model: str = "codynerf"
+    model: str | None = "codynerf"
+    """None: `train`'s own choice (jobs_panel.MODELS)."""
     effects: str = "all"
     minutes: float | None = None
     steps: int | None = None

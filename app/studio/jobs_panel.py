@@ -23,13 +23,13 @@ from app.studio.actions import (
 )
 from app.studio.config import STUDIO_HOME
 from app.studio.context import PanelContext
-from models.avatars.registry import AVATARS, default_model
+from models.avatars.registry import AVATARS
 from models.capture.dataset import DatasetError, load_split
 
-MODELS = tuple(AVATARS)
-VIDEO_MODELS = ("default", *MODELS)
-"""A video's avatar: `train`'s own choice first (a whole head where the universal prior
-ships, else VIDEO_MODEL from scratch: registry.training_start), or a model named."""
+MODELS = ("default", *AVATARS)
+"""The model a job trains: `train`'s own choice first (for a tracked video a whole head where the universal prior
+ships, else VIDEO_MODEL from scratch: registry.training_start; for a synthetic capture default_model), or a model
+named. The same choice for a capture and for a new avatar from a video, as `train` makes it on the command line."""
 EFFECTS = ("all", "none", "shading", "shading,specular", "shadows")
 
 
@@ -123,17 +123,18 @@ def draw(ctx: PanelContext) -> None:
     _, f.minutes = imgui.input_float("minutes", f.minutes, 5.0, 10.0, "%.0f")
     imgui.same_line()
     if imgui.button("Start training"):
-        act(StartTraining(f.dataset.strip(), f.out.strip(), MODELS[f.model], EFFECTS[f.effects], max(f.minutes, 0.1)))
+        act(StartTraining(f.dataset.strip(), f.out.strip(), None if f.model == 0 else MODELS[f.model],
+                          EFFECTS[f.effects], max(f.minutes, 0.1)))
     if imgui.collapsing_header("New avatar from video"):
         _, f.video = imgui.input_text("video", f.video)
         _, f.head = imgui.input_text("head model", f.head)
         _, f.landmarker = imgui.input_text("landmarker (.task)", f.landmarker)
         imgui.set_next_item_width(110)
-        _, f.video_model = imgui.combo("model##video", f.video_model, list(VIDEO_MODELS))
+        _, f.video_model = imgui.combo("model##video", f.video_model, list(MODELS))
         if imgui.button("Track and train"):
             act(StartFromVideo(f.video.strip(), f.head, f.landmarker.strip(), f.out.strip(), EFFECTS[f.effects],
                                max(f.minutes, 0.1),
-                               model=None if f.video_model == 0 else VIDEO_MODELS[f.video_model]))
+                               model=None if f.video_model == 0 else MODELS[f.video_model]))
         imgui.same_line()
         imgui.text_disabled("(avatar folder, effects and minutes from above)")
     if imgui.collapsing_header("Drive the open avatar from a performance"):
@@ -153,7 +154,7 @@ def draw(ctx: PanelContext) -> None:
     imgui.separator()
     for job in reversed(jobs.jobs):
         imgui.push_id(job.id)
-        model = job.model or ("default" if job.video is not None else default_model(tracked=False))
+        model = job.model or "default"  # train's own choice, which it prints in the job's log
         what = f"driven by {job.video.name}" if job.stage == "reenact" and job.video else f"{model} {job.effects}"
         imgui.text(f"#{job.id} {job.out.name}: {what} - {jobs.status(job)}"
                    + (" (resumed)" if job.resume else ""))

@@ -55,3 +55,21 @@ def test_a_training_reading_its_frames_says_so(tmp_path):
     assert JobQueue.status(job) == "reading the frames: 61/302 frames"
     job.progress.append({"step": 1, "eta_s": 1800.0})
     assert JobQueue.status(job) == "running"
+
+
+def test_the_training_forms_default_model_is_trains_own_choice(synth_capture, tmp_path):
+    """The form's first model is "default": the job runs `train` with no --model, so a tracked video gets the avatar
+    `train` makes on the command line (a whole head where the prior ships), not the first model of the list; a model
+    chosen is passed on."""
+    from app.jobs import JobQueue
+    from app.studio.actions import StartTraining
+    from app.studio.jobs_panel import MODELS, start
+
+    capture = synth_capture("sun", 4, 16)
+    assert MODELS[0] == "default" and "whole" in MODELS and "codynerf" in MODELS
+    jobs = JobQueue(max_running=0)  # queued, never started
+    assert start(jobs, StartTraining(str(capture), str(tmp_path / "a"), None, "none", 1.0)) is None
+    assert start(jobs, StartTraining(str(capture), str(tmp_path / "b"), "primitives", "none", 1.0)) is None
+    default, chosen = (job.command() for job in jobs.jobs)
+    assert default[3] == "train" and "--model" not in default
+    assert chosen[chosen.index("--model") + 1] == "primitives"
