@@ -110,8 +110,9 @@ class TrackConfig:
     split: Literal["time", "view"] = "time"
     """time: the last part of the video is held out; view: the frames where the head is turned furthest from its
     usual facing are held out, so the avatar trains on the smaller turns and is measured beyond them."""
-    iterations: Annotated[int, Range(1, 100000)] = 400
-    """Fitting iterations (all frames at once)."""
+    iterations: Annotated[int, Range(1, 100000)] = 200
+    """Fitting iterations (all frames at once; 400 took twice the fit's time for 0-3% less landmark error on four
+    clips, docs/results.md "Tracking")."""
     shape_components: Annotated[int, Range(0)] = 20
     """Identity components fitted (0: the head model's mean shape)."""
     smooth: Annotated[float, Range(0, 1e6)] = 1.0
@@ -323,8 +324,8 @@ class ReenactConfig:
     """Also write the frames as PNGs into a folder beside the mp4."""
     meshes: Literal["none", "obj", "ply"] = "none"
     """Also write the posed guide mesh of every frame (OUT_meshes/frame_0000.obj ...), for other tools."""
-    iterations: Annotated[int, Range(1, 100000)] = 400
-    """Fitting iterations of the tracker."""
+    iterations: Annotated[int, Range(1, 100000)] = 200
+    """Fitting iterations of the tracker (as `track`'s)."""
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,8 @@ class Intrinsics:
 
 @dataclass(frozen=True)
 class FitConfig:
-    iterations: int = 400
+    iterations: int = 200
+    """All frames at once; the commands' default (app/configs.py)."""
     shape_components: int = 20
     """Identity components fitted (the first ones: the model's largest variations)."""
     lr: float = 0.01
