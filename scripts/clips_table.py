@@ -32,14 +32,14 @@ def rows_by_clip(path: Path) -> dict[str, dict]:
     return {row["clip"]: row for row in json.loads(path.read_text())["rows"]}
 
 
-def other_processor(row: dict, long: dict | None) -> str:
-    """"*" where the longer run (`long`: the 30-minute one beside a 6-minute `row`) ran on another processor than
-    `row`'s, else "".
+def other_processor(row: dict, other: dict | None) -> str:
+    """"*" where the run `other` of the same clip (the 30-minute one beside a 6-minute `row`; any length beside the
+    10-minute row in the minutes table) ran on another processor than `row`'s, else "".
 
     >>> other_processor({}, {"machine": "AMD EPYC, 2 cores"}), other_processor({}, {}), other_processor({}, None)
     ('*', '', '')
     """
-    return "*" if long and long.get("machine", XEON) != row.get("machine", XEON) else ""
+    return "*" if other and other.get("machine", XEON) != row.get("machine", XEON) else ""
 
 
 def table(six: dict[str, dict], thirty: dict[str, dict]) -> list[str]:

@@ -33,6 +33,15 @@ named. The same choice for a capture and for a new avatar from a video, as `trai
 EFFECTS = ("all", "none", "shading", "shading,specular", "shadows")
 
 
+def model_chosen(index: int) -> str | None:
+    """The model a form's combo names (MODELS[index]); None for "default", `train`'s own choice.
+
+    >>> model_chosen(0), model_chosen(MODELS.index("primitives"))
+    (None, 'primitives')
+    """
+    return None if index == 0 else MODELS[index]
+
+
 @dataclass
 class JobForm:
     dataset: str = ""
@@ -123,8 +132,8 @@ def draw(ctx: PanelContext) -> None:
     _, f.minutes = imgui.input_float("minutes", f.minutes, 5.0, 10.0, "%.0f")
     imgui.same_line()
     if imgui.button("Start training"):
-        act(StartTraining(f.dataset.strip(), f.out.strip(), None if f.model == 0 else MODELS[f.model],
-                          EFFECTS[f.effects], max(f.minutes, 0.1)))
+        act(StartTraining(f.dataset.strip(), f.out.strip(), model_chosen(f.model), EFFECTS[f.effects],
+                          max(f.minutes, 0.1)))
     if imgui.collapsing_header("New avatar from video"):
         _, f.video = imgui.input_text("video", f.video)
         _, f.head = imgui.input_text("head model", f.head)
@@ -134,7 +143,7 @@ def draw(ctx: PanelContext) -> None:
         if imgui.button("Track and train"):
             act(StartFromVideo(f.video.strip(), f.head, f.landmarker.strip(), f.out.strip(), EFFECTS[f.effects],
                                max(f.minutes, 0.1),
-                               model=None if f.video_model == 0 else MODELS[f.video_model]))
+                               model=model_chosen(f.video_model)))
         imgui.same_line()
         imgui.text_disabled("(avatar folder, effects and minutes from above)")
     if imgui.collapsing_header("Drive the open avatar from a performance"):
