@@ -66,6 +66,18 @@ def builtin_model():
 
 
 @pytest.fixture(scope="session")
+def one_second_scan(tmp_path_factory, face_video, landmarker) -> Path:
+    """The face video's first second tracked with the built-in head at 64 px (`track` as a user runs it, no overlay):
+    a small real capture, made once for the tests that only read it."""
+    from app.cli import main
+
+    scan = tmp_path_factory.mktemp("one_second") / "real_person"
+    assert main(["track", str(face_video), "--out", str(scan), "--size", "64", "--seconds", "1",
+                 "--landmarker", str(landmarker), "--no-overlay"]) == 0
+    return scan
+
+
+@pytest.fixture(scope="session")
 def gl():
     from render.gl.context import GLContext
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -72,6 +74,18 @@ class HeadModel:
     @property
     def num_vertices(self) -> int:
         return self.template.shape[0]
+
+    @cached_property
+    def surface_key(self) -> str:
+        """A digest of the template's vertices and triangles: the same for the same surface whatever file or name it
+        came from, and another for any other (what is computed from the surface alone is cached under it:
+        the primitives' layout and chart)."""
+        digest = hashlib.blake2b(digest_size=16)
+        for a in (self.template, self.triangles):
+            a = np.ascontiguousarray(a)
+            digest.update(f"{a.dtype.str}{a.shape}".encode())
+            digest.update(a.tobytes())
+        return digest.hexdigest()
 
     @property
     def num_shape(self) -> int:

@@ -109,14 +109,16 @@ CASES = ["missing file", "truncated npz", "flame wrong shapes", "obj folder with
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_bad_input_exit_2_one_line(tmp_path, case):
+def test_bad_input_exit_2_one_line(tmp_path, case, capsys):
+    """Run in this process through the command line's own main (the exit status a process gets is its return
+    value: test_malicious_pickle_refused_with_exit_2_and_nothing_runs runs one as a process)."""
     args, message = _bad_inputs(tmp_path, None)[case]
     out = tmp_path / "keep.obj"
     out.write_text("the user's file\n")
-    r = run_cli("mesh", *args, "--out", out)
-    assert r.returncode == 2, r.stderr
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and message in lines[0], r.stderr
+    assert main(["mesh", *args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], err
     assert out.read_text() == "the user's file\n"  # nothing the user had is overwritten
 
 
@@ -130,13 +132,17 @@ def test_malicious_pickle_refused_with_exit_2_and_nothing_runs(tmp_path):
     assert not marker.exists() and not (tmp_path / "x.png").exists()
 
 
-def test_bad_arguments_exit_2(tmp_path):
-    r = run_cli("preview", "--pass", "glitter", "--out", tmp_path / "x.png")
-    assert r.returncode == 2 and "invalid choice" in r.stderr
-    r = run_cli("preview", "--expression", "smile_L", "--out", tmp_path / "x.png")
-    assert r.returncode == 2 and "expected NAME=WEIGHT" in r.stderr
-    r = run_cli("mesh", "--out", tmp_path / "x.stl")
-    assert r.returncode == 2 and "x.stl: output must end in .obj or .ply" in r.stderr
+def test_bad_arguments_exit_2(tmp_path, capsys):
+    """A choice argparse refuses ends in its SystemExit(2), a bad value or output name in main's 2; in this
+    process."""
+    with pytest.raises(SystemExit) as e:
+        main(["preview", "--pass", "glitter", "--out", str(tmp_path / "x.png")])
+    assert e.value.code == 2 and "invalid choice" in capsys.readouterr().err
+    assert main(["preview", "--expression", "smile_L", "--out", str(tmp_path / "x.png")]) == 2
+    assert "expected NAME=WEIGHT" in capsys.readouterr().err
+    assert main(["mesh", "--out", str(tmp_path / "x.stl")]) == 2
+    assert "x.stl: output must end in .obj or .ply" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()
 
 
 def test_ict_through_the_cli(tmp_path, ict_npz, ict_model):

@@ -243,11 +243,11 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         self.light_dir = light_dir if effects else None
         """The capture's key light (world, towards it) where it records one and the effects call for light: the
         decoder reads its direction in the head's frame (colour under that light as the head turns)."""
-        layout = primitive_layout(head_model, cfg.grid, front=cfg.front)
-        self.register_buffer("layout_triangles", torch.as_tensor(layout.triangles, dtype=torch.long))
-        self.register_buffer("layout_bary", torch.as_tensor(layout.bary, dtype=torch.float32))
+        layout = primitive_layout(head_model, cfg.grid, front=cfg.front)  # shared: the buffers are copies
+        self.register_buffer("layout_triangles", torch.tensor(layout.triangles, dtype=torch.long))
+        self.register_buffer("layout_bary", torch.tensor(layout.bary, dtype=torch.float32))
         self.register_buffer("layout_cells", torch.as_tensor(layout.cells[:, 0] * cfg.grid + layout.cells[:, 1]))
-        self.register_buffer("layout_half", torch.as_tensor(layout.half_size_m, dtype=torch.float32))
+        self.register_buffer("layout_half", torch.tensor(layout.half_size_m, dtype=torch.float32))
         self.register_buffer("triangles", torch.as_tensor(np.asarray(head_model.triangles), dtype=torch.long),
                              persistent=False)
         self.condition_dim = head_model.num_expression + 6

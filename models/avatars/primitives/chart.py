@@ -39,8 +39,8 @@ _SAMPLERS: dict[tuple, ChartSampler] = {}
 
 def chart_sampler(model: HeadModel, size: int, front: float = 0.0) -> ChartSampler:
     """The chart at S = size for a head model, its columns crowded to the face by `front` (layout.chart_azimuths;
-    computed once per model, size and front: a ray per texel)."""
-    key = (model.name, model.num_vertices, len(model.triangles), size, front)
+    computed once per surface, size and front: a ray per texel; the arrays are shared, read them only)."""
+    key = (model.surface_key, size, front)
     if key not in _SAMPLERS:
         verts = np.asarray(model.template, np.float64)
         tris = np.asarray(model.triangles, np.int64)

@@ -148,11 +148,24 @@ MIN_INCIDENCE = 0.4
 at a grazing angle (the neck, below the chin) covers a patch 1/cos as long as the cell is wide, up to 2.5x."""
 
 
+_LAYOUTS: dict[tuple, PrimitiveLayout] = {}
+
+
 def primitive_layout(model: HeadModel, grid: int, overlap: float = 1.3, front: float = 0.0) -> PrimitiveLayout:
     """A primitive at each cell of the chart whose ray leaves the template somewhere; its half-size is half the
     surface patch the cell covers (the distance times the cell's angle, the larger of its two sides, over the
     cosine at which the ray leaves the surface, at least MIN_INCIDENCE), times `overlap` so that neighbours leave
-    no gaps. front: the columns crowded to the face (chart_azimuths)."""
+    no gaps. front: the columns crowded to the face (chart_azimuths). Computed once per surface
+    (HeadModel.surface_key) and arguments, 0.1-1.3 s a time (a ray per cell): the arrays are shared, read them,
+    copy before writing."""
+    key = (model.surface_key, grid, overlap, front)
+    if key not in _LAYOUTS:
+        _LAYOUTS[key] = layout_of(model, grid, overlap, front)
+    return _LAYOUTS[key]
+
+
+def layout_of(model: HeadModel, grid: int, overlap: float, front: float) -> PrimitiveLayout:
+    """primitive_layout's arrays, computed."""
     verts = np.asarray(model.template, np.float64)
     tris = np.asarray(model.triangles, np.int64)
     centre = 0.5 * (verts.min(0) + verts.max(0))

@@ -93,18 +93,14 @@ def test_a_video_drives_the_avatar_and_its_mouth_opens_on_screen(display, tmp_pa
     assert report["errors"][-1] == f"live: {SHARED_VIDEO}: the video ended"
 
 
-def test_a_missing_video_is_one_message_and_the_studio_goes_on(display, tmp_path):
-    missing = tmp_path / "nothing.mp4"
-    report = run_script(display, tmp_path, DEMO, [{"wait_render": "draft"}, {"live": str(missing)},
-                                                  {"wait_live_end": True}, {"expect_error": "no such video file"},
-                                                  {"expression": 0, "value": 0.5}, {"wait_render": "draft"}])
-    assert report["errors"] == [f"{missing}: no such video file (a camera is given by its index: --source 0)"]
-
-
 def test_stopping_live_driving_gives_the_sliders_back(display, tmp_path):
-    """Stopped mid-video: no message, the poses stop coming, and a slider's move renders as before. The guide holds
-    while live unless asked to follow (Display.live_guide), and follows the sliders again once live stops."""
-    steps = [{"wait_render": "draft"}, {"record_sliders": True}, {"live": str(SHARED_VIDEO)}, {"wait_live": 30},
+    """A missing video first: one message, and the studio goes on. Then stopped mid-video: no message, the poses
+    stop coming, and a slider's move renders as before. The guide holds while live unless asked to follow
+    (Display.live_guide), and follows the sliders again once live stops."""
+    missing = tmp_path / "nothing.mp4"
+    steps = [{"wait_render": "draft"}, {"live": str(missing)}, {"wait_live_end": True},
+             {"expect_error": "no such video file"},
+             {"record_sliders": True}, {"live": str(SHARED_VIDEO)}, {"wait_live": 30},
              {"record_sliders": True}, {"stop_live": True},
              {"record_sliders": True}, {"wait_frames": 30}, {"record_sliders": True},
              {"expression": 0, "value": 0.7}, {"wait_render": "draft"}, {"record_sliders": True},
@@ -117,7 +113,8 @@ def test_stopping_live_driving_gives_the_sliders_back(display, tmp_path):
     assert moved > later >= stopped  # drawn again once live stopped
     assert following >= moved + 5  # asked to follow: drawn for the live poses
     stopped, later, moved = log[2:5]
-    assert report["errors"] == [] and report["live"]["state"] is None
+    assert report["errors"] == [f"{missing}: no such video file (a camera is given by its index: --source 0)"]
+    assert report["live"]["state"] is None
     assert 30 <= report["live"]["on_screen"] < 200
     assert stopped == later  # nothing drives the sliders once stopped
     assert moved["expression"][0] == 0.7 and moved["expression"][1:] == later["expression"][1:]

@@ -146,16 +146,24 @@ def test_shadow_buffers_in_the_viewport(display, avatar, capture, tmp_path):
     assert np.abs(shown - truth).mean() < 12  # the capture's own frame, as the window shows it
 
 
-def test_script_mistakes_end_on_one_line_with_status_2(display, avatar, tmp_path):
+def test_script_mistakes_end_on_one_line_with_status_2(display, avatar, tmp_path, monkeypatch, capsys):
     """A wrong step is one line naming it (steps[INDEX] (ACTION)) and exit status 2, before the window opens:
-    "wait_render": true once ended in a ValueError's traceback, a gaze of three numbers in a broadcast error."""
+    "wait_render": true once ended in a ValueError's traceback, a gaze of three numbers in a broadcast error. In
+    this process, through the command line's main (no window opens; test_jobs_end_with_the_window sees a studio
+    process end with status 2)."""
+    from app.cli import main
+
+    monkeypatch.setenv("DISPLAY", display)
+    script = tmp_path / "script.json"
     for steps, line in [
         ([{"wait_frames": 1}, {"wait_render": True}],
          "steps[1] (wait_render): one of draft, preview or final, not true"),
         ([{"gaze": [10, 0, 0]}], "steps[0] (gaze): a list of 2 numbers (yaw, pitch in degrees), not [10, 0, 0]"),
     ]:
-        status, stderr = failed_run(display, tmp_path, avatar, steps)
-        assert status == 2 and stderr == [f"avatar-studio studio: error: {tmp_path / 'script.json'}: {line}"], stderr
+        script.write_text(json.dumps({"steps": steps}))
+        assert main(["studio", str(avatar), "--script", str(script)]) == 2
+        stderr = capsys.readouterr().err.splitlines()
+        assert stderr == [f"avatar-studio studio: error: {script}: {line}"], stderr
 
 
 def non_background(image: np.ndarray, colour, tolerance: int = 12) -> np.ndarray:

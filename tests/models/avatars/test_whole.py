@@ -148,7 +148,7 @@ def test_far_and_extreme_rays_stay_finite(whole):
     assert torch.isfinite(w).all() and (w >= 0).all() and (w <= 1).all()
 
 
-def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, face_video, landmarker, capsys):
+def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, one_second_scan, capsys):
     """`train --model whole` on a tracked video: the inside from scratch, then the prior personalised, each in
     parts/, put together as one avatar whose captured views are the inside's; the studio's progress as one run;
     stopped before it was put together, `--resume` finishes the outside with the prior it began with."""
@@ -157,9 +157,7 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, face_video, la
     from models.avatars.registry import load_avatar
     from models.capture.dataset import load_split
     from models.capture.frames import frame_camera
-    scan, prior, out = tmp_path / "scan", tmp_path / "prior", tmp_path / "whole"
-    assert main(["track", str(face_video), "--out", str(scan), "--size", "64", "--seconds", "1",
-                 "--landmarker", str(landmarker), "--no-overlay"]) == 0
+    scan, prior, out = one_second_scan, tmp_path / "prior", tmp_path / "whole"
     torch.manual_seed(0)
     small = PriorAvatar.for_capture(load_builtin(), 1, np.full(3, 0.5, np.float32), (), None, SMALL)
     save_checkpoint(prior, {**small.meta(), "head_model": "builtin", "frames": 1, "background": [0.5] * 3},

@@ -74,6 +74,29 @@ def test_layout_on_every_head_model(builtin_model, ict_model, tmp_path):
     check_layout_on(ict_model, covered=0.9, front=2.0)
 
 
+def test_layouts_are_computed_once_per_surface(builtin_model):
+    """The layout and the chart are cached by the surface (HeadModel.surface_key), not by the model's name: the same
+    surface read again gets the same arrays; a surface under the same name that differs gets its own (the layout of
+    a head 10% larger has boxes 10% larger); an avatar's buffers are copies (loading weights into one leaves the
+    shared layout as it was)."""
+    from dataclasses import replace
+
+    from models.avatars.primitives.chart import chart_sampler
+
+    again = replace(builtin_model, template=builtin_model.template.copy())
+    larger = replace(builtin_model, template=builtin_model.template * 1.1)
+    assert again.surface_key == builtin_model.surface_key != larger.surface_key and larger.name == builtin_model.name
+    assert primitive_layout(again, 8) is primitive_layout(builtin_model, 8)
+    assert chart_sampler(again, 16) is chart_sampler(builtin_model, 16)
+    np.testing.assert_allclose(primitive_layout(larger, 8).half_size_m, 1.1 * primitive_layout(builtin_model, 8)
+                               .half_size_m, rtol=1e-5)
+    assert not np.array_equal(chart_sampler(larger, 16).centre, chart_sampler(builtin_model, 16).centre)
+    avatar = PrimitivesAvatar(builtin_model, PrimitivesConfig(grid=8, voxels=4), 1, np.zeros(3, np.float32))
+    half = primitive_layout(builtin_model, 8, front=avatar.cfg.front).half_size_m.copy()
+    avatar.layout_half.mul_(2.0)
+    np.testing.assert_array_equal(primitive_layout(builtin_model, 8, front=avatar.cfg.front).half_size_m, half)
+
+
 def test_a_chart_crowded_to_the_face_gives_it_smaller_primitives(ict_model):
     """front = 2: the columns within 50 degrees of the face hold twice the primitives, each about 0.6 times as wide
     (ICT, K = 16: 36 of 22.7 mm half-size against 72 of 13.5 mm), the back's grow; the even chart is front = 0."""

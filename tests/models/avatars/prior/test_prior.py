@@ -351,7 +351,7 @@ def test_one_persons_expression_drives_another(gl):
     assert near_mouth > 0.005 and near_mouth > 10 * forehead, (near_mouth, forehead)
 
 
-def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker, capsys):
+def test_a_real_scan_personalizes_over_its_room(tmp_path, one_second_scan, capsys):
     """A second of a real video tracked with the built-in head is a scan: personalize composites the person over
     the video's room (the plate, as `train` does), and the avatar renders the capture camera's view over it."""
     from app.cli import main
@@ -361,9 +361,7 @@ def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker
 
     if not (PRIOR / "avatar.json").is_file():
         pytest.skip(f"no shipped prior at {PRIOR}")
-    scan, out = tmp_path / "scan", tmp_path / "me"
-    assert main(["track", str(face_video), "--out", str(scan), "--size", "64", "--seconds", "1",
-                 "--landmarker", str(landmarker), "--no-overlay"]) == 0
+    scan, out = one_second_scan, tmp_path / "me"
     assert main(["personalize", str(scan), "--prior", str(PRIOR), "--out", str(out), "--steps", "2"]) == 0
     avatar, _ = load_avatar(out)
     split = load_split(scan, "test")
@@ -375,8 +373,8 @@ def test_a_real_scan_personalizes_over_its_room(tmp_path, face_video, landmarker
     np.testing.assert_allclose(corner, plate.reshape(64, 64, 3)[:4, :4].reshape(-1, 3).numpy(), atol=0.02)
 
 
-def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_path, corpus, face_video, landmarker,
-                                                                          gl, capsys):
+def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_path, corpus, one_second_scan, gl,
+                                                                          capsys):
     """A real person (a second of video tracked with the built-in head) joins the synthetic corpus with
     `prior-train --people`: their frames composite over their own room (the plate kept in their frames, none kept
     by the prior); a person of another head model is refused by name; `train` on a tracked video personalises the
@@ -388,9 +386,7 @@ def test_a_tracked_video_joins_the_corpus_and_train_starts_from_the_prior(tmp_pa
     from models.training.configs import PriorTrainConfig
     from models.training.prior import prepare_prior
 
-    scan, prior, other = tmp_path / "real_person", tmp_path / "prior", tmp_path / "demo_person"
-    assert main(["track", str(face_video), "--out", str(scan), "--size", "64", "--seconds", "1",
-                 "--landmarker", str(landmarker), "--no-overlay"]) == 0
+    scan, prior, other = one_second_scan, tmp_path / "prior", tmp_path / "demo_person"
     small = ["--grid", "8", "--voxels", "2", "--width", "16", "--rays-per-frame", "64", "--frames-per-step", "2"]
     assert main(["prior-train", str(corpus), "--people", str(scan), "--out", str(prior), "--steps", "2", *small]) == 0
     meta = json.loads((prior / "avatar.json").read_text())
