@@ -1,6 +1,7 @@
 """Progress of a long command, through tqdm, wherever its output goes: on a terminal a bar with the time left,
 redrawn at each update; in a log (a file, a pipe, the studio's job list, which reads "reenact: 12/40 frames" back) a
-plain line every tenth of the way and at the end, so that a log also says how far it got."""
+plain line every tenth of the way, with the time left, and at the end with the time taken, so that a log also says
+how far it got and how long the rest will take."""
 
 from __future__ import annotations
 
@@ -16,6 +17,10 @@ from tqdm import tqdm
 RUNNING = "{percentage:3.0f}%|{bar:12}| {remaining} left  {desc}: {n}/{total} {unit}{extra}   "
 FINISHED = "{percentage:3.0f}%|{bar:12}| {elapsed} in all  {desc}: {n}/{total} {unit}{extra}   "
 LOG_LINE = "{desc}: {n}/{total} {unit}{extra}"
+# A log's lines say the time left once a rate is known (from the first update on: the warm-up left out), and the
+# last one the time taken, so that a log (and the studio's job list, which shows its last line) tells them too.
+LOG_RUNNING = LOG_LINE + " ({remaining} left)"
+LOG_FINISHED = LOG_LINE + " ({elapsed} in all)"
 
 
 class _Bar(tqdm):
@@ -76,6 +81,8 @@ class Progress:
                              bar_format=LOG_LINE, extra=extra, log=True, delay=float("inf"))
         self._bar.n, self._bar.extra = done, extra
         if finished or done * 10 >= self._next_tenth * self.total:
+            moved = done > self._bar.initial  # else no rate, and no time left to say
+            self._bar.bar_format = LOG_FINISHED if finished else LOG_RUNNING if moved else LOG_LINE
             self._bar.refresh()
             while done * 10 >= self._next_tenth * self.total:
                 self._next_tenth += 1

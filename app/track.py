@@ -60,13 +60,19 @@ def track_video(cfg: TrackConfig, model) -> Tracked:
     tty = sys.stderr.isatty()
     bar = tqdm(desc="landmarks", unit="frame", disable=not tty)
 
+    first: list[tuple[int, float]] = []  # the first frame's count and time: the rate from there on
+
     def landmarks(done: int, total: int | None) -> None:
         if tty:
             bar.total = total
             bar.n = done
             bar.refresh()
-        elif done % 25 == 0:  # a line every 25 frames in a log (the studio's job list shows its last line)
-            print(f"landmarks: {done}" + (f" of about {total}" if total else "") + " frames", flush=True)
+            return
+        if not first:
+            first.append((done, time.perf_counter()))
+        if done % 25 == 0:  # a line every 25 frames in a log (the studio's job list shows its last line)
+            print(f"landmarks: {done}" + (f" of about {total}" if total else "") + " frames"
+                  + time_left(done, total, *first[0]), flush=True)
 
     fitting: list[Progress] = []
 
@@ -85,6 +91,19 @@ def track_video(cfg: TrackConfig, model) -> Tracked:
         return pipeline.track_video(cfg, model, bundle, info, feedback)
     finally:
         bar.close()
+
+
+def time_left(done: int, total: int | None, done_at_start: int, start: float, now: float | None = None) -> str:
+    """" (M:SS left)" at the rate since `start` (when `done_at_start` were done), or "" where there is none yet.
+
+    >>> time_left(50, 200, 0, 100.0, now=110.0), time_left(1, 200, 1, 100.0, now=110.0), time_left(50, None, 0, 0.0)
+    (' (00:30 left)', '', '')
+    """
+    now = time.perf_counter() if now is None else now
+    if not total or done <= done_at_start or now <= start:
+        return ""
+    left = (total - done) * (now - start) / (done - done_at_start)
+    return f" ({tqdm.format_interval(max(left, 0.0))} left)"
 
 
 def run_track(cfg: TrackConfig) -> int:

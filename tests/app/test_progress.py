@@ -17,7 +17,22 @@ def test_a_log_gets_a_line_every_tenth():
     # 24 frames: the tenths fall at 2.4, 4.8, ... frames, so the lines come at frames 3, 5, 8, 10, 12, 15, 17, 20,
     # 22 and 24 (the last one always).
     assert [int(line.split()[1].split("/")[0]) for line in lines] == [3, 5, 8, 10, 12, 15, 17, 20, 22, 24]
-    assert lines[-1] == "turntable: 24/24 frames"
+    assert lines[-1].startswith("turntable: 24/24 frames (") and lines[-1].endswith(" in all)")
+
+
+def test_a_log_line_says_the_time_left_and_the_last_the_time_taken(monkeypatch):
+    """A clock at 2 s a frame from the first update (frame 0) on: after frame k, (10 - k) frames are 2(10 - k) s
+    away; the last line says the 20 s the ten took."""
+    now = [100.0]
+    monkeypatch.setattr("tqdm.std.time", lambda: now[0])
+    out = io.StringIO()
+    p = Progress("fitting", 10, unit="iterations", stream=out, tty=False)
+    for k in range(0, 11):
+        now[0] = 100.0 + 2 * k
+        p.update(k)
+    lines = out.getvalue().splitlines()
+    assert lines[0] == "fitting: 1/10 iterations (00:18 left)" and lines[4] == "fitting: 5/10 iterations (00:10 left)"
+    assert lines[-1] == "fitting: 10/10 iterations (00:20 in all)" and len(lines) == 10
 
 
 def test_a_terminal_gets_one_line_redrawn():

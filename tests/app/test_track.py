@@ -360,7 +360,9 @@ def test_a_landmarker_given_once_is_remembered_and_mediapipe_keeps_quiet(tmp_pat
     err = r.stderr.splitlines()
     assert not [line for line in err if line[:5] in ("W0000", "I0000", "E0000") or line.startswith(("INFO:",
                                                                                                   "WARNING:"))], err
-    assert "fitting: 20/20 iterations" in err and "fitting: 2/20 iterations" in err  # a line every tenth
+    fitting = [line for line in err if line.startswith("fitting: ")]  # a line every tenth, with the time left
+    assert len(fitting) == 10 and fitting[0].startswith("fitting: 2/20 iterations (") and fitting[0].endswith(" left)")
+    assert fitting[-1].startswith("fitting: 20/20 iterations (") and fitting[-1].endswith(" in all)"), fitting
     stored = str(landmarker.resolve())
     assert (f"remembered --landmarker {stored} in {config / 'avatar-studio' / 'config.json'}: later runs need no "
             "--landmarker") in r.stdout.splitlines()
