@@ -21,7 +21,7 @@ from tqdm import tqdm
 from app.capture_commands import next_train
 from app.configs import TrackConfig
 from app.errors import UserInputError
-from app.progress import Progress
+from app.progress import Progress, progress_callback
 from app.user_config import config_folder, find_landmarker, remember, remembered
 from models.files import partial_folder
 from models.head.sources import load_head
@@ -113,7 +113,9 @@ def run_track(cfg: TrackConfig) -> int:
     tr = track_video(cfg, model)
     with partial_folder(cfg.out) as partial:
         bar = Progress(f"cutting masks ({mask_way(cfg.masks)})", len(tr.kept), unit="frames")
-        report = write_capture(cfg, tr, model, partial, Feedback(masks=lambda done, _: bar.update(done)))
+        writing = progress_callback("writing the frames" + (" and the overlay" if cfg.overlay else ""), unit="images")
+        report = write_capture(cfg, tr, model, partial, Feedback(masks=lambda done, _: bar.update(done),
+                                                                 writing=writing))
         total = time.perf_counter() - t_start
         report["seconds"]["total"] = round(total, 2)
         report["seconds_per_frame"] = round(total / tr.read, 4)

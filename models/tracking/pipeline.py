@@ -75,6 +75,8 @@ class Feedback:
     """Once the landmarker has found enough sharp faces (the command remembers a --landmarker that worked)."""
     masks: Callable[[int, int], None] = _quiet
     """(masks cut, in all) as they are cut."""
+    writing: Callable[[int, int], None] = _quiet
+    """(frames written, in all) as the capture's frames and masks are written, then the overlay's frames."""
 
 
 OTHER_PERSON = 0.5
@@ -248,12 +250,20 @@ def write_capture(cfg, tr: Tracked, model, folder: Path, feedback: Feedback = Fe
     masks = foreground_masks(crops, [framing.points(face.landmarks_px[:468]) - framing.offsets[j]
                                      for j, face in enumerate(faces)], progress=feedback.masks, way=way)
     t_masks = time.perf_counter() - t_masks
+    n = len(crops)
+    total = n * (2 if cfg.overlay else 1)
     splits, per_frame, plate_report = write_frames(cfg, folder, tr.kept, crops, masks, framing, tr.intrinsics,
-                                                   tr.result, tr.errors, tr.info.fps)
+                                                   tr.result, tr.errors, tr.info.fps,
+                                                   lambda done: feedback.writing(done, total))
     if cfg.overlay:
         o, pixels, targets = framing.offsets, tr.pixels, tr.targets
-        write_video((overlay(img, pixels[j] - o[j], model, targets[j] - o[j], pixels[j][tr.vertex_ids] - o[j])
-                     for j, img in enumerate(crops)), folder / "tracking" / "overlay.mp4", fps=cfg.fps or tr.info.fps)
+
+        def drawn(j: int, img: np.ndarray) -> np.ndarray:
+            feedback.writing(n + j + 1, total)
+            return overlay(img, pixels[j] - o[j], model, targets[j] - o[j], pixels[j][tr.vertex_ids] - o[j])
+
+        write_video((drawn(j, img) for j, img in enumerate(crops)), folder / "tracking" / "overlay.mp4",
+                    fps=cfg.fps or tr.info.fps)
     return {**track_report(cfg, tr, splits, per_frame, plate_report, t_masks), "masks_by": way}
 
 
@@ -297,12 +307,12 @@ def track_report(cfg, tr: Tracked, splits: dict[str, list[dict]], per_frame: lis
 
 
 def write_frames(cfg, partial: Path, kept: list[dict], crops: list[np.ndarray], masks: list[np.ndarray],
-                 framing: Framing, k: Intrinsics, result, errors: np.ndarray, video_fps: float
-                 ) -> tuple[dict[str, list[dict]], list[dict], dict]:
+                 framing: Framing, k: Intrinsics, result, errors: np.ndarray, video_fps: float,
+                 progress: Callable[[int], None] = _quiet) -> tuple[dict[str, list[dict]], list[dict], dict]:
     """The frames as the camera saw them, their masks, the background plate (from the training frames: nothing
     of the held-out ones; the canvas's size, with its own intrinsics, where the crop follows the head: each frame
     then has its own intrinsics, the canvas's less its window's offset) and the three splits' transforms; returns
-    the splits, each frame's landmark error and the plate's report."""
+    the splits, each frame's landmark error and the plate's report; progress(frames written) after each frame."""
     (partial / "images").mkdir()
     (partial / "masks").mkdir()
     n_test = max(1, math.ceil(cfg.test_fraction * len(kept)))
@@ -352,6 +362,7 @@ def write_frames(cfg, partial: Path, kept: list[dict], crops: list[np.ndarray], 
         per_frame.append({"frame": j, "split": split, "source_frame": f["source_frame"],
                           "time_s": round(f["time_s"], 3), "median_px": round(float(np.median(e)), 3),
                           "p95_px": round(float(np.percentile(e, 95)), 3)})
+        progress(j + 1)
     for split, frames in splits.items():
         write_split(partial, split, header, frames)
     return splits, per_frame, plate_report

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from models.tracking.masks import (
@@ -9,6 +11,7 @@ from models.tracking.masks import (
     background_plate,
     foreground_mask,
     foreground_masks,
+    masked_median,
     room_residual,
 )
 
@@ -78,3 +81,25 @@ def test_a_room_that_moves_is_told_from_a_still_one():
         assert (level <= STILL_ROOM_LEVELS) == still, (pan, level)
         if still:
             assert level < 2.0  # about the noise's mean absolute value (0.8 levels)
+
+
+def test_the_masked_median_is_numpys_nanmedian_bit_for_bit():
+    """masked_median against its reference, np.nanmedian with the others NaN, rounded as the plate rounds it: random
+    values and keeps, odd and even counts, one kept value, none, every one, the ends of the range (0 and 255)."""
+    rng = np.random.default_rng(3)
+    values = rng.integers(0, 256, (37, 20, 24, 3)).astype(np.uint8)
+    values[:, 0] = 255
+    values[:, 1] = 0
+    keep = rng.random((37, 20, 24)) < 0.4
+    keep[:, 2, :] = False  # none
+    keep[:, 3, :] = True  # every one
+    keep[:, 4, :] = False
+    keep[5, 4, :] = True  # one
+    block = values.astype(np.float32)
+    block[~keep] = np.nan
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        reference = np.nan_to_num(np.nanmedian(block, axis=0)).round().clip(0, 255).astype(np.uint8)
+    counts = keep.sum(0)
+    assert (counts % 2 == 0).any() and (counts % 2 == 1).any()  # both kinds of middle
+    np.testing.assert_array_equal(masked_median(values, keep), reference)
