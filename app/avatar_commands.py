@@ -17,7 +17,7 @@ from app.configs import AnimateConfig, EvalConfig, ExportMeshConfig, Personalize
 from app.display import INSPECT, buffer_image, render_needs, resized
 from app.errors import UserInputError
 from app.head_commands import save_png
-from app.progress import Progress, progress_callback
+from app.progress import Progress, progress_by_stage, progress_callback
 from app.turntable import TurntableConfig, turntable_frames
 from models.avatars.checkpoint import CheckpointError
 from models.avatars.effects import parse_effects
@@ -80,7 +80,7 @@ def train_locked(cfg: TrainConfig) -> int:
     if not cfg.resume and (cfg.out / "avatar.json").exists():
         raise UserInputError(f"{cfg.out}: already holds an avatar; pass --resume to continue it or choose a new folder")
     gl = GLContext.headless()
-    reading = progress_callback("reading the frames")
+    reading = progress_by_stage()
     if cfg.resume and (cfg.out / WHOLE_PARTS).is_dir():  # a whole head's parts: each continued, then put together
         return train_whole(cfg, gl, None)
     if cfg.resume:
@@ -212,7 +212,7 @@ def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
     if prior is not None:  # the prior this whole head personalises, for a --resume before its turn comes
         parts.mkdir(parents=True, exist_ok=True)
         (parts / WHOLE_PRIOR_NOTE).write_text(json.dumps({"prior": str(Path(prior).resolve())}) + "\n")
-    reading = progress_callback("reading the frames")
+    reading = progress_by_stage()  # the inside's frames, then the outside's: a bar for each
     print(f"training the inside ({inside_cfg.out}: from scratch{', continued' if inside_cfg.resume else ''})",
           flush=True)
     inside = prepare_training(inside_cfg, gl, on_frame=reading)
@@ -451,7 +451,7 @@ def run_personalize(cfg: PersonalizeConfig) -> int:
     tcfg = TrainConfig(dataset=cfg.scan, out=cfg.out, model="prior", minutes=cfg.minutes or None,
                        steps=cfg.steps or (None if cfg.minutes else 1), device=cfg.device, seed=cfg.seed, lr=cfg.lr)
     gl = GLContext.headless()
-    trainer, maps_s = personalizing_trainer(tcfg, cfg.prior, gl, cfg.tune)
+    trainer, maps_s = personalizing_trainer(tcfg, cfg.prior, gl, cfg.tune, on_frame=progress_by_stage())
     if cfg.minutes or cfg.steps:
         trainer.run(gl)
     else:

@@ -100,3 +100,17 @@ def progress_callback(what: str, unit: str = "frames") -> Callable[[int, int], N
         bar[0].update(done)
 
     return update
+
+
+def progress_by_stage(unit: str = "frames") -> Callable[[str, int, int], None]:
+    """A (stage, done, total) callback for work in named stages (a training's frames read, then placed): a Progress
+    for each stage as it starts, a new one when a stage starts again (the second of a whole head's two trainings)."""
+    bars: dict[str, tuple[Progress, int]] = {}
+
+    def update(stage: str, done: int, total: int) -> None:
+        if stage not in bars or done <= bars[stage][1]:
+            bars[stage] = (Progress(stage, total, unit), 0)
+        bars[stage][0].update(done)
+        bars[stage] = (bars[stage][0], done)
+
+    return update

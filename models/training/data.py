@@ -102,14 +102,19 @@ class ValidationFrame:
     room: np.ndarray | None = None  # (H,W,3) its own room, where the capture keeps one a frame (frame_room)
 
 
+READING, PLACING = "reading the frames", "placing the mesh in the frames"
+"""build_frames' two passes, as its on_frame names them."""
+
+
 def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
-                 on_frame: Callable[[int, int], None] | None = None) -> FrameSet:
+                 on_frame: Callable[[str, int, int], None] | None = None) -> FrameSet:
     """Read the split's images (and masks), make each frame's geometry, rasterize the posed mesh for the surface
     distance along each pixel's ray, and let the avatar fit its settings to the capture and choose where
     training draws rays. One frame at a time into tensors made once: what a frame's raster holds (3 MB at 256 px)
     is not kept for every frame of a long video, the mesh is rasterized again once the avatar's settings are
     fitted; the masks only say how far the person reaches (not kept), the images are kept as bytes, the training
-    pixels' indices as int32. on_frame(done, total) after each frame is read (a long video takes minutes)."""
+    pixels' indices as int32. on_frame(READING, done, total) after each frame is read (a long video takes
+    minutes), then on_frame(PLACING, done, total) as each is rasterized again for its training pixels."""
     n = len(split.frames)
     d = camera_directions(camera_of(split, np.eye(4)))  # the split's intrinsics (frames may have their own)
     dirs_cam = (d / np.linalg.norm(d, axis=-1, keepdims=True)).astype(np.float32)
@@ -135,12 +140,14 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
         geos.append(geo)
         cameras.append(cam)
         if on_frame is not None:
-            on_frame(k + 1, n)
+            on_frame(READING, k + 1, n)
     avatar.fit_to_capture(np.concatenate(reach) if has_masks else None)
     active = []
-    for geo, cam in zip(geos, cameras, strict=True):  # the pixels as the fitted settings see them
+    for k, (geo, cam) in enumerate(zip(geos, cameras, strict=True)):  # the pixels as the fitted settings see them
         pixels = avatar.training_pixels(cam, raster.rasterize(geo.posed.cpu().numpy(), tris, cam))
         active.append(torch.from_numpy(np.flatnonzero(pixels).astype(np.int32)))
+        if on_frame is not None:
+            on_frame(PLACING, k + 1, n)
     raster.release()
     plate, windows, plate_width = frames_on_plate(split, avatar, cameras)
     own = [f.intrinsics for f in split.frames]

@@ -54,10 +54,11 @@ def _load_adam_state(opt: torch.optim.Adam, tensors: dict[str, torch.Tensor]) ->
 
 
 def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None,
-                     on_frame: Callable[[int, int], None] | None = None) -> Trainer:
+                     on_frame: Callable[[str, int, int], None] | None = None) -> Trainer:
     """A training run from its config: read the capture and the head model (and the checkpoint to resume), build
     the avatar the registry names, read and rasterize the frames. model_config: the model's own sizes or loss
-    weights (its for_capture's `config`; None: its defaults). on_frame(done, total): as the frames are read."""
+    weights (its for_capture's `config`; None: its defaults). on_frame(stage, done, total): as the frames are read
+    and placed (build_frames)."""
     split, val_split = load_split(cfg.dataset, "train"), load_split(cfg.dataset, "val")
     for s in (split, val_split):  # a truncated or wrong-size image: a clear error before any work
         check_images(s)
@@ -93,7 +94,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None,
 
 
 def capture_frames(avatar: Avatar, split, gl: GLContext, corrections: bool | None = None,
-                   on_frame: Callable[[int, int], None] | None = None) -> FrameSet:
+                   on_frame: Callable[[str, int, int], None] | None = None) -> FrameSet:
     """The training frames of a capture, the avatar made ready for them: a tracked video's corrections and code
     keys, what the frames saw (note_views). Every avatar `train` makes or resumes, and a personalised prior."""
     if split.tracked:  # (a resumed avatar too: what it learns is not all in avatar.json)

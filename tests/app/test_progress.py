@@ -53,3 +53,17 @@ def test_a_terminal_bar_says_the_time_left_then_the_time_taken():
     assert first == " 25%|###         | ? left  turntable: 1/4 frames   "
     assert re.fullmatch(r" 50%\|###### {6}\| \d\d:\d\d left  turntable: 2/4 frames {3}", second)
     assert re.fullmatch(r"100%\|#{12}\| \d\d:\d\d in all  turntable: 4/4 frames {3}\n", last)
+
+
+def test_stages_each_get_a_bar_and_a_stage_begun_again_a_new_one(capsys):
+    """A whole head reads and places its frames twice (the inside's, then the outside's): each time each stage
+    writes its lines, ending at its total (a bar reused once finished wrote nothing the second time)."""
+    from app.progress import progress_by_stage
+
+    update = progress_by_stage()
+    for _ in range(2):
+        for stage in ("reading the frames", "placing the mesh in the frames"):
+            for k in range(1, 5):
+                update(stage, k, 4)
+    ends = [line.split(" (")[0] for line in capsys.readouterr().err.splitlines() if "4/4" in line]
+    assert ends == ["reading the frames: 4/4 frames", "placing the mesh in the frames: 4/4 frames"] * 2
