@@ -16,11 +16,23 @@ from render.mesh import cross
 
 
 @dataclass(frozen=True)
-class Raster:
-    """What a camera's pixels see of a mesh, H x W, rows top first."""
+class Coverage:
+    """Which pixels of a camera see a mesh, and how deep: H x W, rows top first (what choosing the pixels to render
+    or train needs: Rasterizer.coverage, without the ray math of a Raster)."""
 
     triangle: np.ndarray  # (H,W) int, -1 where the pixel sees no surface
     depth: np.ndarray  # (H,W) metres along the view axis, inf where no surface
+
+    @property
+    def hit(self) -> np.ndarray:
+        return self.triangle >= 0
+
+
+@dataclass(frozen=True)
+class Raster(Coverage):
+    """What a camera's pixels see of a mesh, H x W, rows top first: the coverage and where on its triangle each
+    pixel's ray meets the surface."""
+
     bary: np.ndarray  # (H,W,3) barycentric coordinates of the visible point (0 where no surface)
     distance: np.ndarray
     """(H,W) metres along each pixel's unit ray to the visible point, inf where no surface: the ray met with its
@@ -32,10 +44,6 @@ class Raster:
         """A camera's view of no mesh at all."""
         shape = (height_px, width_px)
         return Raster(np.full(shape, -1), np.full(shape, np.inf), np.zeros((*shape, 3)), np.full(shape, np.inf))
-
-    @property
-    def hit(self) -> np.ndarray:
-        return self.triangle >= 0
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ from models.head.head import Head
 from models.head.model import HeadModel
 from render.camera import Camera
 from render.gl.raster import Rasterizer
-from render.rays import Raster, Rays
+from render.rays import Coverage, Rays
 
 BACKGROUND = "background"
 """The fill of colour buffers outside the rendered pixels: the avatar's background colour."""
@@ -173,10 +173,10 @@ class Avatar(nn.Module, ABC):
         vertices (V,3))."""
 
     @abstractmethod
-    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+    def image_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         """(H,W) bool: the pixels whose rays are rendered in an image (the rest take each buffer's fill)."""
 
-    def training_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+    def training_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         """(H,W) bool: where training draws its rays."""
         return self.image_pixels(camera, raster)
 

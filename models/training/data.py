@@ -144,7 +144,7 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
     avatar.fit_to_capture(np.concatenate(reach) if has_masks else None)
     active = []
     for k, (geo, cam) in enumerate(zip(geos, cameras, strict=True)):  # the pixels as the fitted settings see them
-        pixels = avatar.training_pixels(cam, raster.rasterize(geo.posed.cpu().numpy(), tris, cam))
+        pixels = avatar.training_pixels(cam, raster.coverage(geo.posed.cpu().numpy(), tris, cam))
         active.append(torch.from_numpy(np.flatnonzero(pixels).astype(np.int32)))
         if on_frame is not None:
             on_frame(PLACING, k + 1, n)

@@ -38,7 +38,7 @@ from models.head.model import HeadModel
 from models.ranges import Range, check_config
 from render.camera import Camera
 from render.gl.raster import Rasterizer
-from render.rays import Raster, Rays
+from render.rays import Coverage, Rays
 from render.sampling import fine_samples
 from render.volume import composite, expected_depth
 
@@ -97,7 +97,7 @@ def silhouette_margin_px(cfg: RenderConfig, camera: Camera, depth: np.ndarray) -
     return max(cfg.silhouette_px, int(np.ceil(reach * camera.focal_px() / max(finite.min(), 1e-3))))
 
 
-def active_pixels(cfg: RenderConfig, camera: Camera, raster: Raster) -> np.ndarray:
+def active_pixels(cfg: RenderConfig, camera: Camera, raster: Coverage) -> np.ndarray:
     """(H,W) pixels whose rays are rendered: those within the silhouette margin of the rasterized mesh."""
     if not raster.hit.any():
         return raster.hit
@@ -200,7 +200,7 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
             raise ValueError("this avatar's shadow factor reads the posed mesh's shadow map: pass a rasterizer")
         return with_light_depth(geo, self.head_model.triangles, self.field_cfg.light_dir, rasterizer)
 
-    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+    def image_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         if self.render_cfg.dense_samples:  # the reference renders every pixel whose ray crosses the head's box
             return np.ones_like(raster.hit)
         return active_pixels(self.render_cfg, camera, raster)

@@ -35,7 +35,7 @@ from models.head.model import HeadModel
 from models.ranges import Range, check_config
 from render.camera import Camera
 from render.gl.raster import Rasterizer
-from render.rays import Raster, Rays
+from render.rays import Coverage, Rays
 from render.sampling import RaySamples, stratified
 from render.volume import composite, expected_depth, ray_aabb_intersect, sample_pdf, weights_from_density
 
@@ -203,11 +203,11 @@ class NerfaceAvatar(Avatar):
         del rasterizer  # NerFACE samples every ray densely; it does not need the mesh
         return self.geometry(controls)
 
-    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+    def image_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         """Every pixel (rays that miss the head's box see the background)."""
         return np.ones((camera.height_px, camera.width_px), bool)
 
-    def training_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+    def training_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         """The face's box (the mesh's pixels' bounding box, grown a little)."""
         return face_box(raster.hit, margin_px=max(2, camera.width_px // 32))
 

@@ -57,7 +57,7 @@ from models.ranges import Range, check_config
 from render.camera import Camera
 from render.gl.raster import Rasterizer
 from render.gl.shadow import draw_light_depth
-from render.rays import Raster, Rays
+from render.rays import Coverage, Rays
 from render.shadow_map import LightDepthMap
 
 EXPRESSION_MAP_UNIT_M = 0.01
@@ -450,10 +450,10 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         image[self.layout_cells] = vis
         return image.reshape(K, K, M, M).permute(0, 2, 1, 3).reshape(1, 1, K * M, K * M)
 
-    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+    def image_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         return np.ones((camera.height_px, camera.width_px), bool)
 
-    def training_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+    def training_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         """The mesh's pixels and those within `reach` of its largest primitive's half-size beyond them."""
         if not raster.hit.any():
             return np.zeros_like(raster.hit)

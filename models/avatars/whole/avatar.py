@@ -37,7 +37,7 @@ from models.head.controls import Controls
 from models.head.model import HeadModel
 from render.camera import Camera
 from render.gl.raster import Rasterizer
-from render.rays import Raster, Rays
+from render.rays import Coverage, Rays
 
 VIEW_FADE_DEG = (0.0, 20.0)
 """Over this angle of the camera beyond the captured cone (seen from the head, as the inside's decoder reads its view)
@@ -251,10 +251,10 @@ class WholeHeadAvatar(Avatar):
         radius = float((head - centre).norm(dim=-1).median())
         return WholeGeometry(inside, lambda: self.outside.frame_geometry(controls, rasterizer), centre, radius)
 
-    def image_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+    def image_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         return self.inside.image_pixels(camera, raster)
 
-    def training_pixels(self, camera: Camera, raster: Raster) -> np.ndarray:
+    def training_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         return self.inside.training_pixels(camera, raster)
 
     def note_views(self, frames) -> None:

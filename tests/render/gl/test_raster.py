@@ -70,3 +70,28 @@ def test_off_centre_crop_rasterizes_the_same_pixels(gl, builtin_model):
     both = same & part.hit
     np.testing.assert_allclose(part.depth[both], full.depth[9:47, 13:53][both], atol=1e-5)
     r.release()
+
+
+def test_coverage_is_the_rasters_triangles_and_depth(gl, builtin_model):
+    """Rasterizer.coverage (what choosing the pixels to train reads) is the raster's triangle ids and depth, bit for
+    bit, without its barycentrics and distances; every model's training pixels come out the same from either."""
+    from models.avatars.nerface.avatar import face_box
+    from render.rays import Coverage, Raster
+
+    cam = framing_camera(builtin_model.template, 30, 10, width_px=96, height_px=80)
+    raster = Rasterizer(gl)
+    full = raster.rasterize(builtin_model.template, builtin_model.triangles, cam)
+    cover = raster.coverage(builtin_model.template, builtin_model.triangles, cam)
+    assert type(cover) is Coverage and isinstance(full, Coverage) and not isinstance(cover, Raster)
+    np.testing.assert_array_equal(cover.triangle, full.triangle)
+    np.testing.assert_array_equal(cover.depth, full.depth)
+    assert 0.1 < cover.hit.mean() < 0.9 and np.isinf(cover.depth[~cover.hit]).all()
+    np.testing.assert_array_equal(face_box(cover.hit, 3), face_box(full.hit, 3))  # NerFACE's
+    from models.avatars.codynerf.avatar import RenderConfig, active_pixels
+    from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig
+
+    np.testing.assert_array_equal(active_pixels(RenderConfig(), cam, cover), active_pixels(RenderConfig(), cam, full))
+    primitives = PrimitivesAvatar(builtin_model, PrimitivesConfig(grid=8, voxels=4), 1, np.zeros(3, np.float32))
+    pixels = primitives.training_pixels(cam, cover)
+    assert pixels.sum() > cover.hit.sum()  # the mesh's pixels and a margin about them
+    np.testing.assert_array_equal(pixels, primitives.training_pixels(cam, full))
