@@ -300,7 +300,8 @@ def run_eval(cfg: EvalConfig) -> int:
     shadow_views = avatar.inspection_buffers()
     frames = split.frames[:: max(cfg.every, 1)]
     frames = frames[: cfg.max_frames] if cfg.max_frames else frames
-    for f in frames:
+    bar = Progress(f"rendering the {cfg.split} frames", len(frames))
+    for k, f in enumerate(frames):
         truth = load_rgb(f.image_path, avatar.background.numpy())
         t0 = time.perf_counter()
         out = render_image(avatar, frame_camera(split, f), f.controls, RenderOptions(room=frame_room(f)),
@@ -329,6 +330,7 @@ def run_eval(cfg: EvalConfig) -> int:
         rows.append(row)
         save_png(cfg.out / f"{cfg.split}_{f.index:04d}.png",
                  (np.concatenate(panels, 1) * 255).round().astype(np.uint8))
+        bar.update(k + 1)
     metrics = {k: float(np.mean([r[k] for r in rows if k in r])) for k in (
         "psnr", "psnr_person", "ssim", "face_mse", "offset_px", "normal_deg", "normal_median_deg", *SHADOW_METRICS)
         if any(k in r for r in rows)}
