@@ -39,7 +39,7 @@ class FrameSet:
     origins: torch.Tensor  # (N,3)
     camera_directions: torch.Tensor  # (H*W,3) unit, camera space, of the split's intrinsics
     rotations: torch.Tensor  # (N,3,3) float64, camera to world
-    surface_t: torch.Tensor  # (N,H,W) inf where the pixel misses the mesh
+    surface_t: torch.Tensor | None  # (N,H,W) inf where the pixel misses the mesh; None: the avatar reads no raster
     geometry: list[Any]  # the avatar's frame_geometry of each frame
     active_index: list[torch.Tensor]  # per frame, the flat indices of the pixels training draws rays from (the
     # avatar's training_pixels)
@@ -81,7 +81,9 @@ class FrameSet:
         behind = None if self.plate is None else self.plate[self.plate_pixels(frame, pixels)]
         if behind is not None and behind.dtype == torch.uint8:  # frames' own rooms, kept as their bytes
             behind = behind.float() / 255.0
-        return Rays(self.origins[frame].expand(len(pixels), 3), d, self.surface_t[frame].reshape(-1)[pixels], behind)
+        surface_t = torch.full((len(pixels),), float("inf")) if self.surface_t is None else \
+            self.surface_t[frame].reshape(-1)[pixels]  # (as render_image gives a model that reads no raster)
+        return Rays(self.origins[frame].expand(len(pixels), 3), d, surface_t, behind)
 
     def plate_pixels(self, frame: int, pixels: torch.Tensor) -> torch.Tensor:
         """A frame's pixels (flat indices) as the plate's (its window's place in the plate)."""
@@ -120,7 +122,9 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
     dirs_cam = (d / np.linalg.norm(d, axis=-1, keepdims=True)).astype(np.float32)
     H, W = dirs_cam.shape[:2]
     images = torch.empty(n, H, W, 4 if any(has_alpha(f.image_path) for f in split.frames) else 3, dtype=torch.uint8)
-    surf = torch.empty(n, H, W)
+    # A model that reads no raster (its rays need no distance to the mesh: Avatar.reads_raster) gets the coverage
+    # alone, as the second pass does: half the time, and no (N,H,W) distances kept (256 KB a frame at 256 px).
+    surf = torch.empty(n, H, W) if avatar.reads_raster else None
     has_masks = n > 0 and all("mask_path" in f.extra for f in split.frames)
     geos, cameras, reach = [], [], []
     raster = Rasterizer(gl)
@@ -132,11 +136,12 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
         images[k] = torch.from_numpy(np.array(rgb))  # (PIL's array is read-only)
         geo = avatar.frame_geometry(f.controls, raster)
         cam = frame_camera(split, f)
-        r = raster.rasterize(geo.posed.cpu().numpy(), tris, cam)
+        r = (raster.rasterize if surf is not None else raster.coverage)(geo.posed.cpu().numpy(), tris, cam)
         if has_masks:
             mask = load_mask(f.extra["mask_path"])
             reach.append(foreground_reach_m(r.hit, r.depth, mask, cam.focal_px()))
-        surf[k] = torch.from_numpy(r.distance.astype(np.float32))
+        if surf is not None:
+            surf[k] = torch.from_numpy(r.distance.astype(np.float32))
         geos.append(geo)
         cameras.append(cam)
         if on_frame is not None:

@@ -20,27 +20,34 @@ from render.rays import pixel_rays
 def test_a_frames_rays_are_its_cameras_and_its_raster_made_afresh(tmp_path, gl):
     """build_frames keeps no per-frame directions or rasters: each frame's rays, made from the camera's directions
     and the frame's rotation, are the pixel rays of that frame's camera (render.rays, through the inverse view
-    matrix: to 1e-6), and its surface distances and training pixels are what rasterizing the frame again gives,
-    bit for bit."""
+    matrix: to 1e-6), and its training pixels are what rasterizing the frame again gives, bit for bit; so are its
+    surface distances for a model that reads the raster (CoDyNeRF's shell), while one that reads none (the
+    primitives) gets none kept and its rays' distances infinite, as render_image gives them."""
+    from models.avatars.codynerf.avatar import CoDyNeRFAvatar
+
     synthesize(SynthConfig(scene="ambient", frames=4, size=32, views=2, out=tmp_path / "c"), load_builtin(), gl)
     split = load_split(tmp_path / "c", "train")  # each frame from two cameras, in front and behind
-    avatar = PrimitivesAvatar(load_builtin(), PrimitivesConfig(grid=8, voxels=2, width=16), len(split.frames),
-                              np.zeros(3, np.float32))
-    fs = build_frames(split, avatar, gl)
+    primitives = PrimitivesAvatar(load_builtin(), PrimitivesConfig(grid=8, voxels=2, width=16), len(split.frames),
+                                  np.zeros(3, np.float32))
+    codynerf = CoDyNeRFAvatar.for_capture(load_builtin(), len(split.frames), np.zeros(3, np.float32), (), None)
     raster = Rasterizer(gl)
-    yaws = set()
-    for k, f in enumerate(split.frames):
-        cam = frame_camera(split, f)
-        origin, dirs = pixel_rays(cam)
-        rays = fs.rays(k, torch.arange(32 * 32))
-        np.testing.assert_allclose(rays.origins.numpy(), np.broadcast_to(origin, (32 * 32, 3)), atol=1e-6)
-        np.testing.assert_allclose(rays.directions.numpy(), dirs.reshape(-1, 3), atol=1e-6)
-        r = raster.rasterize(fs.geometry[k].posed.numpy(), avatar.head_model.triangles, cam)
-        assert torch.equal(rays.surface_t, torch.from_numpy(r.distance.astype(np.float32)).reshape(-1))
-        assert np.array_equal(fs.active_index[k].numpy(), np.flatnonzero(avatar.training_pixels(cam, r)))
-        yaws.add(round(float(np.degrees(np.arctan2(f.camera_to_world[0, 2], f.camera_to_world[2, 2]))), 3))
+    for avatar in (primitives, codynerf):
+        fs = build_frames(split, avatar, gl)
+        assert (fs.surface_t is None) == (not avatar.reads_raster)
+        yaws = set()
+        for k, f in enumerate(split.frames):
+            cam = frame_camera(split, f)
+            origin, dirs = pixel_rays(cam)
+            rays = fs.rays(k, torch.arange(32 * 32))
+            np.testing.assert_allclose(rays.origins.numpy(), np.broadcast_to(origin, (32 * 32, 3)), atol=1e-6)
+            np.testing.assert_allclose(rays.directions.numpy(), dirs.reshape(-1, 3), atol=1e-6)
+            r = raster.rasterize(fs.geometry[k].posed.numpy(), avatar.head_model.triangles, cam)
+            distance = torch.from_numpy(r.distance.astype(np.float32)).reshape(-1)
+            assert torch.equal(rays.surface_t, distance if avatar.reads_raster else torch.full_like(distance, np.inf))
+            assert np.array_equal(fs.active_index[k].numpy(), np.flatnonzero(avatar.training_pixels(cam, r)))
+            yaws.add(round(float(np.degrees(np.arctan2(f.camera_to_world[0, 2], f.camera_to_world[2, 2]))), 3))
+        assert len(yaws) > 1  # the frames' cameras differ: each frame's own rotation is used
     raster.release()
-    assert len(yaws) > 1  # the frames' cameras differ: each frame's own rotation is used
 
 
 @pytest.mark.gl
