@@ -110,13 +110,13 @@ READING, PLACING = "reading the frames", "placing the mesh in the frames"
 
 def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
                  on_frame: Callable[[str, int, int], None] | None = None) -> FrameSet:
-    """Read the split's images (and masks), make each frame's geometry, rasterize the posed mesh for the surface
-    distance along each pixel's ray, and let the avatar fit its settings to the capture and choose where
-    training draws rays. One frame at a time into tensors made once: what a frame's raster holds (3 MB at 256 px)
-    is not kept for every frame of a long video, the mesh is rasterized again once the avatar's settings are
-    fitted; the masks only say how far the person reaches (not kept), the images are kept as bytes, the training
-    pixels' indices as int32. on_frame(READING, done, total) after each frame is read (a long video takes
-    minutes), then on_frame(PLACING, done, total) as each is rasterized again for its training pixels."""
+    """Read the split's images (and masks), make each frame's geometry, rasterize the posed mesh (for the surface
+    distance along each pixel's ray, where the avatar reads the raster), and let the avatar fit its settings to the
+    capture and choose where training draws rays. One frame at a time into tensors made once: what a frame's
+    raster holds (3 MB at 256 px) is not kept for every frame of a long video, the mesh is rasterized again once the
+    avatar's settings are fitted; the masks only say how far the person reaches (not kept), the images are kept as
+    bytes, the training pixels' indices as int32. on_frame(READING, done, total) after each frame is read (a long
+    video takes minutes), then on_frame(PLACING, done, total) as each is rasterized again for its training pixels."""
     n = len(split.frames)
     d = camera_directions(camera_of(split, np.eye(4)))  # the split's intrinsics (frames may have their own)
     dirs_cam = (d / np.linalg.norm(d, axis=-1, keepdims=True)).astype(np.float32)
