@@ -91,26 +91,22 @@ class Progress:
 
 
 def progress_callback(what: str, unit: str = "frames") -> Callable[[int, int], None]:
-    """A (done, total) callback for work that learns its total as it goes: a Progress made on the first call."""
-    bar: list[Progress] = []
-
-    def update(done: int, total: int) -> None:
-        if not bar:
-            bar.append(Progress(what, total, unit))
-        bar[0].update(done)
-
-    return update
+    """A (done, total) callback for work that learns its total as it goes: a Progress made on the first call (and
+    again if the work starts over)."""
+    update = progress_by_stage(unit)
+    return lambda done, total: update(what, done, total)
 
 
 def progress_by_stage(unit: str = "frames") -> Callable[[str, int, int], None]:
     """A (stage, done, total) callback for work in named stages (a training's frames read, then placed): a Progress
     for each stage as it starts, a new one when a stage starts again (the second of a whole head's two trainings)."""
-    bars: dict[str, tuple[Progress, int]] = {}
+    bars: dict[str, Progress] = {}
+    last: dict[str, int] = {}
 
     def update(stage: str, done: int, total: int) -> None:
-        if stage not in bars or done <= bars[stage][1]:
-            bars[stage] = (Progress(stage, total, unit), 0)
-        bars[stage][0].update(done)
-        bars[stage] = (bars[stage][0], done)
+        if stage not in bars or done <= last[stage]:
+            bars[stage] = Progress(stage, total, unit)
+        bars[stage].update(done)
+        last[stage] = done
 
     return update
