@@ -21,19 +21,19 @@ class Rasterizer:
         self._size = (0, 0)
 
     def rasterize(self, vertices: np.ndarray, triangles: np.ndarray, camera: Camera) -> Raster:
-        tri, depth = self._draw(vertices, triangles, camera.view, camera.projection, camera.width_px,
-                                camera.height_px)
-        hit = tri >= 0
-        bary = np.zeros((*tri.shape, 3), np.float32)
-        distance = np.full(tri.shape, np.inf)
+        """The coverage, and where each covered pixel's ray meets its triangle (barycentrics, distance)."""
+        c = self.coverage(vertices, triangles, camera)
+        hit = c.hit
+        bary = np.zeros((*hit.shape, 3), np.float32)
+        distance = np.full(hit.shape, np.inf)
         if hit.any():
             origin, dirs = pixel_rays(camera)
-            corners = np.asarray(vertices, np.float64)[np.asarray(triangles)[tri[hit]]]
+            corners = np.asarray(vertices, np.float64)[np.asarray(triangles)[c.triangle[hit]]]
             bary[hit], t = ray_triangle_hit(origin, dirs[hit], corners)
             # Where the plane is edge-on to the ray (or behind it), the GL depth along the ray instead.
-            from_depth = depth[hit] / np.maximum(dirs[hit] @ -np.linalg.inv(camera.view)[:3, 2], 1e-6)
+            from_depth = c.depth[hit] / np.maximum(dirs[hit] @ -np.linalg.inv(camera.view)[:3, 2], 1e-6)
             distance[hit] = np.where(np.isfinite(t) & (t > 0), t, from_depth)
-        return Raster(tri, np.where(hit, depth, np.inf), bary, distance)
+        return Raster(c.triangle, c.depth, bary, distance)
 
     def coverage(self, vertices: np.ndarray, triangles: np.ndarray, camera: Camera) -> Coverage:
         """The raster's triangle ids and depth alone (what choosing pixels reads): half a raster's time (11 against

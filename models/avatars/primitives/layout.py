@@ -156,7 +156,7 @@ def primitive_layout(model: HeadModel, grid: int, overlap: float = 1.3, front: f
     surface patch the cell covers (the distance times the cell's angle, the larger of its two sides, over the
     cosine at which the ray leaves the surface, at least MIN_INCIDENCE), times `overlap` so that neighbours leave
     no gaps. front: the columns crowded to the face (chart_azimuths). Computed once per surface
-    (HeadModel.surface_key) and arguments, 0.1-1.3 s a time (a ray per cell): the arrays are shared, read them,
+    (HeadModel.surface_key) and arguments, 0.1-0.8 s a time here (a ray per cell): the arrays are shared, read them,
     copy before writing."""
     key = (model.surface_key, grid, overlap, front)
     if key not in _LAYOUTS:
