@@ -156,7 +156,32 @@ def run_trainer(trainer, gl: GLContext, on_record=None) -> dict | None:
     if trainer.stop_requested:
         print(f"stopped at step {trainer.step}; checkpoint in {trainer.cfg.out} (continue with --resume)")
         return None
+    choose_code_time(trainer, gl)
     return last
+
+
+def choose_code_time(trainer, gl: GLContext) -> None:
+    """After a tracked video's training: how the video's own frames that no one trained on take their codes
+    (Trainer.choose_code_time), said in a line, with a bar while its renders run; the avatar saved with it."""
+    bars: list[Progress] = []
+
+    def on_frame(done: int, total: int) -> None:
+        if not bars:
+            bars.append(Progress("choosing the codes of frames no one trained on", total, "renders"))
+        bars[0].update(done)
+
+    choice = trainer.choose_code_time(gl, on_frame)
+    if choice is None:
+        return
+    trainer.save()
+    if not choice["frames"]:
+        print("frames of the video no one trained on take the codes of the training frames nearest in controls "
+              "(no validation frame came late enough to choose)", flush=True)
+        return
+    way = "controls and time" if choice["by_time"] else "controls"
+    print(f"frames of the video no one trained on take the codes of the training frames nearest in {way}: on "
+          f"{choice['frames']} validation frames, from earlier frames' codes, {choice['psnr_controls_and_time']:.2f} "
+          f"dB by controls and time against {choice['psnr_controls']:.2f} by controls", flush=True)
 
 
 WHOLE_PARTS = "parts"
@@ -293,6 +318,7 @@ def run_eval(cfg: EvalConfig) -> int:
     if mismatch:  # measured all the same: a stranger's capture is a fair question, only not the usual one
         print(f"avatar-studio eval: warning: {cfg.dataset}: {mismatch}; the metrics measure the avatar on it all the "
               "same", file=sys.stderr)
+    own = own_capture(meta, cfg.dataset)  # its frames' times mean something to the avatar's codes
     gl = GLContext.headless()
     raster = Rasterizer(gl)
     cfg.out.mkdir(parents=True, exist_ok=True)
@@ -304,8 +330,8 @@ def run_eval(cfg: EvalConfig) -> int:
     for k, f in enumerate(frames):
         truth = load_rgb(f.image_path, avatar.background.numpy())
         t0 = time.perf_counter()
-        out = render_image(avatar, frame_camera(split, f), f.controls, RenderOptions(room=frame_room(f)),
-                           rasterizer=raster)
+        out = render_image(avatar, frame_camera(split, f), f.controls,
+                           RenderOptions(room=frame_room(f), time_s=f.time_s if own else None), rasterizer=raster)
         times.append(time.perf_counter() - t0)
         face = face_mask_of(f, truth.shape)
         dx, dy = image_offset_px(out["rgb"], truth)
@@ -336,7 +362,8 @@ def run_eval(cfg: EvalConfig) -> int:
         if any(k in r for r in rows)}
     metrics["render_ms"] = 1e3 * float(np.median(times))
     report = {"avatar": str(cfg.avatar), "dataset": str(cfg.dataset), "split": cfg.split, "frames": len(rows),
-              "effects": meta.get("effects"), "training": meta.get("provenance"), "metrics": metrics, "per_frame": rows}
+              "effects": meta.get("effects"), "training": meta.get("provenance"),
+              "codes_by_time": own and avatar.code_keys.keys_time, "metrics": metrics, "per_frame": rows}
     (cfg.out / "metrics.json").write_text(json.dumps(report, indent=1))
     images = f"{len(rows)} side-by-side image{'s' * (len(rows) != 1)} ({cfg.out / cfg.split}_NNNN.png"
     print(f"wrote {cfg.out / 'metrics.json'} and {images}: truth, render, error x4...); PSNR {metrics['psnr']:.2f} "
@@ -349,6 +376,13 @@ IDENTITY_GAP_M = 0.0025
 """Identity shapes that move some vertex of the head model further apart than this are two people's. Measured with
 the built-in head on 2-second clips (64 px): one person tracked twice 0.6 to 1.1 mm apart, the three people of
 ../shared/data/video 3.8 to 5.6 mm; synthetic identities (synth --identity) 9 to 30 mm."""
+
+
+def own_capture(meta: dict, folder: Path) -> bool:
+    """Whether a capture is the one the avatar trained on (avatar.json's provenance): its frames' times in the
+    video are the times its codes know (components/codes.py)."""
+    trained_on = meta.get("provenance", {}).get("dataset_resolved")
+    return trained_on is not None and Path(trained_on) == Path(folder).resolve()
 
 
 def capture_mismatch(model, meta: dict, split) -> str | None:
@@ -494,7 +528,8 @@ def personalizing_trainer(tcfg: TrainConfig, prior: Path, gl: GLContext, tune: s
     avatar.train()
     frames = capture_frames(avatar, split, gl, on_frame=on_frame)
     val = load_split(tcfg.dataset, "val")
-    trainer = Trainer(tcfg, avatar, frames, validation_frame(val, avatar.background.numpy()) if val.frames else None)
+    trainer = Trainer(tcfg, avatar, frames, validation_frame(val, avatar.background.numpy()) if val.frames else None,
+                      val_split=val)
     return trainer, maps_s
 
 

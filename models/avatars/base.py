@@ -27,6 +27,7 @@ import torch
 from torch import nn
 
 from models.avatars.card import AvatarCard
+from models.avatars.components.codes import CodeKeys
 from models.avatars.components.kept import keep_weight_names
 from models.avatars.mesh import MeshField
 from models.head.controls import Controls
@@ -119,6 +120,9 @@ class Avatar(nn.Module, ABC):
         """What each ray sees behind the avatar: the plate's pixel where the rays carry one, else the colour."""
         return self.background if rays.background is None else rays.background
 
+    code_keys: CodeKeys
+    """The training frames' control keys (and times) by which frames no one trained on take their codes."""
+
     optional_buffers: ClassVar[tuple[str, ...]] = ()
     """Buffers of a model's own that it has only where its capture gave them (registered when noted, saved with the
     weights); the plate, the views and the code keys are components (components/kept.py)."""
@@ -168,9 +172,10 @@ class Avatar(nn.Module, ABC):
 
     # ---- per frame -------------------------------------------------------------------------------------
     @abstractmethod
-    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> Any:
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None, time_s: float | None = None) -> Any:
         """Everything about one frame's head that its rays need (with `.to(device)` and `.posed`, the posed
-        vertices (V,3))."""
+        vertices (V,3)). time_s: where the frame is one of the avatar's own capture's video, its time there (the
+        codes may follow it: components/codes.py)."""
 
     @abstractmethod
     def image_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:

@@ -48,6 +48,9 @@ class RenderOptions:
     room: np.ndarray | None = None
     """(H,W,3) what this camera saw behind the person, at the camera's size: a frame's own room, where the capture's
     camera moved (frame_room); None: the avatar's plate where the camera is the capture's, else its colour."""
+    time_s: float | None = None
+    """Where the controls are a frame of the avatar's own capture (a held-out frame, the timeline): its time in the
+    video, which the codes may follow (components/codes.py); None: new controls (sliders, another video)."""
 
 
 def preset_options(card: AvatarCard, preset: str, size: int, options: RenderOptions = RenderOptions()
@@ -63,7 +66,7 @@ def render_image(avatar: Avatar, camera: Camera, controls: Controls, options: Re
     """The avatar's buffers as images (H,W,...) for these controls seen by `camera`, rendered as `options` says;
     `rasterizer` (None: none) draws the posed guide mesh for the models that sample about it."""
     device = avatar.background.device
-    geo = avatar.frame_geometry(controls, rasterizer).to(device)
+    geo = avatar.frame_geometry(controls, rasterizer, options.time_s).to(device)
     camera = clipping_around(camera, geo.posed.cpu().numpy())  # the head may be anywhere (a translation)
     rays, idx = pixel_rays_of(avatar, geo, camera, rasterizer)
     plate = avatar.plate.for_camera(camera) if options.room is None else room_pixels(options.room, camera, device)

@@ -41,6 +41,9 @@ class Frame:
     intrinsics: tuple[float, float, float, float] | None = None
     """fx, fy, cx, cy of this frame where they are not the split's (a crop that follows a moving head: each frame's
     window of the video has its own principal point)."""
+    time_s: float | None = None
+    """Seconds into the video the frame was taken from (a tracked video's `time_s`); None where the capture does
+    not say."""
 
 
 @dataclass(frozen=True)
@@ -247,10 +250,20 @@ def _load_ours(folder: Path, split: str, path: Path, data: dict) -> CaptureSplit
             bbox=_bbox(path, where, f.get("bbox")),
             extra=extra,
             intrinsics=_optional_intrinsics(path, f"{where}field 'intrinsics' ", f.get("intrinsics")),
+            time_s=_frame_time(path, where, f.get("time_s")),
         ))
     return CaptureSplit(folder, split, "avatar-studio", w, h, intr, head_model, shape, bg,
                         data.get("lighting"), frames, float(data.get("depth_scale_m", 1e-4)),
                         isinstance(data.get("source"), dict) and "video" in data["source"], bg_intr)
+
+
+def _frame_time(path: Path, where: str, value: object) -> float | None:
+    """A frame's `time_s` (seconds into its video, from 0), None where it is not given."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+        raise _fail(path, where, f"field 'time_s' must be a number of seconds from 0, got {value!r}")
+    return float(value)
 
 
 def _optional_intrinsics(path: Path, where: str, value: object) -> tuple[float, float, float, float] | None:

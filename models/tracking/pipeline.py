@@ -357,7 +357,8 @@ def write_frames(cfg, partial: Path, kept: list[dict], crops: list[np.ndarray], 
             "expression": c.expression.tolist(),
             "controls": {key: v for key, v in controls_to_dict(c).items() if key != "shape"},
             "bbox": [float(lo[1]), float(hi[1]), float(lo[0]), float(hi[0])],
-            "source_frame": f["source_frame"], **({"intrinsics": own[j]} if framing.following else {})})
+            "source_frame": f["source_frame"], "time_s": round(f["time_s"], 4),
+            **({"intrinsics": own[j]} if framing.following else {})})
         e = errors[j]
         per_frame.append({"frame": j, "split": split, "source_frame": f["source_frame"],
                           "time_s": round(f["time_s"], 3), "median_px": round(float(np.median(e)), 3),

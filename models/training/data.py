@@ -102,6 +102,7 @@ class ValidationFrame:
     camera: Any
     image: np.ndarray  # (H,W,3)
     room: np.ndarray | None = None  # (H,W,3) its own room, where the capture keeps one a frame (frame_room)
+    time_s: float | None = None  # its time in the video (Frame.time_s)
 
 
 READING, PLACING = "reading the frames", "placing the mesh in the frames"
@@ -197,7 +198,8 @@ def frames_on_plate(split: CaptureSplit, avatar: Avatar, cameras: list
     return avatar.plate.image.reshape(-1, 3).cpu(), windows, int(key[0])
 
 
-def validation_frame(split: CaptureSplit, background: np.ndarray) -> ValidationFrame:
-    """The split's first frame, read."""
-    f = split.frames[0]
-    return ValidationFrame(f.controls, frame_camera(split, f), load_rgb(f.image_path, background), frame_room(f))
+def validation_frame(split: CaptureSplit, background: np.ndarray, index: int = 0) -> ValidationFrame:
+    """One of the split's frames (the first), read."""
+    f = split.frames[index]
+    return ValidationFrame(f.controls, frame_camera(split, f), load_rgb(f.image_path, background), frame_room(f),
+                           f.time_s)

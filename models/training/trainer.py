@@ -16,11 +16,12 @@ import torch
 import torch.distributed as dist
 
 from models.avatars.base import Avatar, TrainingBatch
+from models.avatars.components.codes import TIME_SCALE_S
 from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from models.avatars.effects import parse_effects
 from models.avatars.registry import DEFAULT_MODEL, avatar_class, default_model
 from models.avatars.rendering import RenderOptions, render_image
-from models.capture.dataset import DatasetError, check_images, load_split
+from models.capture.dataset import CaptureSplit, DatasetError, check_images, load_split
 from models.capture.frames import background_plate, view_range
 from models.device import device_of
 from models.files import atomic_write_bytes
@@ -90,7 +91,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None,
             avatar.plate.note(*plate)
     frames = capture_frames(avatar, split, gl, cfg.corrections, on_frame)
     validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
-    return Trainer(cfg, avatar, frames, validation, resumed)
+    return Trainer(cfg, avatar, frames, validation, resumed, val_split)
 
 
 def capture_frames(avatar: Avatar, split, gl: GLContext, corrections: bool | None = None,
@@ -101,7 +102,7 @@ def capture_frames(avatar: Avatar, split, gl: GLContext, corrections: bool | Non
         avatar.fit_to_tracked_video(corrections)
         # Its codes carry what the controls miss (hair, shoulders) and follow the controls: held-out frames and
         # sliders take the nearest training frames' (components/codes.py). Synthetic captures keep the mean code.
-        avatar.code_keys.note([f.controls for f in split.frames])
+        avatar.code_keys.note([f.controls for f in split.frames], [f.time_s for f in split.frames])
     frames = build_frames(split, avatar, gl, on_frame)
     avatar.note_views(frames)
     return frames
@@ -138,12 +139,14 @@ class Trainer:
     Built from data (prepare_training reads the files)."""
 
     def __init__(self, cfg: TrainConfig, avatar: Avatar, frames: FrameSet, validation: ValidationFrame | None = None,
-                 resumed: Checkpoint | None = None):
+                 resumed: Checkpoint | None = None, val_split: CaptureSplit | None = None):
         self.cfg = cfg
         self.avatar = avatar
         self.frames = frames
         self.split = frames.split
         self.validation = validation
+        self.val_split = val_split
+        """The validation frames that choose how new frames of the video take their codes (choose_code_time)."""
         template = avatar.head_model.template
         self.view_range = view_range(frames.split, 0.5 * (template.min(0) + template.max(0)))
         if avatar.all_round:  # a person's prior, or a whole head: its prior saw heads from every side (its corpus's
@@ -235,9 +238,42 @@ class Trainer:
     def validation_psnr(self, gl: GLContext) -> float:
         v = self.validation
         r = Rasterizer(gl)
-        img = render_image(self.avatar, v.camera, v.controls, RenderOptions(room=v.room), rasterizer=r)["rgb"]
+        img = render_image(self.avatar, v.camera, v.controls, RenderOptions(room=v.room, time_s=v.time_s),
+                           rasterizer=r)["rgb"]
         r.release()
         return psnr(img, v.image)
+
+    @torch.no_grad()
+    def choose_code_time(self, gl: GLContext, on_frame: Callable[[int, int], None] | None = None) -> dict | None:
+        """Whether the video's own frames that no one trained on (held-out frames, the timeline) take the codes of
+        the training frames nearest in controls and time (components/codes.py), or in controls alone: each
+        validation frame filmed late enough is rendered both ways from the codes of the training frames filmed
+        FORECAST_GAP_S or more before it (as a held-out frame after them has them), and the way with the higher
+        mean PSNR is kept (controls alone where they tie or no frame says). Where the avatar keys no codes by
+        time: None. on_frame(done, total) after each render."""
+        keys = self.avatar.code_keys
+        if keys.times is None or self.val_split is None:
+            return None
+        frames = [i for i, f in enumerate(self.val_split.frames) if f.time_s is not None and keys.forecastable(f.time_s)]
+        scores: dict[float | None, list[float]] = {None: [], TIME_SCALE_S: []}
+        r = Rasterizer(gl)
+        done = 0
+        for i in frames:
+            v = validation_frame(self.val_split, self.avatar.background.numpy(), i)
+            for scale, got in scores.items():
+                with keys.forecasting(scale):
+                    img = render_image(self.avatar, v.camera, v.controls, RenderOptions(room=v.room, time_s=v.time_s),
+                                       rasterizer=r)["rgb"]
+                got.append(psnr(img, v.image))
+                done += 1
+                if on_frame is not None:
+                    on_frame(done, 2 * len(frames))
+        r.release()
+        by_time = bool(frames) and float(np.mean(scores[TIME_SCALE_S])) > float(np.mean(scores[None]))
+        keys.choose_time(TIME_SCALE_S if by_time else None)
+        return {"by_time": by_time, "frames": len(frames),
+                **({"psnr_controls": round(float(np.mean(scores[None])), 2),
+                    "psnr_controls_and_time": round(float(np.mean(scores[TIME_SCALE_S])), 2)} if frames else {})}
 
     # ---- the loop --------------------------------------------------------------------------------------
     def run(self, gl: GLContext, on_progress: Callable[[dict], None] | None = None) -> dict:

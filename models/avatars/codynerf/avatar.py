@@ -187,13 +187,14 @@ class CoDyNeRFAvatar(PoseCorrected, Avatar):
         return self.field_cfg.effects
 
     # ---- per frame -------------------------------------------------------------------------------------
-    def geometry(self, controls: Controls) -> FrameGeometry:
+    def geometry(self, controls: Controls, time_s: float | None = None) -> FrameGeometry:
         """The frame's meshes, tree, landmarks and box (no shadow map), and the codes' weights new controls take."""
         return replace(frame_geometry(self.head, controls, self.render_cfg.box_margin_m),
-                       code_weights=self.code_keys.weights(controls))
+                       code_weights=self.code_keys.weights(controls, time_s))
 
-    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> FrameGeometry:
-        geo = self.geometry(controls)
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None, time_s: float | None = None
+                       ) -> FrameGeometry:
+        geo = self.geometry(controls, time_s)
         if not self.field_cfg.shadow_factor:
             return geo
         if rasterizer is None:

@@ -9,6 +9,8 @@ controls. So new controls take a blend of the codes of the training frames whose
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from typing import ClassVar
 
 import numpy as np
@@ -23,6 +25,14 @@ of 1, 3, 5, 10; README "Real people"), then kept for every capture."""
 LEFT_OUT_WINDOW = 12
 """Frames each side of a training frame whose codes `left_out_weights` leaves out with it (half a second of
 video: a held-out frame's nearest training frames are not its own moment)."""
+TIME_SCALE_S = 0.1
+"""Seconds of a video that weigh as much as one spread of a control in a code key with a time: a frame 0.1 s
+away is as far as one whose controls differ by a spread, so near frames decide unless the controls differ a lot.
+On seven 10-minute avatars (27 November, held-out frames): +0.4 to +2.9 dB on five clips, 0 on one, -2.0 dB on
+the expressions clip d19, whose codes follow its expressions; hence the choice per capture."""
+FORECAST_GAP_S = 0.3
+"""The choice's validation frames blend only the codes of training frames filmed this much earlier or more:
+as a held-out frame after the training frames gets them (its moment is not among them)."""
 KEY_SCALE_FLOOR = 0.01
 """The least spread (radians, or expression weight) a control's key is divided by: a control the training
 frames never moved would otherwise blow any change of it up into a distance that outweighs all the rest."""
@@ -96,23 +106,69 @@ class CodeKeys(Kept):
     """The training frames' control keys (N,D), divided by their spread (D,) (`scale`), that let new controls take
     the codes of the nearest training frames; none where the capture did not call for them (the mean code)."""
 
-    weight_names: ClassVar[dict[str, str]] = {"keys": "code_keys", "scale": "code_key_scale"}
+    weight_names: ClassVar[dict[str, str]] = {"keys": "code_keys", "scale": "code_key_scale",
+                                              "times": "code_key_times", "time_scale": "code_time_scale"}
 
     def __init__(self, num_expression: int):
         super().__init__()
         self.num_expression = num_expression
+        self._forecast: tuple[float | None] | None = None  # (time scale,) while `forecasting`
 
-    def note(self, controls: list[Controls], device: torch.device | str = "cpu") -> None:
-        """Key the training frames' controls (in order; saved with the weights)."""
+    def note(self, controls: list[Controls], times: list[float | None] | None = None,
+             device: torch.device | str = "cpu") -> None:
+        """Key the training frames' controls (in order; saved with the weights), and their times in the video
+        (seconds) where every frame has one."""
         keys = np.stack([control_key(c, self.num_expression) for c in controls])
         scale = np.maximum(keys.std(0), KEY_SCALE_FLOOR)
         self.keep("keys", torch.as_tensor(keys / scale, dtype=torch.float32, device=device))
         self.keep("scale", torch.as_tensor(scale, dtype=torch.float32, device=device))
+        if times is not None and len(times) == len(controls) and all(t is not None for t in times):
+            self.keep("times", torch.as_tensor(times, dtype=torch.float32, device=device))
 
-    def weights(self, controls: Controls) -> torch.Tensor | None:
+    @property
+    def keys_time(self) -> bool:
+        """Whether frames with a time take the codes nearest in controls and time (training chose it)."""
+        return self.times is not None and self.time_scale is not None
+
+    def choose_time(self, scale: float | None) -> None:
+        """Key frames with a time by controls and time, a second weighing as 1/scale spreads (None: by controls)."""
+        if scale is None:
+            self.register_buffer("time_scale", None)
+        else:
+            self.keep("time_scale", torch.tensor(float(scale), device=self.keys.device))
+
+    def weights(self, controls: Controls, time_s: float | None = None) -> torch.Tensor | None:
         """(N,) the training frames' share of the codes for these controls; None without keys (an older avatar,
-        or a capture that did not call for them): the mean code."""
+        or a capture that did not call for them): the mean code. time_s: the time in the capture's video of a
+        frame of it (a held-out frame): keyed by time as well where training chose it."""
         if self.keys is None:
             return None
-        query = torch.as_tensor(control_key(controls, self.num_expression), device=self.keys.device)
-        return nearest_code_weights(self.keys, query / self.scale)
+        query = torch.as_tensor(control_key(controls, self.num_expression), device=self.keys.device) / self.scale
+        keys = self.keys
+        if self._forecast is not None:
+            scale = self._forecast[0]
+        else:
+            scale = float(self.time_scale) if self.time_scale is not None else None
+        if time_s is not None and self.times is not None and scale is not None:
+            keys = torch.cat([keys, (self.times / scale)[:, None]], 1)
+            query = torch.cat([query, query.new_tensor([time_s / scale])])
+        if self._forecast is None or time_s is None or self.times is None:
+            return nearest_code_weights(keys, query)
+        earlier = self.times < time_s - FORECAST_GAP_S
+        w = torch.zeros(len(keys), dtype=keys.dtype, device=keys.device)
+        w[earlier] = nearest_code_weights(keys[earlier], query)
+        return w
+
+    def forecastable(self, time_s: float) -> bool:
+        """Whether enough training frames were filmed FORECAST_GAP_S before this time for `forecasting` to blend."""
+        return self.times is not None and int((self.times < time_s - FORECAST_GAP_S).sum()) > NEAREST_FRAMES
+
+    @contextlib.contextmanager
+    def forecasting(self, scale: float | None) -> Iterator[None]:
+        """Within: frames with a time blend only the codes of training frames filmed FORECAST_GAP_S or more
+        before them (as a held-out frame after them would), keyed by time at `scale` (None: by controls alone)."""
+        self._forecast = (scale,)
+        try:
+            yield
+        finally:
+            self._forecast = None

@@ -186,7 +186,7 @@ class NerfaceAvatar(Avatar):
 
     # ---- per frame -------------------------------------------------------------------------------------
     @torch.no_grad()
-    def geometry(self, controls: Controls) -> NerfaceGeometry:
+    def geometry(self, controls: Controls, time_s: float | None = None) -> NerfaceGeometry:
         unposed = Controls(shape=controls.shape, expression=controls.expression)
         v, joints, _ = self.head.pose([unposed, controls])
         rotation, translation = head_pose(self.head_model, controls, v, joints)
@@ -197,11 +197,12 @@ class NerfaceAvatar(Avatar):
             expr[self.head_model.num_expression + 3 * k:self.head_model.num_expression + 3 * k + 3] = \
                 controls.rotation(joint)
         return NerfaceGeometry(rotation, translation, torch.as_tensor(expr)[None].to(rotation.device), v[1],
-                               self.code_keys.weights(controls))
+                               self.code_keys.weights(controls, time_s))
 
-    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> NerfaceGeometry:
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None, time_s: float | None = None
+                       ) -> NerfaceGeometry:
         del rasterizer  # NerFACE samples every ray densely; it does not need the mesh
-        return self.geometry(controls)
+        return self.geometry(controls, time_s)
 
     def image_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         """Every pixel (rays that miss the head's box see the background)."""

@@ -402,7 +402,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
 
     # ---- per frame -------------------------------------------------------------------------------------
     @torch.no_grad()
-    def geometry(self, controls: Controls) -> PrimitivesGeometry:
+    def geometry(self, controls: Controls, time_s: float | None = None) -> PrimitivesGeometry:
         unposed = Controls(shape=controls.shape, expression=controls.expression)
         v, joints, _ = self.head.pose([unposed, controls])
         rotation, translation = head_pose(self.head_model, controls, v, joints)
@@ -413,14 +413,15 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         cond[E:E + 3], cond[E + 3:E + 6] = controls.rotation("jaw"), controls.rotation("neck")
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
-        return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_keys.weights(controls),
+        return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_keys.weights(controls, time_s),
                                   controls=controls,
                                   expression=self.controls_expression_map(controls, v[1], joints[1, 0]))
 
-    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> PrimitivesGeometry:
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None, time_s: float | None = None
+                       ) -> PrimitivesGeometry:
         """The frame's geometry; where the avatar casts shadows, with the posed mesh's depth map from the key light
         (drawn by the GL rasterizer). Rays need no raster: the primitives' own boxes say which rays meet them."""
-        geo = self.geometry(controls)
+        geo = self.geometry(controls, time_s)
         if not self.casts_shadows:
             return geo
         if rasterizer is None:

@@ -132,8 +132,8 @@ class PriorAvatar(PrimitivesAvatar):
         local = self.head_local(controls, posed, root)
         return geometry_map(self.sampler, self.triangles, local)[None] - self._neutral[1]
 
-    def geometry(self, controls: Controls) -> PriorGeometry:
-        base = super().geometry(controls)
+    def geometry(self, controls: Controls, time_s: float | None = None) -> PriorGeometry:
+        base = super().geometry(controls, time_s)
         return PriorGeometry(**{k: getattr(base, k) for k in PrimitivesGeometry.__dataclass_fields__})
 
     def identity_biases(self, geo: PriorGeometry) -> list[torch.Tensor]:

@@ -240,8 +240,9 @@ class WholeHeadAvatar(Avatar):
         return self.inside.interactive_chunk_rays
 
     # ---- per frame -------------------------------------------------------------------------------------
-    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None) -> WholeGeometry:
-        inside = self.inside.frame_geometry(controls, rasterizer)
+    def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None, time_s: float | None = None
+                       ) -> WholeGeometry:
+        inside = self.inside.frame_geometry(controls, rasterizer, time_s)
         posed = inside.posed
         # The head's middle: the mesh above its lowest fifth (a head model's neck and shoulders pull the box's
         # middle down towards the chin).
@@ -249,7 +250,7 @@ class WholeHeadAvatar(Avatar):
         head = posed[posed[:, 1] > low + 0.2 * (high - low)]
         centre = head.mean(0)
         radius = float((head - centre).norm(dim=-1).median())
-        return WholeGeometry(inside, lambda: self.outside.frame_geometry(controls, rasterizer), centre, radius)
+        return WholeGeometry(inside, lambda: self.outside.frame_geometry(controls, rasterizer, time_s), centre, radius)
 
     def image_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         return self.inside.image_pixels(camera, raster)
