@@ -1,7 +1,9 @@
 """Give an avatar trained on a tracked video before held-out frames took the nearest training frames' codes
 (models/avatars/components/codes.py) the keys that rule needs, and one trained before new views were held to its
 capture's (models/avatars/components/views.py) that cone, from its capture's training frames, into a new folder
-(the avatar's own folder is left as it is).
+(the avatar's own folder is left as it is). Where the capture's frames have their times in the video (`track`
+writes `time_s`), the training frames' times too, and the choice `train` makes at its end of whether held-out
+frames take codes by controls and time (models/training/trainer.py choose_code_time), said in a line.
 
     .venv/bin/python scripts/key_codes.py AVATAR DATASET OUT
 """
@@ -17,6 +19,7 @@ from models.avatars.checkpoint import save_checkpoint
 from models.avatars.registry import load_avatar
 from models.capture.dataset import load_split
 from models.training.data import build_frames
+from models.training.trainer import choose_code_time
 from render.gl.context import GLContext
 
 
@@ -34,8 +37,12 @@ def main() -> int:
     if len(frames) != int(meta["frames"]):
         print(f"{dataset}: {len(frames)} training frames, not the avatar's {meta['frames']}", file=sys.stderr)
         return 2
-    avatar.code_keys.note([f.controls for f in frames])
-    avatar.note_views(build_frames(split, avatar, GLContext.headless()))
+    avatar.code_keys.note([f.controls for f in frames], [f.time_s for f in frames])
+    gl = GLContext.headless()
+    avatar.note_views(build_frames(split, avatar, gl))
+    choice = choose_code_time(avatar, load_split(dataset, "val"), gl)
+    if choice is not None:
+        print(f"held-out frames take codes by controls{' and time' if choice['by_time'] else ''}: {choice}")
     save_checkpoint(out, meta, avatar.state_dict(), int(meta.get("step", 1)))
     print(f"wrote {out}")
     return 0

@@ -243,37 +243,9 @@ class Trainer:
         r.release()
         return psnr(img, v.image)
 
-    @torch.no_grad()
     def choose_code_time(self, gl: GLContext, on_frame: Callable[[int, int], None] | None = None) -> dict | None:
-        """Whether the video's own frames that no one trained on (held-out frames, the timeline) take the codes of
-        the training frames nearest in controls and time (components/codes.py), or in controls alone: each
-        validation frame filmed late enough is rendered both ways from the codes of the training frames filmed
-        FORECAST_GAP_S or more before it (as a held-out frame after them has them), and the way with the higher
-        mean PSNR is kept (controls alone where they tie or no frame says). Where the avatar keys no codes by
-        time: None. on_frame(done, total) after each render."""
-        keys = self.avatar.code_keys
-        if keys.times is None or self.val_split is None:
-            return None
-        frames = [i for i, f in enumerate(self.val_split.frames) if f.time_s is not None and keys.forecastable(f.time_s)]
-        scores: dict[float | None, list[float]] = {None: [], TIME_SCALE_S: []}
-        r = Rasterizer(gl)
-        done = 0
-        for i in frames:
-            v = validation_frame(self.val_split, self.avatar.background.numpy(), i)
-            for scale, got in scores.items():
-                with keys.forecasting(scale):
-                    img = render_image(self.avatar, v.camera, v.controls, RenderOptions(room=v.room, time_s=v.time_s),
-                                       rasterizer=r)["rgb"]
-                got.append(psnr(img, v.image))
-                done += 1
-                if on_frame is not None:
-                    on_frame(done, 2 * len(frames))
-        r.release()
-        by_time = bool(frames) and float(np.mean(scores[TIME_SCALE_S])) > float(np.mean(scores[None]))
-        keys.choose_time(TIME_SCALE_S if by_time else None)
-        return {"by_time": by_time, "frames": len(frames),
-                **({"psnr_controls": round(float(np.mean(scores[None])), 2),
-                    "psnr_controls_and_time": round(float(np.mean(scores[TIME_SCALE_S])), 2)} if frames else {})}
+        """choose_code_time on this run's avatar and validation frames (after its budget)."""
+        return None if self.val_split is None else choose_code_time(self.avatar, self.val_split, gl, on_frame)
 
     # ---- the loop --------------------------------------------------------------------------------------
     def run(self, gl: GLContext, on_progress: Callable[[dict], None] | None = None) -> dict:
@@ -312,6 +284,38 @@ class Trainer:
                 last_ck = time.perf_counter()
         self.save()
         return record
+
+
+@torch.no_grad()
+def choose_code_time(avatar: Avatar, val_split: CaptureSplit, gl: GLContext,
+                     on_frame: Callable[[int, int], None] | None = None) -> dict | None:
+    """Whether the video's own frames that no one trained on (held-out frames) take the codes of the training
+    frames nearest in controls and time (components/codes.py), or in controls alone: each validation frame filmed
+    late enough is rendered both ways from the codes of the training frames filmed FORECAST_GAP_S or more before it
+    (as a held-out frame after them has them), and the way with the higher mean PSNR is kept (controls alone where
+    they tie or no frame says). None where the avatar's training frames have no times. on_frame(done, total) after
+    each render."""
+    keys = avatar.code_keys
+    if keys.times is None:
+        return None
+    frames = [i for i, f in enumerate(val_split.frames) if f.time_s is not None and keys.forecastable(f.time_s)]
+    scores: dict[float | None, list[float]] = {None: [], TIME_SCALE_S: []}
+    r = Rasterizer(gl)
+    for i in frames:
+        v = validation_frame(val_split, avatar.background.numpy(), i)
+        for scale, got in scores.items():
+            with keys.forecasting(scale):
+                img = render_image(avatar, v.camera, v.controls, RenderOptions(room=v.room, time_s=v.time_s),
+                                   rasterizer=r)["rgb"]
+            got.append(psnr(img, v.image))
+            if on_frame is not None:
+                on_frame(sum(map(len, scores.values())), 2 * len(frames))
+    r.release()
+    by_time = bool(frames) and float(np.mean(scores[TIME_SCALE_S])) > float(np.mean(scores[None]))
+    keys.choose_time(TIME_SCALE_S if by_time else None)
+    return {"by_time": by_time, "frames": len(frames),
+            **({"psnr_controls": round(float(np.mean(scores[None])), 2),
+                "psnr_controls_and_time": round(float(np.mean(scores[TIME_SCALE_S])), 2)} if frames else {})}
 
 
 def optimiser_step(opt: torch.optim.Optimizer, model: torch.nn.Module, total: torch.Tensor, terms: dict,

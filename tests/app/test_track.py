@@ -4,6 +4,7 @@ videos are clear errors that leave nothing behind."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import cv2
@@ -55,6 +56,13 @@ def test_d3_video_tracks(d3_dataset):
     cap = cv2.VideoCapture(str(d3_dataset / "tracking" / "overlay.mp4"))
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == report["frames_kept"]
     cap.release()
+    # Each frame's time in the video: its frame of the video over the video's own rate (not --fps 10's)
+    cap = cv2.VideoCapture(report["video"])
+    video_fps = cap.get(cv2.CAP_PROP_FPS)
+    cap.release()
+    raw = json.loads((d3_dataset / "transforms_train.json").read_text())["frames"]
+    assert video_fps > 20 and [f.time_s for f in train.frames] == pytest.approx(
+        [r["source_frame"] / video_fps for r in raw], abs=1e-4)
 
 
 @pytest.mark.parametrize("which", ["builtin", "flame"])
@@ -144,7 +152,19 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     face = (slice(top, bottom), slice(left, right))
     assert np.abs(plate[face] - frame[face]).mean() > 0.15  # and not the face
     out = tmp_path / "avatar"
-    prepare_training(TrainConfig(dataset=d3_dataset, out=out, model="codynerf", effects="none", steps=30), gl).run(gl)
+    trainer = prepare_training(TrainConfig(dataset=d3_dataset, out=out, model="codynerf", effects="none", steps=30),
+                               gl)
+    trainer.run(gl)
+    # How frames of the video no one trained on take their codes: the validation frames filmed late enough, each
+    # rendered by controls and by controls and time from earlier frames' codes; the better kept, and saved.
+    val = load_split(d3_dataset, "val")
+    choice = trainer.choose_code_time(gl)
+    late = [f for f in val.frames if trainer.avatar.code_keys.forecastable(f.time_s)]
+    assert choice["frames"] == len(late) > 0 and len(late) >= len(val.frames) - 1, (choice, len(val.frames))
+    assert 10 < choice["psnr_controls"] < 40 and 10 < choice["psnr_controls_and_time"] < 40, choice
+    assert choice["by_time"] == (choice["psnr_controls_and_time"] > choice["psnr_controls"])
+    assert trainer.avatar.code_keys.keys_time == choice["by_time"]
+    trainer.save()
     log = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
     assert log[-1]["photometric"] < 0.7 * log[0]["photometric"], (log[0], log[-1])
     avatar, _ = load_avatar(out)
@@ -165,9 +185,15 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     img = render_image(avatar, frame_camera(test, test.frames[0]), test.frames[0].controls, rasterizer=raster)
     raster.release()
     assert np.isfinite(img["rgb"]).all() and img["opacity"].max() > 0.1
+    assert avatar.code_keys.keys_time == choice["by_time"]  # as saved
     assert run_eval(EvalConfig(avatar=out, dataset=d3_dataset, out=tmp_path / "eval", max_frames=3)) == 0
-    metrics = json.loads((tmp_path / "eval" / "metrics.json").read_text())["metrics"]
+    report = json.loads((tmp_path / "eval" / "metrics.json").read_text())
+    metrics = report["metrics"]
     assert 10 < metrics["psnr"] < 40 and 0 < metrics["face_mse"] < 0.1, metrics
+    assert report["codes_by_time"] == choice["by_time"]  # the avatar's own capture: its frames' times count
+    elsewhere = shutil.copytree(d3_dataset, tmp_path / "copy")  # another folder: its times may be another video's
+    assert run_eval(EvalConfig(avatar=out, dataset=elsewhere, out=tmp_path / "eval2", max_frames=1)) == 0
+    assert json.loads((tmp_path / "eval2" / "metrics.json").read_text())["codes_by_time"] is False
 
 
 def test_on_a_tracked_video_all_and_none_train_the_same_primitives(d3_dataset, gl, tmp_path):

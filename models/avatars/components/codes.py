@@ -28,7 +28,7 @@ video: a held-out frame's nearest training frames are not its own moment)."""
 TIME_SCALE_S = 0.1
 """Seconds of a video that weigh as much as one spread of a control in a code key with a time: a frame 0.1 s
 away is as far as one whose controls differ by a spread, so near frames decide unless the controls differ a lot.
-On seven 10-minute avatars (27 November, held-out frames): +0.4 to +2.9 dB on five clips, 0 on one, -2.0 dB on
+On seven 10-minute avatars (28 November, held-out frames): +0.4 to +2.9 dB on five clips, 0 on one, -2.0 dB on
 the expressions clip d19, whose codes follow its expressions; hence the choice per capture."""
 FORECAST_GAP_S = 0.3
 """The choice's validation frames blend only the codes of training frames filmed this much earlier or more:

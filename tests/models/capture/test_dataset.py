@@ -50,6 +50,16 @@ def test_loads_ours(ours):
     np.testing.assert_allclose(s.frames[2].controls.expression, [0.2])
     np.testing.assert_allclose(s.frames[1].controls.jaw, [0.1, 0, 0])
     np.testing.assert_allclose(s.frames[0].controls.shape, [0.5])
+    assert all(f.time_s is None for f in s.frames)  # not a video's frames
+
+
+def test_a_video_frames_time_is_read(ours):
+    path = ours / "transforms_train.json"
+    data = json.loads(path.read_text())
+    for k, f in enumerate(data["frames"]):
+        f.update(source_frame=3 * k, time_s=0.1 * k)
+    path.write_text(json.dumps(data))
+    assert [f.time_s for f in load_split(ours, "train").frames] == [0.0, 0.1, 0.2]
 
 
 @pytest.mark.parametrize(("edit", "message"), [
@@ -65,6 +75,8 @@ def test_loads_ours(ours):
     (lambda d: d["frames"][2].update(intrinsics=[0.0, 50, 20, 15]), "frame 2: field 'intrinsics' must be [fx, fy"),
     (lambda d: d["frames"][1].update(intrinsics=[50, 50, 20]), "frame 1: field 'intrinsics' must have shape"),
     (lambda d: d.update(background_intrinsics=[50, 50, 20, 15]), "field 'background_intrinsics' needs a background"),
+    (lambda d: d["frames"][2].update(time_s=-0.5), "frame 2: field 'time_s' must be a number of seconds from 0"),
+    (lambda d: d["frames"][1].update(time_s="0:01"), "frame 1: field 'time_s' must be a number of seconds"),
 ])
 def test_errors_name_file_frame_field(ours, edit, message):
     path = ours / "transforms_train.json"

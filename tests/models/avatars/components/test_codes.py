@@ -1,6 +1,7 @@
 """Codes for new controls: the blend of the nearest training frames' codes, worked by hand, continuous as the
 controls move, a training frame's own controls giving its own code, and the keys saved with the avatar; a
-primitives training step that takes the code of its frame left out."""
+primitives training step that takes the code of its frame left out; frames of the video with a time keyed by time
+as well where training chose it, and the forecast that chooses it."""
 
 from __future__ import annotations
 
@@ -11,7 +12,13 @@ import numpy as np
 import torch
 
 from models.avatars.checkpoint import save_checkpoint
-from models.avatars.components.codes import LEFT_OUT_WINDOW, left_out_weights, nearest_code_weights
+from models.avatars.components.codes import (
+    FORECAST_GAP_S,
+    LEFT_OUT_WINDOW,
+    CodeKeys,
+    left_out_weights,
+    nearest_code_weights,
+)
 from models.avatars.registry import load_avatar
 from models.head.controls import Controls
 from tests.conftest import CODYNERF_DEMO, DEMO
@@ -80,3 +87,67 @@ def test_a_swapped_training_step_decodes_with_the_left_out_frames_code():
     assert w[7 - LEFT_OUT_WINDOW:8 + LEFT_OUT_WINDOW].sum() == 0 and abs(float(w.sum()) - 1) < 1e-6
     assert w[8 + LEFT_OUT_WINDOW] > 0  # the nearest frame left in: the first after the window
     torch.testing.assert_close(avatar.training_code(7, g), w[None] @ avatar.latent.weight)
+
+
+def clocked_keys() -> tuple[CodeKeys, list[Controls]]:
+    """12 frames filmed half a second apart whose one expression weight runs 0, 1/3, 2/3, 1 and again (spread
+    0.3727): frames 2, 6 and 10 have the same controls."""
+    keys = CodeKeys(num_expression=1)
+    controls = [Controls(expression=np.array([(i % 4) / 3], np.float32)) for i in range(12)]
+    keys.note(controls, [0.5 * i for i in range(12)])
+    return keys, controls
+
+
+def test_a_frame_with_a_time_takes_the_codes_nearest_in_controls_and_time_where_training_chose_it():
+    keys, controls = clocked_keys()
+    query = controls[2]  # the controls of frames 2, 6 and 10, filmed at 5.6 s
+    by_controls = torch.zeros(12)
+    by_controls[[2, 6, 10]] = 1 / 3  # three at distance 0, the sixth nearest 1/3 / 0.3727 away: 1, 1, 1, 0, 0
+    torch.testing.assert_close(keys.weights(query), by_controls)
+    torch.testing.assert_close(keys.weights(query, 5.6), by_controls)  # no time chosen: the time changes nothing
+    assert not keys.keys_time
+    keys.choose_time(0.1)  # 0.1 s weighs as one spread
+    assert keys.keys_time
+    torch.testing.assert_close(keys.weights(query), by_controls)  # new controls (no time): by controls alone
+    # With the time: frame 11 (5.5 s, 0.894 spreads off) is sqrt(0.894^2 + 1^2) = 1.342 away, frame 10 (5.0 s, the
+    # same controls) 6.0, frame 9 11.04, frame 8 16.10, frame 7 21.02; the sixth, frame 6, 26.0:
+    # weights 1 - d / 26 = 0.948, 0.769, 0.575, 0.381, 0.192 over their sum 2.865.
+    w = keys.weights(query, 5.6)
+    expected = torch.zeros(12)
+    expected[[11, 10, 9, 8, 7]] = torch.tensor([0.9484, 0.7692, 0.5754, 0.3808, 0.1915]) / 2.8653
+    torch.testing.assert_close(w, expected, atol=2e-4, rtol=0)
+    keys.choose_time(None)
+    torch.testing.assert_close(keys.weights(query, 5.6), by_controls)
+
+
+def test_forecasting_blends_only_frames_filmed_a_gap_before():
+    keys, controls = clocked_keys()
+    # At 3.2 s, frames filmed before 3.2 - 0.3 s: 0-5. By controls among them: frame 2 at 0, frames 1, 3, 5 at
+    # 0.894, frames 0 and 4 at 1.789 (the sixth): weights 1, 0.5, 0.5, 0.5 over 2.5.
+    assert FORECAST_GAP_S == 0.3
+    with keys.forecasting(None):
+        w = keys.weights(controls[2], 3.2)
+    expected = torch.zeros(12)
+    expected[[2, 1, 3, 5]] = torch.tensor([0.4, 0.2, 0.2, 0.2])
+    torch.testing.assert_close(w, expected)
+    with keys.forecasting(0.1):  # by time as well: frame 5 (2.5 s) is nearest, none after 2.9 s
+        w = keys.weights(controls[2], 3.2)
+    assert w.argmax().item() == 5 and w[6:].sum() == 0 and abs(float(w.sum()) - 1) < 1e-6
+    torch.testing.assert_close(keys.weights(controls[2], 3.2), keys.weights(controls[2]))  # outside: all frames
+    assert keys.forecastable(2.9) and not keys.forecastable(2.7)  # 6 frames before 2.6 s, 5 before 2.4 s
+
+
+def test_the_times_and_the_choice_are_saved_and_old_keys_load_without_them():
+    keys, controls = clocked_keys()
+    keys.choose_time(0.1)
+    again = CodeKeys(num_expression=1)
+    again.load_state_dict(keys.state_dict())
+    assert again.keys_time
+    torch.testing.assert_close(again.weights(controls[2], 5.6), keys.weights(controls[2], 5.6))
+    old = CodeKeys(num_expression=1)
+    old.load_state_dict({k: v for k, v in keys.state_dict().items() if k in ("keys", "scale")})
+    assert not old.keys_time and old.times is None
+    torch.testing.assert_close(old.weights(controls[2], 5.6), keys.weights(controls[2]))
+    untimed = CodeKeys(num_expression=1)
+    untimed.note(controls, [0.5] * 11 + [None])  # a frame without a time: no times kept
+    assert untimed.times is None
