@@ -118,9 +118,10 @@ def print_next(cfg: TrainConfig) -> None:
     print(f"next: avatar-studio studio {out}  (or: avatar-studio turntable {out}; avatar-studio eval {out} {dataset})")
 
 
-def run_trainer(trainer, gl: GLContext, on_record=None) -> dict | None:
-    """Run a trainer to its budget, its progress on the terminal (and to on_record); its last record, or None where
-    it was stopped (SIGTERM, the studio's Cancel, or Ctrl-C: it finishes the step and checkpoints)."""
+def run_trainer(trainer, gl: GLContext, on_record=None, choose_codes: bool = True) -> dict | None:
+    """Run a trainer to its budget, its progress on the terminal (and to on_record), then (choose_codes) choose how
+    its video's frames no one trained on take their codes; its last record, or None where it was stopped (SIGTERM,
+    the studio's Cancel, or Ctrl-C: it finishes the step and checkpoints)."""
     tty = sys.stderr.isatty()
     last_line = [0.0]
 
@@ -156,7 +157,8 @@ def run_trainer(trainer, gl: GLContext, on_record=None) -> dict | None:
     if trainer.stop_requested:
         print(f"stopped at step {trainer.step}; checkpoint in {trainer.cfg.out} (continue with --resume)")
         return None
-    choose_code_time(trainer, gl)
+    if choose_codes:
+        choose_code_time(trainer, gl)
     return last
 
 
@@ -259,7 +261,8 @@ def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
                 raise UserInputError(f"{noted}: cannot read the prior the training began with ({e})") from None
         print(f"training the outside ({outside_cfg.out}: the universal prior {prior} personalised)", flush=True)
         outside, _ = personalizing_trainer(outside_cfg, prior, gl, on_frame=reading)
-    if run_trainer(outside, gl, mirror("outside")) is None:
+    # (a whole head's codes are its inside's: WholeHeadAvatar.code_keys)
+    if run_trainer(outside, gl, mirror("outside"), choose_codes=False) is None:
         return 0
     try:
         compose(inside_cfg.out, outside_cfg.out, cfg.out)

@@ -39,7 +39,8 @@ def main() -> int:
         return 2
     avatar.code_keys.note([f.controls for f in frames], [f.time_s for f in frames])
     gl = GLContext.headless()
-    avatar.note_views(build_frames(split, avatar, gl))
+    if avatar.views.eye is None:  # trained before the views were kept (a whole head always keeps its inside's)
+        avatar.note_views(build_frames(split, avatar, gl))
     choice = choose_code_time(avatar, load_split(dataset, "val"), gl)
     if choice is not None:
         print(f"held-out frames take codes by controls{' and time' if choice['by_time'] else ''}: {choice}")

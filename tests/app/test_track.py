@@ -162,7 +162,8 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     late = [f for f in val.frames if trainer.avatar.code_keys.forecastable(f.time_s)]
     assert choice["frames"] == len(late) > 0 and len(late) >= len(val.frames) - 1, (choice, len(val.frames))
     assert 10 < choice["psnr_controls"] < 40 and 10 < choice["psnr_controls_and_time"] < 40, choice
-    assert choice["by_time"] == (choice["psnr_controls_and_time"] > choice["psnr_controls"])
+    by_time, by_controls = choice["psnr_controls_and_time"], choice["psnr_controls"]  # (to 0.01 dB)
+    assert by_time >= by_controls if choice["by_time"] else by_time <= by_controls
     assert trainer.avatar.code_keys.keys_time == choice["by_time"]
     trainer.save()
     log = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]

@@ -166,6 +166,7 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, one_second_sca
     assert main(["train", str(scan), "--model", "whole", "--prior", str(prior), "--out", str(out), "--steps", "4"]) == 0
     said = capsys.readouterr().out
     assert "as a whole head" in said and "a whole head, 4 steps from scratch and 1 personalising" in said
+    assert said.count("frames of the video no one trained on take the codes") == 1  # the inside's: the whole's codes
     avatar, meta = load_avatar(out)
     assert isinstance(avatar, WholeHeadAvatar) and meta["model"] == "whole" and meta["provenance"]["steps"] == 5
     assert float(avatar.outside.neutral_texture.abs().sum()) > 0  # personalised on the scan
