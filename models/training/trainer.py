@@ -16,8 +16,8 @@ import torch
 import torch.distributed as dist
 
 from models.avatars.base import Avatar, TrainingBatch
-from models.avatars.components.codes import TIME_SCALE_S
 from models.avatars.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
+from models.avatars.components.codes import TIME_SCALE_S
 from models.avatars.effects import parse_effects
 from models.avatars.registry import DEFAULT_MODEL, avatar_class, default_model
 from models.avatars.rendering import RenderOptions, render_image

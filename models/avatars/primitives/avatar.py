@@ -413,8 +413,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         cond[E:E + 3], cond[E + 3:E + 6] = controls.rotation("jaw"), controls.rotation("neck")
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
-        return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze), self.code_keys.weights(controls, time_s),
-                                  controls=controls,
+        return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze),
+                                  self.code_keys.weights(controls, time_s), controls=controls,
                                   expression=self.controls_expression_map(controls, v[1], joints[1, 0]))
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None, time_s: float | None = None
