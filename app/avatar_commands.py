@@ -158,11 +158,11 @@ def run_trainer(trainer, gl: GLContext, on_record=None, choose_codes: bool = Tru
         print(f"stopped at step {trainer.step}; checkpoint in {trainer.cfg.out} (continue with --resume)")
         return None
     if choose_codes:
-        choose_code_time(trainer, gl)
+        choose_code_time_aloud(trainer, gl)
     return last
 
 
-def choose_code_time(trainer, gl: GLContext) -> None:
+def choose_code_time_aloud(trainer, gl: GLContext) -> None:
     """After a tracked video's training: how the video's own frames that no one trained on take their codes
     (Trainer.choose_code_time), said in a line, with a bar while its renders run; the avatar saved with it."""
     bars: list[Progress] = []
