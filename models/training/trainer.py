@@ -147,6 +147,8 @@ class Trainer:
         self.validation = validation
         self.val_split = val_split
         """The validation frames that choose how new frames of the video take their codes (choose_code_time)."""
+        self.code_choice: dict | None = None
+        """That choice and its measure, for avatar.json (`held_out_codes`)."""
         template = avatar.head_model.template
         self.view_range = view_range(frames.split, 0.5 * (template.min(0) + template.max(0)))
         if avatar.all_round:  # a person's prior, or a whole head: its prior saw heads from every side (its corpus's
@@ -182,7 +184,8 @@ class Trainer:
                                "dataset_resolved": str(Path(self.cfg.dataset).resolve()), "steps": self.step,
                                "skipped_steps": self.skipped_steps,
                                "seconds": round(self.elapsed, 1), "config": {k: str(v) for k, v in
-                                                                            asdict(self.cfg).items()}}}
+                                                                            asdict(self.cfg).items()}},
+                **({"held_out_codes": self.code_choice} if self.code_choice is not None else {})}
 
     def save(self) -> None:
         self.avatar.before_save(self.frames.geometry[0])
@@ -198,6 +201,7 @@ class Trainer:
         self.elapsed = float(ck.train_state["elapsed"])
         self.step = ck.step
         self.skipped_steps = int(ck.meta.get("provenance", {}).get("skipped_steps", 0))
+        self.code_choice = ck.meta.get("held_out_codes")
 
     # ---- one step --------------------------------------------------------------------------------------
     def lr_at(self, progress: float) -> float:
@@ -244,8 +248,10 @@ class Trainer:
         return psnr(img, v.image)
 
     def choose_code_time(self, gl: GLContext, on_frame: Callable[[int, int], None] | None = None) -> dict | None:
-        """choose_code_time on this run's avatar and validation frames (after its budget)."""
-        return None if self.val_split is None else choose_code_time(self.avatar, self.val_split, gl, on_frame)
+        """choose_code_time on this run's avatar and validation frames (after its budget), kept for its meta."""
+        if self.val_split is not None:
+            self.code_choice = choose_code_time(self.avatar, self.val_split, gl, on_frame)
+        return self.code_choice
 
     # ---- the loop --------------------------------------------------------------------------------------
     def run(self, gl: GLContext, on_progress: Callable[[dict], None] | None = None) -> dict:

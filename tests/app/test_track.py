@@ -166,6 +166,7 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     assert by_time >= by_controls if choice["by_time"] else by_time <= by_controls
     assert trainer.avatar.code_keys.keys_time == choice["by_time"]
     trainer.save()
+    assert json.loads((out / "avatar.json").read_text())["held_out_codes"] == choice  # said beside the weights
     log = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
     assert log[-1]["photometric"] < 0.7 * log[0]["photometric"], (log[0], log[-1])
     avatar, _ = load_avatar(out)

@@ -169,6 +169,7 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, one_second_sca
     assert said.count("frames of the video no one trained on take the codes") == 1  # the inside's: the whole's codes
     avatar, meta = load_avatar(out)
     assert isinstance(avatar, WholeHeadAvatar) and meta["model"] == "whole" and meta["provenance"]["steps"] == 5
+    assert meta["held_out_codes"]["by_time"] == avatar.code_keys.keys_time  # the inside's choice, and its measure
     assert float(avatar.outside.neutral_texture.abs().sum()) > 0  # personalised on the scan
     assert meta["view_range"]["yaw_deg"] == [-180.0, 180.0] and avatar.card.turntable_sweep_deg() == 0.0  # round
     assert meta["captured_view_range"] == json.loads((out / "parts" / "inside" / "avatar.json").read_text())[
