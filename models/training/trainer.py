@@ -249,8 +249,9 @@ class Trainer:
 
     def choose_code_time(self, gl: GLContext, on_frame: Callable[[int, int], None] | None = None) -> dict | None:
         """choose_code_time on this run's avatar and validation frames (after its budget), kept for its meta."""
-        if self.val_split is not None:
-            self.code_choice = choose_code_time(self.avatar, self.val_split, gl, on_frame)
+        if self.val_split is None:
+            return None
+        self.code_choice = choose_code_time(self.avatar, self.val_split, gl, on_frame)
         return self.code_choice
 
     # ---- the loop --------------------------------------------------------------------------------------
