@@ -71,7 +71,7 @@ def neutral_views(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frame
               for f in split.frames]
     raster = Rasterizer(gl)
     colours, weights = [], []
-    bg = avatar.background.numpy()
+    bg = avatar.background.cpu().numpy()
     for k in np.argsort(amount)[:frames]:
         f = split.frames[int(k)]
         geo = avatar.geometry(f.controls)

@@ -90,7 +90,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None,
         if plate is not None:
             avatar.plate.note(*plate)
     frames = capture_frames(avatar, split, gl, cfg.corrections, on_frame)
-    validation = validation_frame(val_split, avatar.background.numpy()) if val_split.frames else None
+    validation = validation_frame(val_split, avatar.background.cpu().numpy()) if val_split.frames else None
     return Trainer(cfg, avatar, frames, validation, resumed, val_split)
 
 
@@ -309,7 +309,7 @@ def choose_code_time(avatar: Avatar, val_split: CaptureSplit, gl: GLContext,
     scores: dict[float | None, list[float]] = {None: [], TIME_SCALE_S: []}
     r = Rasterizer(gl)
     for i in frames:
-        v = validation_frame(val_split, avatar.background.numpy(), i)
+        v = validation_frame(val_split, avatar.background.cpu().numpy(), i)
         for scale, got in scores.items():
             with keys.forecasting(scale):
                 img = render_image(avatar, v.camera, v.controls, RenderOptions(room=v.room, time_s=v.time_s),

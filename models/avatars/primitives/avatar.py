@@ -496,6 +496,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         if self._neutral is None or self._neutral[0] != key:  # the face expressions are measured from
             neutral, _, _ = self.head.pose([Controls(shape=controls.shape)])
             self._neutral = key, self.texel_map(neutral[0])
+        if self._neutral[1].device != local.device:  # made on the CPU with a trainer's frames, then the avatar
+            self._neutral = key, self._neutral[1].to(local.device)  # went to a GPU (validation, the codes' choice)
         return self.texel_map(local) - self._neutral[1]
 
     def frame_expression_map(self, geo: PrimitivesGeometry, posed: torch.Tensor) -> torch.Tensor:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
+import shutil
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,10 +36,29 @@ def saved_and_reloaded(trainer):
     return avatar, meta
 
 
+def with_frame_times(capture: Path, out: Path) -> Path:
+    """A copy of a capture made to read as a tracked video's (a `source` video; what a tracked video's training
+    does: pose corrections, per-frame codes keyed by controls and time) whose frames have times in the video
+    (`time_s`, as `track` writes): the training frames 0.1 s apart from 0, the validation and test frames 0.1 s
+    apart from 0.35 s after the last, so that every training frame was filmed long enough before them for the
+    codes' choice (FORECAST_GAP_S)."""
+    shutil.copytree(capture, out)
+    after = 0.1 * len(json.loads((out / "transforms_train.json").read_text())["frames"]) + 0.25
+    for split, start in (("train", 0.0), ("val", after), ("test", after)):
+        path = out / f"transforms_{split}.json"
+        meta = json.loads(path.read_text())
+        meta["source"] = {"video": "synthetic.mp4"}
+        for i, frame in enumerate(meta["frames"]):
+            frame["time_s"] = round(start + 0.1 * i, 3)
+        path.write_text(json.dumps(meta))
+    return out
+
+
 def gpu_run_matches_cpu(cfg, gl, progress: float, buffers: tuple[str, ...] = ("rgb",)) -> None:
     """The same 4 steps (same seed, same rays: the generator stays on the CPU) on the GPU and the CPU give the same
-    losses and weights to float tolerance; the GPU's saved avatar, loaded on the GPU, renders the first training frame
-    as the CPU's does (each buffer within 0.01)."""
+    losses and weights to float tolerance, and the same validation PSNR (and codes' choice, where the capture has
+    frame times) from the trainer's own renders; the GPU's saved avatar, loaded on the GPU, renders the first
+    training frame as the CPU's does (each buffer within 0.01)."""
     cpu, gpu = prepare_training(cfg, gl), prepare_training(replace(cfg, out=cfg.out.parent / "gpu", device="cuda"), gl)
     for _ in range(4):
         a, b = cpu.train_step(progress), gpu.train_step(progress)
@@ -51,6 +73,12 @@ def gpu_run_matches_cpu(cfg, gl, progress: float, buffers: tuple[str, ...] = ("r
         assert (g - c).abs().max() <= bound, k
         apart, count = apart + int(((g - c).abs() > 1e-3 + 1e-3 * c.abs()).sum()), count + c.numel()
     assert apart <= 0.02 * count, (apart, count)
+    # the trainer's own renders on the GPU (validation, the codes' choice) with what its first pass made on the CPU
+    assert gpu.validation_psnr(gl) == pytest.approx(cpu.validation_psnr(gl), abs=0.05)
+    on_cpu, on_gpu = cpu.choose_code_time(gl), gpu.choose_code_time(gl)
+    assert (on_gpu is None) == (on_cpu is None)  # None: the capture has no frame times
+    for key in ("psnr_controls", "psnr_controls_and_time") if on_cpu else ():
+        assert on_gpu[key] == pytest.approx(on_cpu[key], abs=0.05), key
     gpu.save()
     avatar, _ = load_avatar(gpu.cfg.out, "cuda")
     f = cpu.split.frames[0]

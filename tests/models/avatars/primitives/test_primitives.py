@@ -31,7 +31,12 @@ from models.training.trainer import TrainConfig, prepare_training
 from render.camera import framing_camera
 from render.gl.raster import Rasterizer
 from tests.conftest import DEMO
-from tests.models.avatars.runs import gpu_run_matches_cpu, photometric_before_and_after, saved_and_reloaded
+from tests.models.avatars.runs import (
+    gpu_run_matches_cpu,
+    photometric_before_and_after,
+    saved_and_reloaded,
+    with_frame_times,
+)
 from tests.models.head.flame_files import write_flame_from_head
 
 
@@ -302,11 +307,13 @@ def test_a_newer_request_stops_a_frame_within_its_one_batch(gl):
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (--device cuda); torch sees none here")
 def test_cuda_trains_and_renders_as_the_cpu_does(synth_capture, gl, tmp_path):
     """`train --device cuda`: the same steps (same seed and rays) give the same losses and weights to float
-    tolerance, with every effect, expression maps, the opacity window and kept sizes on; a render on the GPU (the
+    tolerance, with every effect, expression maps, the opacity window and kept sizes on (the capture with frame
+    times, so that the codes' choice renders on the GPU too); a render on the GPU (the
     torch march) matches the CPU's (the C march where a compiler is found: within 2e-3 of the torch march, tests of
     test_native.py)."""
     options = ("grid=8", "voxels=4", "width=16", "expression_maps=true", "opacity_window=true", "keep_size=true")
-    gpu_run_matches_cpu(TrainConfig(dataset=synth_capture("sun", 12, 32), out=tmp_path / "cpu", model="primitives",
+    capture = with_frame_times(synth_capture("sun", 12, 32), tmp_path / "timed")
+    gpu_run_matches_cpu(TrainConfig(dataset=capture, out=tmp_path / "cpu", model="primitives",
                                     steps=4, checkpoint_seconds=1e9, model_options=options), gl, 0.5,
                         ("rgb", "normals", "opacity"))
 
