@@ -1,8 +1,9 @@
-"""How near the back of an avatar's head comes to the colour its video saw on the crown: the avatar at rest seen from
+"""How near the back of an avatar's head comes to the colour its video saw on the head: the avatar at rest seen from
 behind (yaw 180, 5 degrees up, 256 px), the mean colour of the upper half of its opaque silhouette (the head, not
-the shoulders), against the crown's colour in the capture (the weighted median of the chart's texels 8.5 cm and more
-above the eyes that its least expressive frames saw: models/avatars/prior/maps.py crown_colour, in the chart of the
-shipped prior placed on the capture's head model).
+the shoulders), against the hair's colour in the capture's least expressive frames (the median of the person's
+pixels beyond the head mesh above the eyes: models/avatars/prior/maps.py hair_colour) and the crown's (the weighted
+median of the chart's texels 8.5 cm and more above the eyes that those frames saw: crown_colour, in the chart of the
+shipped prior placed on the capture's head model); the distance is to the first where the frames show it.
 
     .venv/bin/python scripts/back_colour.py AVATAR CAPTURE [AVATAR CAPTURE ...]"""
 
@@ -48,12 +49,14 @@ def main() -> None:
         avatar = load_avatar(folder)[0]
         split = load_split(capture, "train")
         prior = load_prior(SHIPPED_PRIOR, split.head_model)[0]  # its chart: the texels' places on the head model
-        mean, total = weighted_mean(*neutral_views(split, prior, gl))
+        views = neutral_views(split, prior, gl)
+        mean, total = weighted_mean(views.colours, views.weights)
         crown = crown_colour(mean, total, eye_heights(prior.head_model, prior.sampler))
+        head = views.hair if views.hair is not None else crown
         back = back_colour(avatar, raster)
         rgb = lambda c: "-" if c is None else "(" + ", ".join(f"{float(x):.3f}" for x in c) + ")"
-        gap = "-" if crown is None else f"{np.linalg.norm(back - crown):.3f}"
-        print(f"{folder}: back of the head {rgb(back)}, crown {rgb(crown)}, distance {gap}")
+        gap = "-" if head is None else f"{np.linalg.norm(back - head):.3f}"
+        print(f"{folder}: back of the head {rgb(back)}, hair {rgb(views.hair)}, crown {rgb(crown)}, distance {gap}")
 
 
 if __name__ == "__main__":

@@ -29,9 +29,17 @@ from models.avatars.checkpoint import load_checkpoint, read_meta, save_checkpoin
 from models.avatars.components.plate import Plate
 from models.avatars.effects import parse_effects
 from models.avatars.prior.avatar import PriorAvatar, PriorConfig
-from models.avatars.prior.maps import average_texture, eye_heights, texture_map, texture_tensor
+from models.avatars.prior.maps import (
+    average_texture,
+    eye_heights,
+    eye_vertices,
+    hair_colour,
+    hair_pixels,
+    texture_map,
+    texture_tensor,
+)
 from models.capture.dataset import CaptureSplit, load_split
-from models.capture.frames import background_plate, frame_camera, load_rgb
+from models.capture.frames import background_plate, frame_camera, load_mask, load_rgb
 from models.device import DeviceError, device_of
 from models.head.sources import head_kind, load_head
 from models.ranges import OptionError
@@ -46,6 +54,7 @@ from models.training.trainer import (
     optimiser_step,
     trim_progress,
 )
+from render.camera import project
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
@@ -63,35 +72,53 @@ class Identity:
     geometry: torch.Tensor
 
 
+@dataclass
+class NeutralViews:
+    """What a capture's least expressive frames saw of the head: each frame's colours (S,S,3) and weights (S,S)
+    unprojected onto the chart (maps.texture_map), and the hair's colour (3,) from the person's pixels beyond the
+    mesh above the eyes (maps.hair_colour; None where the frames have no masks or show too little beyond it)."""
+
+    colours: list[np.ndarray]
+    weights: list[np.ndarray]
+    hair: np.ndarray | None
+
+
 def neutral_views(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frames: int = NEUTRAL_FRAMES
-                  ) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """The colours (S,S,3) and weights (S,S) of the split's `frames` least expressive frames unprojected onto the
-    chart (maps.texture_map), a pair a frame."""
+                  ) -> NeutralViews:
+    """The split's `frames` least expressive frames' views of the head (NeutralViews)."""
     amount = [float(np.abs(f.controls.expression).sum() + np.abs(f.controls.rotation("jaw")).sum())
               for f in split.frames]
     raster = Rasterizer(gl)
-    colours, weights = [], []
+    colours, weights, hair, head_pixels = [], [], [], 0
     bg = avatar.background.cpu().numpy()
+    eyes = eye_vertices(avatar.head_model)
     for k in np.argsort(amount)[:frames]:
         f = split.frames[int(k)]
         geo = avatar.geometry(f.controls)
         cam = frame_camera(split, f)
         posed = geo.posed.cpu().numpy()
         r = raster.rasterize(posed, avatar.head_model.triangles, cam)
-        c, w = texture_map(avatar.sampler, avatar.triangles.cpu(), geo.posed.cpu(), cam, load_rgb(f.image_path, bg), r)
+        image = load_rgb(f.image_path, bg)
+        c, w = texture_map(avatar.sampler, avatar.triangles.cpu(), geo.posed.cpu(), cam, image, r)
         colours.append(c)
         weights.append(w)
+        person = load_mask(f.extra["mask_path"]) > 0.5 if "mask_path" in f.extra else None
+        if person is not None and person.shape == image.shape[:2]:
+            eye_row = float(project(cam, posed[eyes])[1].mean())
+            hair.append(hair_pixels(image, person, r.hit, eye_row))
+            head_pixels += int(r.hit[: max(int(eye_row), 0)].sum())
     raster.release()
-    return colours, weights
+    return NeutralViews(colours, weights, hair_colour(hair, head_pixels))
 
 
 def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frames: int = NEUTRAL_FRAMES
                     ) -> torch.Tensor:
     """(1,3,S,S) the colours of the split's `frames` least expressive frames, unprojected onto the chart and
-    averaged (the seed's view-averaged neutral texture; the back of the head none sees takes the crown's colour,
-    the rest of what none sees is filled from around: average_texture)."""
-    texture, _ = average_texture(*neutral_views(split, avatar, gl, frames),
-                                 heights=eye_heights(avatar.head_model, avatar.sampler))
+    averaged (the seed's view-averaged neutral texture; the back of the head none sees takes the hair's colour,
+    or the crown's, the rest of what none sees is filled from around: average_texture)."""
+    views = neutral_views(split, avatar, gl, frames)
+    texture, _ = average_texture(views.colours, views.weights, heights=eye_heights(avatar.head_model, avatar.sampler),
+                                 hair=views.hair)
     return texture_tensor(texture)[None]
 
 

@@ -198,6 +198,40 @@ def test_an_avatar_trains_on_the_tracked_video(d3_dataset, gl, tmp_path):
     assert json.loads((tmp_path / "eval2" / "metrics.json").read_text())["codes_by_time"] is False
 
 
+def test_the_hair_colour_is_read_beyond_the_head_mesh(d3_dataset, gl):
+    """A real person (d3, tracked with ICT's head): the colour the prior's neutral texture gives the unseen back of
+    the head is read from her pixels beyond the head mesh above the eyes (maps.hair_colour), and agrees within 0.08
+    with an independent reading, the median of her outline's top tenth (her hair's crown, eroded 3 px off the
+    room), and at most half as near her skin (the mesh's pixels about the eyes; measured: 0.155 from it)."""
+    from scipy import ndimage
+
+    from models.avatars.prior.maps import eye_vertices
+    from models.avatars.registry import SHIPPED_PRIOR, load_prior
+    from models.capture.frames import load_mask, load_rgb
+    from models.training.prior import neutral_views
+    from render.camera import project
+
+    split = load_split(d3_dataset, "train")
+    prior = load_prior(SHIPPED_PRIOR, split.head_model)[0]
+    hair = neutral_views(split, prior, gl).hair
+    assert hair is not None
+    tops, skins, r = [], [], Rasterizer(gl)
+    for f in split.frames[:8]:
+        image, person = load_rgb(f.image_path), load_mask(f.extra["mask_path"]) > 0.5
+        rows = np.nonzero(person.any(1))[0]
+        top = ndimage.binary_erosion(person, iterations=3)
+        top[rows.min() + (rows.max() - rows.min()) // 10:] = False
+        tops.append(image[top])
+        posed = prior.geometry(f.controls).posed.cpu().numpy()
+        cam = frame_camera(split, f)
+        eye_row = int(project(cam, posed[eye_vertices(prior.head_model)])[1].mean())
+        skins.append(image[eye_row - 2:eye_row + 3][r.coverage(posed, prior.head_model.triangles, cam).hit[
+            eye_row - 2:eye_row + 3]])
+    r.release()
+    crown, skin = np.median(np.concatenate(tops), 0), np.median(np.concatenate(skins), 0)
+    assert np.linalg.norm(hair - crown) < min(0.08, 0.5 * np.linalg.norm(hair - skin)), (hair, crown, skin)
+
+
 def test_on_a_tracked_video_all_and_none_train_the_same_primitives(d3_dataset, gl, tmp_path):
     """A tracked video records no key light, so `all` has nothing to read that `none` does not: the same steps train
     the same weights bit for bit (their 30-minute results differ only by the steps each run made and where the

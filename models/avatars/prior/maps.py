@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 import torch.nn.functional as F
+from scipy import ndimage
 
 from models.avatars.primitives.chart import GAZE_JOINTS, ChartSampler, carried_by, texel_points
 from models.head.model import HeadModel
@@ -63,16 +64,65 @@ NAPE_BELOW_EYES_M = 0.06
 (the nape, the back of the neck) they are filled from around, hair and neck alike."""
 
 
-def eye_heights(model: HeadModel, sampler: ChartSampler) -> np.ndarray:
-    """(S,S) each texel's height above the eyes on the template, metres (the eyes: the mean of the vertices the eye
-    joints carry; a head model without them has its eyes 0.35 of its half-height above its middle, where ICT's
-    and the built-in head's lie); nan off the head."""
+HAIR_EDGE_PX = 2
+"""hair_pixels keeps this many pixels off the person's outline (the room blends in there) and off the head mesh's."""
+
+HAIR_MIN_SHARE = 0.02
+"""A capture's hair colour is read from the pixels beyond the mesh (hair_colour) where they are at least this share
+of the mesh's own pixels above the eyes; fewer (a bald or close-cropped head the mesh fits) leave it to the crown."""
+
+
+def eye_level(model: HeadModel) -> float:
+    """The eyes' height on the template (y, metres): the mean of the vertices the eye joints carry; a head model
+    without them has its eyes 0.35 of its half-height above its middle, where ICT's and the built-in head's lie."""
     verts = np.asarray(model.template, np.float64)
     carried = carried_by(model, GAZE_JOINTS)
     low, high = verts[:, 1].min(), verts[:, 1].max()
-    eyes = verts[carried, 1].mean() if carried.any() else 0.5 * (low + high) + 0.35 * 0.5 * (high - low)
+    return float(verts[carried, 1].mean() if carried.any() else 0.5 * (low + high) + 0.35 * 0.5 * (high - low))
+
+
+def eye_vertices(model: HeadModel) -> np.ndarray:
+    """(V,) the template's vertices within a centimetre of the eyes' height (eye_level): where they are posed in a
+    frame, their mean image row is the eyes' row."""
+    return np.abs(np.asarray(model.template, np.float64)[:, 1] - eye_level(model)) < 0.01
+
+
+def hair_pixels(image: np.ndarray, person: np.ndarray, head: np.ndarray, eye_row: float,
+                edge_px: int = HAIR_EDGE_PX) -> np.ndarray:
+    """(N,3) a frame's colours (image (H,W,3)) of the person (mask (H,W) bool) beyond the head mesh's pixels (head
+    (H,W) bool: its raster's coverage) and above the eyes' row: what the person has on the head beyond the skull
+    (the hair; a hat; the skin of a bald head the mesh is smaller than), edge_px off both outlines.
+
+    A person on rows 1-9 and columns 1-10 (columns 2-9 once eroded), the head on rows 6-9 and columns 4-7 (grown
+    by a pixel: row 5 columns 4-7, rows 6-10 columns 3-8), the eyes' row 8 (pixel rows 0-7 above it), each pixel's
+    red its row: rows 2-4 whole (8 each), row 5 but the grown head's top (4), rows 6 and 7 beside it (2 each).
+
+    >>> person = np.zeros((12, 12), bool); person[1:10, 1:11] = True
+    >>> head = np.zeros((12, 12), bool); head[6:10, 4:8] = True
+    >>> image = np.zeros((12, 12, 3)); image[..., 0] = np.arange(12)[:, None]
+    >>> np.unique(hair_pixels(image, person, head, eye_row=8.0, edge_px=1)[:, 0], return_counts=True)[1].tolist()
+    [8, 8, 8, 4, 2, 2]
+    """
+    inner = ndimage.binary_erosion(person, iterations=edge_px) if edge_px else person
+    beyond = ~ndimage.binary_dilation(head, iterations=edge_px) if edge_px else ~head
+    above = np.arange(image.shape[0])[:, None] + 0.5 < eye_row
+    return np.asarray(image)[inner & beyond & above]
+
+
+def hair_colour(pixels: list[np.ndarray], head_pixels: int) -> np.ndarray | None:
+    """(3,) the median colour of frames' hair_pixels ((N,3) each), or None where they are fewer than HAIR_MIN_SHARE
+    of head_pixels (the mesh's pixels above the eyes in the same frames)."""
+    found = np.concatenate(pixels) if pixels else np.zeros((0, 3))
+    if len(found) == 0 or len(found) < HAIR_MIN_SHARE * head_pixels:
+        return None
+    return np.median(found, axis=0)
+
+
+def eye_heights(model: HeadModel, sampler: ChartSampler) -> np.ndarray:
+    """(S,S) each texel's height above the eyes (eye_level) on the template, metres; nan off the head."""
+    verts = np.asarray(model.template, np.float64)
     tri = np.asarray(model.triangles)[np.maximum(sampler.triangles, 0)]
-    y = (verts[tri, 1] * sampler.bary).sum(1) - eyes
+    y = (verts[tri, 1] * sampler.bary).sum(1) - eye_level(model)
     S = sampler.size
     return np.where(sampler.valid, y, np.nan).reshape(S, S)
 
@@ -100,15 +150,18 @@ def weighted_mean(colours: list[np.ndarray], weights: list[np.ndarray]) -> tuple
 
 
 def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: np.ndarray | None = None,
-                    heights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    heights: np.ndarray | None = None, hair: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """The weighted mean of frames' unprojected colours (S,S,3) and where any frame saw the texel (S,S) bool;
     texels none saw take `fill` where given, else are filled from the seen ones around them (render/fill.py's
     push-pull: a video that saw the front gives the back of the head the colours at the edge of what it saw, where
     the seed's mean of every seen texel gave it the face's skin); grey where none was seen. heights (S,S), each
     texel's height above the eyes (eye_heights): the unseen back of the head, down to NAPE_BELOW_EYES_M below the
-    eyes, takes the colour seen on the crown (the weighted median of the texels CROWN_ABOVE_EYES_M above them),
-    before the fill: the edge of a frontal video's view is the ears and cheeks as much as the hair, and from them
-    the back came out skin-coloured under dark hair."""
+    eyes, takes the hair's colour (3,) where given (hair_colour: what the frames show beyond the skull), else the
+    colour seen on the crown (the weighted median of the texels CROWN_ABOVE_EYES_M above them), before the fill:
+    the edge of a frontal video's view is the ears and cheeks as much as the hair, and from them the back came out
+    skin-coloured under dark hair; and the crown's texels see the forehead where the hair starts high (two women
+    with their hair drawn back: the backs of their heads came out skin-coloured)."""
     mean, total = weighted_mean(colours, weights)
     seen = total > 1e-6
     if fill is not None:
@@ -116,8 +169,9 @@ def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: 
     if not seen.any():
         return np.full_like(mean, 0.5, dtype=np.float32), seen
     known = seen
-    hair = None if heights is None else crown_colour(mean, total, heights)
-    if hair is not None:
+    if hair is None and heights is not None:
+        hair = crown_colour(mean, total, heights)
+    if hair is not None and heights is not None:
         back = ~seen & (np.nan_to_num(heights, nan=-1.0) > -NAPE_BELOW_EYES_M)
         mean = np.where(back[..., None], hair, mean)
         known = seen | back

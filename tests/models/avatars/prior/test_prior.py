@@ -14,7 +14,15 @@ import torch
 
 from models.avatars.primitives.chart import GEOMETRY_SCALE_M, chart_sampler, eye_cells, geometry_map, texel_points
 from models.avatars.prior.avatar import PriorAvatar, PriorConfig
-from models.avatars.prior.maps import CROWN_ABOVE_EYES_M, NAPE_BELOW_EYES_M, average_texture, eye_heights, texture_map
+from models.avatars.prior.maps import (
+    CROWN_ABOVE_EYES_M,
+    HAIR_MIN_SHARE,
+    NAPE_BELOW_EYES_M,
+    average_texture,
+    eye_heights,
+    hair_colour,
+    texture_map,
+)
 from models.avatars.rendering import render_image
 from models.capture.synthetic import SynthConfig, synthesize
 from models.head.controls import Controls
@@ -504,6 +512,20 @@ def test_the_unseen_back_of_the_head_takes_the_crowns_colour_hand_worked():
     np.testing.assert_array_equal(hair[seen], colour[seen].astype(np.float32))
     nape = ~seen & ~back
     assert np.all((hair[nape] > 0.1) & (hair[nape] < 0.8))  # between the hair above and the neck beside
+    # the hair's colour read beyond the mesh (hair_colour), where the frames show it, before the crown's texels
+    given, _ = average_texture([colour], [weight], heights=heights, hair=np.array([0.3, 0.2, 0.1]))
+    np.testing.assert_allclose(given[back], np.broadcast_to([0.3, 0.2, 0.1], (36, 3)), atol=1e-6)
+    np.testing.assert_array_equal(given[seen], colour[seen].astype(np.float32))
+
+
+def test_the_hair_colour_is_the_median_beyond_the_mesh_where_there_is_enough_of_it():
+    """hair_colour: the per-channel median of the frames' pixels beyond the mesh, hand-worked; None where they are
+    fewer than HAIR_MIN_SHARE of the mesh's pixels above the eyes (a head the mesh fits)."""
+    a = np.array([[0.1, 0.2, 0.3], [0.5, 0.5, 0.5]])
+    b = np.array([[0.2, 0.1, 0.0]])
+    np.testing.assert_allclose(hair_colour([a, b], head_pixels=100), [0.2, 0.2, 0.3])
+    assert hair_colour([a, b], head_pixels=int(3 / HAIR_MIN_SHARE) + 1) is None
+    assert hair_colour([], head_pixels=0) is None
 
 
 def test_eye_heights_are_the_templates_heights_above_its_eyes():
