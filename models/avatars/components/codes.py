@@ -112,7 +112,8 @@ class CodeKeys(Kept):
     def __init__(self, num_expression: int):
         super().__init__()
         self.num_expression = num_expression
-        self._forecast: tuple[float | None] | None = None  # (time scale,) while `forecasting`
+        self._forecasting = False  # within `forecasting`, keyed by time at _forecast_scale (None: by controls)
+        self._forecast_scale: float | None = None
 
     def note(self, controls: list[Controls], times: list[float | None] | None = None,
              device: torch.device | str = "cpu") -> None:
@@ -145,30 +146,34 @@ class CodeKeys(Kept):
             return None
         query = torch.as_tensor(control_key(controls, self.num_expression), device=self.keys.device) / self.scale
         keys = self.keys
-        if self._forecast is not None:
-            scale = self._forecast[0]
+        if self._forecasting:
+            scale = self._forecast_scale
         else:
             scale = float(self.time_scale) if self.time_scale is not None else None
         if time_s is not None and self.times is not None and scale is not None:
             keys = torch.cat([keys, (self.times / scale)[:, None]], 1)
             query = torch.cat([query, query.new_tensor([time_s / scale])])
-        if self._forecast is None or time_s is None or self.times is None:
+        if not self._forecasting or time_s is None or self.times is None:
             return nearest_code_weights(keys, query)
-        earlier = self.times < time_s - FORECAST_GAP_S
+        earlier = self._filmed_before(time_s)
         w = torch.zeros(len(keys), dtype=keys.dtype, device=keys.device)
         w[earlier] = nearest_code_weights(keys[earlier], query)
         return w
 
     def forecastable(self, time_s: float) -> bool:
         """Whether enough training frames were filmed FORECAST_GAP_S before this time for `forecasting` to blend."""
-        return self.times is not None and int((self.times < time_s - FORECAST_GAP_S).sum()) > NEAREST_FRAMES
+        return self.times is not None and int(self._filmed_before(time_s).sum()) > NEAREST_FRAMES
+
+    def _filmed_before(self, time_s: float) -> torch.Tensor:
+        """(N,) bool: the training frames filmed FORECAST_GAP_S or more before this time."""
+        return self.times < time_s - FORECAST_GAP_S
 
     @contextlib.contextmanager
     def forecasting(self, scale: float | None) -> Iterator[None]:
         """Within: frames with a time blend only the codes of training frames filmed FORECAST_GAP_S or more
         before them (as a held-out frame after them would), keyed by time at `scale` (None: by controls alone)."""
-        self._forecast = (scale,)
+        self._forecasting, self._forecast_scale = True, scale
         try:
             yield
         finally:
-            self._forecast = None
+            self._forecasting, self._forecast_scale = False, None
