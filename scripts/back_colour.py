@@ -3,7 +3,8 @@ behind (yaw 180, 5 degrees up, 256 px), the mean colour of the upper half of its
 the shoulders), against the hair's colour in the capture's least expressive frames (the median of the person's
 pixels beyond the head mesh above the eyes: models/avatars/prior/maps.py hair_colour) and the crown's (the weighted
 median of the chart's texels 8.5 cm and more above the eyes that those frames saw: crown_colour, in the chart of the
-shipped prior placed on the capture's head model); the distance is to the first where the frames show it.
+shipped prior placed on the capture's head model); the distance is to the first where the frames show it. The same
+for the nape: the silhouette's third quarter from the top, where long hair hangs down the back.
 
     .venv/bin/python scripts/back_colour.py AVATAR CAPTURE [AVATAR CAPTURE ...]"""
 
@@ -26,15 +27,18 @@ from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
 
-def back_colour(avatar, raster: Rasterizer, size: int = 256) -> np.ndarray:
-    """(3,) the mean colour of the upper half of the avatar's opaque silhouette (opacity > 0.9) seen from behind."""
+def back_colour(avatar, raster: Rasterizer, size: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """(3,) each: the mean colour of the upper half of the avatar's opaque silhouette (opacity > 0.9) seen from
+    behind (the back of the head), and of its third quarter from the top (the nape, where long hair hangs)."""
     cam = turntable_camera(avatar.card.rest_vertices(), 180.0, 5.0, fov_y_deg=18.0, width_px=size, height_px=size)
     with torch.inference_mode():
         out = render_image(avatar, cam, avatar.card.at_rest(Controls()), RenderOptions(buffers=()), raster)
     solid = np.asarray(out["opacity"]) > 0.9
     rows = np.nonzero(solid.any(1))[0]
-    solid[rows.min() + (rows.max() - rows.min()) // 2:] = False
-    return np.asarray(out["rgb"])[solid].mean(0)
+    top, height = rows.min(), rows.max() - rows.min()
+    band = lambda a, b: solid & ((np.arange(size) >= top + a * height) & (np.arange(size) < top + b * height))[:, None]
+    rgb = np.asarray(out["rgb"])
+    return rgb[band(0.0, 0.5)].mean(0), rgb[band(0.5, 0.75)].mean(0)
 
 
 def main() -> None:
@@ -53,10 +57,11 @@ def main() -> None:
         mean, total = weighted_mean(views.colours, views.weights)
         crown = crown_colour(mean, total, eye_heights(prior.head_model, prior.sampler))
         head = views.hair if views.hair is not None else crown
-        back = back_colour(avatar, raster)
+        back, nape = back_colour(avatar, raster)
         rgb = lambda c: "-" if c is None else "(" + ", ".join(f"{float(x):.3f}" for x in c) + ")"
-        gap = "-" if head is None else f"{np.linalg.norm(back - head):.3f}"
-        print(f"{folder}: back of the head {rgb(back)}, hair {rgb(views.hair)}, crown {rgb(crown)}, distance {gap}")
+        gap = lambda c, head=head: "-" if head is None else f"{np.linalg.norm(c - head):.3f}"
+        print(f"{folder}: back of the head {rgb(back)}, hair {rgb(views.hair)} (hanging {views.hair_reach_m:.3f} m "
+              f"below the eyes), crown {rgb(crown)}, distance {gap(back)}; nape {rgb(nape)}, distance {gap(nape)}")
 
 
 if __name__ == "__main__":

@@ -31,10 +31,12 @@ from models.avatars.effects import parse_effects
 from models.avatars.prior.avatar import PriorAvatar, PriorConfig
 from models.avatars.prior.maps import (
     average_texture,
+    beyond_head,
     eye_heights,
     eye_vertices,
     hair_colour,
     hair_pixels,
+    hair_reach_m,
     texture_map,
     texture_tensor,
 )
@@ -75,12 +77,14 @@ class Identity:
 @dataclass
 class NeutralViews:
     """What a capture's least expressive frames saw of the head: each frame's colours (S,S,3) and weights (S,S)
-    unprojected onto the chart (maps.texture_map), and the hair's colour (3,) from the person's pixels beyond the
-    mesh above the eyes (maps.hair_colour; None where the frames have no masks or show too little beyond it)."""
+    unprojected onto the chart (maps.texture_map); the hair's colour (3,) from the person's pixels beyond the mesh
+    above the eyes (maps.hair_colour; None where the frames have no masks or show too little beyond it), and how
+    far below the eyes the hair hangs (metres, the frames' median of maps.hair_reach_m; 0 without a colour)."""
 
     colours: list[np.ndarray]
     weights: list[np.ndarray]
     hair: np.ndarray | None
+    hair_reach_m: float = 0.0
 
 
 def neutral_views(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frames: int = NEUTRAL_FRAMES
@@ -89,7 +93,7 @@ def neutral_views(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frame
     amount = [float(np.abs(f.controls.expression).sum() + np.abs(f.controls.rotation("jaw")).sum())
               for f in split.frames]
     raster = Rasterizer(gl)
-    colours, weights, hair, head_pixels = [], [], [], 0
+    colours, weights, beside, head_pixels = [], [], [], 0
     bg = avatar.background.cpu().numpy()
     eyes = eye_vertices(avatar.head_model)
     for k in np.argsort(amount)[:frames]:
@@ -104,21 +108,26 @@ def neutral_views(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frame
         weights.append(w)
         person = load_mask(f.extra["mask_path"]) > 0.5 if "mask_path" in f.extra else None
         if person is not None and person.shape == image.shape[:2]:
-            eye_row = float(project(cam, posed[eyes])[1].mean())
-            hair.append(hair_pixels(image, person, r.hit, eye_row))
+            _, y, depth = project(cam, posed[eyes])
+            eye_row, px_per_m = float(y.mean()), cam.intrinsics[1] / float(depth.mean())
+            beside.append((image, beyond_head(person, r.hit), eye_row, px_per_m))
             head_pixels += int(r.hit[: max(int(eye_row), 0)].sum())
     raster.release()
-    return NeutralViews(colours, weights, hair_colour(hair, head_pixels))
+    hair = hair_colour([hair_pixels(image, beyond, row) for image, beyond, row, _ in beside], head_pixels)
+    reach = 0.0 if hair is None else float(np.median([hair_reach_m(image, beyond, hair, row, px_per_m)
+                                                      for image, beyond, row, px_per_m in beside]))
+    return NeutralViews(colours, weights, hair, reach)
 
 
 def neutral_texture(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frames: int = NEUTRAL_FRAMES
                     ) -> torch.Tensor:
     """(1,3,S,S) the colours of the split's `frames` least expressive frames, unprojected onto the chart and
     averaged (the seed's view-averaged neutral texture; the back of the head none sees takes the hair's colour,
-    or the crown's, the rest of what none sees is filled from around: average_texture)."""
+    or the crown's, down to where long hair hangs; the rest of what none sees is filled from around:
+    average_texture)."""
     views = neutral_views(split, avatar, gl, frames)
     texture, _ = average_texture(views.colours, views.weights, heights=eye_heights(avatar.head_model, avatar.sampler),
-                                 hair=views.hair)
+                                 hair=views.hair, hair_reach_m=views.hair_reach_m)
     return texture_tensor(texture)[None]
 
 

@@ -87,11 +87,17 @@ def eye_vertices(model: HeadModel) -> np.ndarray:
     return np.abs(np.asarray(model.template, np.float64)[:, 1] - eye_level(model)) < 0.01
 
 
-def hair_pixels(image: np.ndarray, person: np.ndarray, head: np.ndarray, eye_row: float,
-                edge_px: int = HAIR_EDGE_PX) -> np.ndarray:
-    """(N,3) a frame's colours (image (H,W,3)) of the person (mask (H,W) bool) beyond the head mesh's pixels (head
-    (H,W) bool: its raster's coverage) and above the eyes' row: what the person has on the head beyond the skull
-    (the hair; a hat; the skin of a bald head the mesh is smaller than), edge_px off both outlines.
+def beyond_head(person: np.ndarray, head: np.ndarray, edge_px: int = HAIR_EDGE_PX) -> np.ndarray:
+    """(H,W) bool: the person's pixels (mask (H,W) bool) beyond the head mesh's (head (H,W) bool: its raster's
+    coverage), edge_px off both outlines (the room blends in at the one, the mesh's edge wavers at the other)."""
+    inner = ndimage.binary_erosion(person, iterations=edge_px) if edge_px else person
+    return inner & ~(ndimage.binary_dilation(head, iterations=edge_px) if edge_px else head)
+
+
+def hair_pixels(image: np.ndarray, beyond: np.ndarray, eye_row: float) -> np.ndarray:
+    """(N,3) a frame's colours (image (H,W,3)) of the person beyond the head mesh (beyond_head) above the eyes'
+    row: what the person has on the head beyond the skull (the hair; a hat; the skin of a bald head the mesh is
+    smaller than).
 
     A person on rows 1-9 and columns 1-10 (columns 2-9 once eroded), the head on rows 6-9 and columns 4-7 (grown
     by a pixel: row 5 columns 4-7, rows 6-10 columns 3-8), the eyes' row 8 (pixel rows 0-7 above it), each pixel's
@@ -100,13 +106,49 @@ def hair_pixels(image: np.ndarray, person: np.ndarray, head: np.ndarray, eye_row
     >>> person = np.zeros((12, 12), bool); person[1:10, 1:11] = True
     >>> head = np.zeros((12, 12), bool); head[6:10, 4:8] = True
     >>> image = np.zeros((12, 12, 3)); image[..., 0] = np.arange(12)[:, None]
-    >>> np.unique(hair_pixels(image, person, head, eye_row=8.0, edge_px=1)[:, 0], return_counts=True)[1].tolist()
+    >>> found = hair_pixels(image, beyond_head(person, head, edge_px=1), eye_row=8.0)
+    >>> np.unique(found[:, 0], return_counts=True)[1].tolist()
     [8, 8, 8, 4, 2, 2]
     """
-    inner = ndimage.binary_erosion(person, iterations=edge_px) if edge_px else person
-    beyond = ~ndimage.binary_dilation(head, iterations=edge_px) if edge_px else ~head
     above = np.arange(image.shape[0])[:, None] + 0.5 < eye_row
-    return np.asarray(image)[inner & beyond & above]
+    return np.asarray(image)[beyond & above]
+
+
+HAIR_ROW_PIXELS = 3
+"""hair_reach_m counts an image row as hair where this many of its pixels beyond the mesh have the hair's colour."""
+
+HAIR_COLOUR_WITHIN = 0.1
+"""A pixel has the hair's colour within this (RGB distance, colours in [0,1])."""
+
+HAIR_GAP_M = 0.02
+"""hair_reach_m follows the hair down from the eyes across gaps of at most this (a parting, an earring)."""
+
+
+def hair_reach_m(image: np.ndarray, beyond: np.ndarray, hair: np.ndarray, eye_row: float, px_per_m: float
+                 ) -> float:
+    """How far below the eyes (metres, at the head's depth: px_per_m image pixels a metre) a frame shows the hair
+    hanging beside the head: the lowest image row, followed down from the eyes' row across gaps of at most
+    HAIR_GAP_M, with HAIR_ROW_PIXELS pixels of the person beyond the mesh (beyond, beyond_head) within
+    HAIR_COLOUR_WITHIN of the hair's colour; 0 where none is below the eyes (short hair).
+
+    Hair on rows 2-8 and 10 beside a head, a strand on row 14, the eyes on row 3, 100 px a metre (a pixel a
+    centimetre: the gap allowed, 2 cm, is 2 rows): row 9's gap is crossed, rows 11-13 are too many, so the hair
+    reaches row 10, 7 cm below the eyes.
+
+    >>> beyond = np.zeros((16, 8), bool); beyond[:, :4] = True
+    >>> image = np.ones((16, 8, 3)); image[2:9, :4] = 0.2; image[10, :4] = 0.2; image[14, :4] = 0.2
+    >>> round(hair_reach_m(image, beyond, np.array([0.2, 0.2, 0.2]), eye_row=3.0, px_per_m=100.0), 6)
+    0.07
+    """
+    near = beyond & (np.linalg.norm(np.asarray(image) - hair, axis=-1) < HAIR_COLOUR_WITHIN)
+    rows = near.sum(1) >= HAIR_ROW_PIXELS
+    gap, low = HAIR_GAP_M * px_per_m, eye_row
+    for y in range(max(int(np.ceil(eye_row)), 0), len(rows)):
+        if rows[y]:
+            low = float(y)
+        elif y - low > gap:
+            break
+    return (low - eye_row) / px_per_m
 
 
 def hair_colour(pixels: list[np.ndarray], head_pixels: int) -> np.ndarray | None:
@@ -150,7 +192,7 @@ def weighted_mean(colours: list[np.ndarray], weights: list[np.ndarray]) -> tuple
 
 
 def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: np.ndarray | None = None,
-                    heights: np.ndarray | None = None, hair: np.ndarray | None = None
+                    heights: np.ndarray | None = None, hair: np.ndarray | None = None, hair_reach_m: float = 0.0
                     ) -> tuple[np.ndarray, np.ndarray]:
     """The weighted mean of frames' unprojected colours (S,S,3) and where any frame saw the texel (S,S) bool;
     texels none saw take `fill` where given, else are filled from the seen ones around them (render/fill.py's
@@ -161,7 +203,9 @@ def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: 
     colour seen on the crown (the weighted median of the texels CROWN_ABOVE_EYES_M above them), before the fill:
     the edge of a frontal video's view is the ears and cheeks as much as the hair, and from them the back came out
     skin-coloured under dark hair; and the crown's texels see the forehead where the hair starts high (two women
-    with their hair drawn back: the backs of their heads came out skin-coloured)."""
+    with their hair drawn back: the backs of their heads came out skin-coloured). hair_reach_m: how far below the
+    eyes the frames show the hair hanging (hair_reach_m): long hair takes the back down to there, over the nape
+    that the fill gave the neck's skin."""
     mean, total = weighted_mean(colours, weights)
     seen = total > 1e-6
     if fill is not None:
@@ -172,7 +216,7 @@ def average_texture(colours: list[np.ndarray], weights: list[np.ndarray], fill: 
     if hair is None and heights is not None:
         hair = crown_colour(mean, total, heights)
     if hair is not None and heights is not None:
-        back = ~seen & (np.nan_to_num(heights, nan=-1.0) > -NAPE_BELOW_EYES_M)
+        back = ~seen & (np.nan_to_num(heights, nan=-1.0) > -max(NAPE_BELOW_EYES_M, hair_reach_m))
         mean = np.where(back[..., None], hair, mean)
         known = seen | back
     return push_pull(mean.astype(np.float64), known).astype(np.float32), seen

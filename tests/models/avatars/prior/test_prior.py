@@ -516,6 +516,13 @@ def test_the_unseen_back_of_the_head_takes_the_crowns_colour_hand_worked():
     given, _ = average_texture([colour], [weight], heights=heights, hair=np.array([0.3, 0.2, 0.1]))
     np.testing.assert_allclose(given[back], np.broadcast_to([0.3, 0.2, 0.1], (36, 3)), atol=1e-6)
     np.testing.assert_array_equal(given[seen], colour[seen].astype(np.float32))
+    # long hair, seen hanging 10 cm below the eyes: the seventh row (8.6 cm below them) takes it too, the last
+    # (12 cm) is filled from around, between the hair above and the neck beside
+    long, _ = average_texture([colour], [weight], heights=heights, hair=np.array([0.3, 0.2, 0.1]), hair_reach_m=0.1)
+    hangs = ~seen & (heights > -0.1)
+    assert hangs.sum() == 7 * 6 and np.allclose(long[hangs], [0.3, 0.2, 0.1])
+    below = long[~seen & ~hangs]
+    assert np.all((below > np.array([0.3, 0.2, 0.1])) & (below < 0.8))
 
 
 def test_the_hair_colour_is_the_median_beyond_the_mesh_where_there_is_enough_of_it():
