@@ -65,7 +65,7 @@ NAPE_BELOW_EYES_M = 0.06
 
 
 HAIR_EDGE_PX = 2
-"""hair_pixels keeps this many pixels off the person's outline (the room blends in there) and off the head mesh's."""
+"""beyond_head keeps this many pixels off the person's outline (the room blends in there) and off the head mesh's."""
 
 HAIR_MIN_SHARE = 0.02
 """A capture's hair colour is read from the pixels beyond the mesh (hair_colour) where they are at least this share

@@ -37,8 +37,8 @@ def saved_and_reloaded(trainer):
 
 
 def with_frame_times(capture: Path, out: Path) -> Path:
-    """A copy of a capture made to read as a tracked video's (a `source` video; what a tracked video's training
-    does: pose corrections, per-frame codes keyed by controls and time) whose frames have times in the video
+    """A copy of a capture made to read as a tracked video's (a `source` video: a video's model settings, per-frame
+    codes keyed by controls and time, the codes' choice after training) whose frames have times in the video
     (`time_s`, as `track` writes): the training frames 0.1 s apart from 0, the validation and test frames 0.1 s
     apart from 0.35 s after the last, so that every training frame was filmed long enough before them for the
     codes' choice (FORECAST_GAP_S)."""
