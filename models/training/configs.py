@@ -53,7 +53,8 @@ class TrainConfig:
     correction) with the avatar; default: the model's (codynerf on, primitives off: README, Real people)."""
     lr: Annotated[float, Range(0, 1, above=True)] = 5e-3
     """Adam learning rate at the start; it decays tenfold over the run (personalising the prior, left at the
-    default: the phone-scan paper's 1e-3, PERSONALIZE_LR)."""
+    default: the phone-scan paper's 1e-3, PERSONALIZE_LR; a whole head's is its inside's, its outside always
+    personalises at PERSONALIZE_LR)."""
     checkpoint_seconds: Annotated[float, Range(0, above=True)] = 60.0
     """How often to checkpoint."""
     grad_clip: Annotated[float, Range(0, above=True)] = 1.0

@@ -157,13 +157,15 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, one_second_sca
     from models.avatars.registry import load_avatar
     from models.capture.dataset import load_split
     from models.capture.frames import frame_camera
+    from models.training.configs import PERSONALIZE_LR
     scan, prior, out = one_second_scan, tmp_path / "prior", tmp_path / "whole"
     torch.manual_seed(0)
     small = PriorAvatar.for_capture(load_builtin(), 1, np.full(3, 0.5, np.float32), (), None, SMALL)
     save_checkpoint(prior, {**small.meta(), "head_model": "builtin", "frames": 1, "background": [0.5] * 3},
                     small.state_dict(), 1)
     capsys.readouterr()
-    assert main(["train", str(scan), "--model", "whole", "--prior", str(prior), "--out", str(out), "--steps", "4"]) == 0
+    assert main(["train", str(scan), "--model", "whole", "--prior", str(prior), "--out", str(out), "--steps", "4",
+                 "--lr", "0.01"]) == 0
     said = capsys.readouterr().out
     assert "as a whole head" in said and "a whole head, 4 steps from scratch and 1 personalising" in said
     assert said.count("frames of the video no one trained on take the codes") == 1  # the inside's: the whole's codes
@@ -174,6 +176,9 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, one_second_sca
     assert meta["view_range"]["yaw_deg"] == [-180.0, 180.0] and avatar.card.turntable_sweep_deg() == 0.0  # round
     assert meta["captured_view_range"] == json.loads((out / "parts" / "inside" / "avatar.json").read_text())[
         "view_range"]
+    lrs = [json.loads((out / "parts" / p / "avatar.json").read_text())["provenance"]["config"]["lr"]
+           for p in ("inside", "outside")]
+    assert lrs == ["0.01", str(PERSONALIZE_LR)]  # --lr is the inside's; the outside personalises at the prior's
     records = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
     assert records[0]["stage"] == "inside" and records[-1]["stage"] == "outside" and records[-1]["step"] == 5
     assert all(b["elapsed_s"] >= a["elapsed_s"] for a, b in itertools.pairwise(records))
