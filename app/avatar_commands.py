@@ -306,7 +306,7 @@ def shadow_metrics(avatar, frame, split, raster, truth: np.ndarray, on: np.ndarr
     if on.any():
         row["shadow_corr"] = pearson(taken, gt, on)
     if "unshadowed_path" in frame.extra and on.any():
-        lit = load_rgb(frame.extra["unshadowed_path"], avatar.background.cpu().numpy())
+        lit = load_rgb(frame.extra["unshadowed_path"], avatar.background_colour())
         row["unshadowed_psnr"] = psnr(out["rgb_no_shadows"], lit, on)
         row["unshadowed_psnr_render"] = psnr(out["rgb"], lit, on)
     return [out["rgb_no_shadows"], np.repeat(np.clip(taken * 4, 0, 1)[..., None], 3, -1)]
@@ -331,9 +331,9 @@ def run_eval(cfg: EvalConfig) -> int:
     shadow_views = avatar.inspection_buffers()
     frames = split.frames[:: max(cfg.every, 1)]
     frames = frames[: cfg.max_frames] if cfg.max_frames else frames
-    bar = Progress(f"rendering the {cfg.split} frames", len(frames))
+    bar, background = Progress(f"rendering the {cfg.split} frames", len(frames)), avatar.background_colour()
     for k, f in enumerate(frames):
-        truth = load_rgb(f.image_path, avatar.background.cpu().numpy())
+        truth = load_rgb(f.image_path, background)
         t0 = time.perf_counter()
         out = render_image(avatar, frame_camera(split, f), f.controls,
                            RenderOptions(room=frame_room(f), time_s=f.time_s if own else None), rasterizer=raster)
@@ -533,7 +533,7 @@ def personalizing_trainer(tcfg: TrainConfig, prior: Path, gl: GLContext, tune: s
     avatar.train()
     frames = capture_frames(avatar, split, gl, on_frame=on_frame)
     val = load_split(tcfg.dataset, "val")
-    validation = validation_frame(val, avatar.background.cpu().numpy()) if val.frames else None
+    validation = validation_frame(val, avatar.background_colour()) if val.frames else None
     trainer = Trainer(tcfg, avatar, frames, validation, val_split=val)
     return trainer, maps_s
 

@@ -52,7 +52,7 @@ def score(avatar, round_split, raster) -> dict:
     """PSNR of every test frame of the round capture, and their means by the nearest of ANGLES_DEG."""
     rows = []
     for f in round_split.frames:
-        truth = load_rgb(f.image_path, avatar.background.numpy())
+        truth = load_rgb(f.image_path, avatar.background_colour())
         with torch.inference_mode():
             out = render_image(avatar, frame_camera(round_split, f), f.controls, RenderOptions(buffers=()), raster)
         angle = angle_from_face_deg(f)

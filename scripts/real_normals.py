@@ -70,7 +70,7 @@ def main() -> None:
         if skin.any():
             angles.append(normal_angles_deg(out["normals"], truth_n, skin))
         if f in shown:
-            rows.append(np.concatenate([load_rgb(f.image_path, avatar.background.numpy()), out["rgb"],
+            rows.append(np.concatenate([load_rgb(f.image_path, avatar.background_colour()), out["rgb"],
                                         out["normals"] * 0.5 + 0.5, truth_n * 0.5 + 0.5], 1))
     save_png(args.out / "normals.png", to_bytes(np.concatenate(rows, 0)))
     every = np.concatenate(angles)

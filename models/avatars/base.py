@@ -116,6 +116,11 @@ class Avatar(nn.Module, ABC):
         """What its folder says of it beside the weights (card.py: rest pose, views, presets; registry.load_avatar
         reads it)."""
 
+    def background_colour(self) -> np.ndarray:
+        """(3,) the background colour as an array, wherever the avatar's tensors are (a GPU's too: the frames it is
+        measured against are composited over it on the CPU)."""
+        return self.background.cpu().numpy()
+
     def ray_background(self, rays: Rays) -> torch.Tensor:
         """What each ray sees behind the avatar: the plate's pixel where the rays carry one, else the colour."""
         return self.background if rays.background is None else rays.background

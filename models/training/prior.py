@@ -94,7 +94,7 @@ def neutral_views(split: CaptureSplit, avatar: PriorAvatar, gl: GLContext, frame
               for f in split.frames]
     raster = Rasterizer(gl)
     colours, weights, beside, head_pixels = [], [], [], 0
-    bg = avatar.background.cpu().numpy()
+    bg = avatar.background_colour()
     eyes = eye_vertices(avatar.head_model)
     for k in np.argsort(amount)[:frames]:
         f = split.frames[int(k)]

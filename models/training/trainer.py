@@ -90,7 +90,7 @@ def prepare_training(cfg: TrainConfig, gl: GLContext, model_config: Any = None,
         if plate is not None:
             avatar.plate.note(*plate)
     frames = capture_frames(avatar, split, gl, cfg.corrections, on_frame)
-    validation = validation_frame(val_split, avatar.background.cpu().numpy()) if val_split.frames else None
+    validation = validation_frame(val_split, avatar.background_colour()) if val_split.frames else None
     return Trainer(cfg, avatar, frames, validation, resumed, val_split)
 
 
@@ -307,9 +307,9 @@ def choose_code_time(avatar: Avatar, val_split: CaptureSplit, gl: GLContext,
         return None
     frames = [i for i, f in enumerate(val_split.frames) if f.time_s is not None and keys.forecastable(f.time_s)]
     scores: dict[float | None, list[float]] = {None: [], TIME_SCALE_S: []}
-    r = Rasterizer(gl)
+    r, background = Rasterizer(gl), avatar.background_colour()
     for i in frames:
-        v = validation_frame(val_split, avatar.background.cpu().numpy(), i)
+        v = validation_frame(val_split, background, i)
         for scale, got in scores.items():
             with keys.forecasting(scale):
                 img = render_image(avatar, v.camera, v.controls, RenderOptions(room=v.room, time_s=v.time_s),
