@@ -117,9 +117,9 @@ class Avatar(nn.Module, ABC):
         reads it)."""
 
     def background_colour(self) -> np.ndarray:
-        """(3,) the background colour as an array, wherever the avatar's tensors are (a GPU's too: the frames it is
-        measured against are composited over it on the CPU)."""
-        return self.background.cpu().numpy()
+        """(3,) float32, a copy of the background colour, wherever the avatar's tensors are (a GPU's too: the frames it
+        is measured against are composited over it on the CPU)."""
+        return self.background.detach().cpu().numpy().astype(np.float32)
 
     def ray_background(self, rays: Rays) -> torch.Tensor:
         """What each ray sees behind the avatar: the plate's pixel where the rays carry one, else the colour."""

@@ -214,7 +214,7 @@ def bake_texture(avatar: Avatar, chart: Chart, size: int, render_px: int, n_yaws
     views = bake_views(avatar, n_yaws)
     options = RenderOptions(buffers=(), quality=avatar.card.presets[preset].quality)  # not its scale: render_px it is
     px = render_px
-    background = avatar.background.detach().cpu().numpy().astype(np.float32)
+    background = avatar.background_colour()
     blend = ViewBlend(len(points))
     for k, (yaw, pitch) in enumerate(views):
         camera = turntable_camera(avatar.card.rest_vertices(), yaw, pitch, width_px=px, height_px=px)

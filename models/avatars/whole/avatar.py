@@ -163,7 +163,7 @@ class WholeHeadAvatar(Avatar):
         if inside.head_model.name != outside.head_model.name:
             raise ValueError(f"the inside is of the {inside.head_model.name} head model, the outside of the "
                              f"{outside.head_model.name}")
-        super().__init__(inside.head_model, inside.n_frames, inside.background_colour().copy())
+        super().__init__(inside.head_model, inside.n_frames, inside.background_colour())
         self.inside = inside
         self.outside = outside
         # The outside's display stops sooner (training composites every candidate) and keeps its boxes within
