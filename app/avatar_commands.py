@@ -196,6 +196,13 @@ WHOLE_OUTSIDE_SHARE = 0.1
 (docs/results.md): 3 minutes keep the prior's whole head, 30 lose it."""
 
 
+WHOLE_OUTSIDE_TUNE = "texel"
+"""What personalising the prior fine-tunes for a whole head's outside: the decoder's per-texel bias maps alone, so
+that whatever no frame of the video saw (the sides and back) stays as the prior decodes it. Fine-tuning every weight
+made the sides of real heads a patchwork of boxes of hair and skin (docs/results.md "What personalising does beyond
+the views"); the inside shows what the video saw."""
+
+
 def budget_share(budget: float | int | None, share: float) -> float | int | None:
     """A share of a budget: minutes as they are, steps whole and at least one; None stays None.
 
@@ -262,7 +269,7 @@ def train_whole(cfg: TrainConfig, gl: GLContext, prior: Path | None) -> int:
             except (OSError, ValueError, KeyError, TypeError) as e:
                 raise UserInputError(f"{noted}: cannot read the prior the training began with ({e})") from None
         print(f"training the outside ({outside_cfg.out}: the universal prior {prior} personalised)", flush=True)
-        outside, _ = personalizing_trainer(outside_cfg, prior, gl, on_frame=reading)
+        outside, _ = personalizing_trainer(outside_cfg, prior, gl, WHOLE_OUTSIDE_TUNE, on_frame=reading)
     # (a whole head's codes are its inside's: WholeHeadAvatar.code_keys)
     if run_trainer(outside, gl, mirror("outside"), choose_codes=False) is None:
         return 0
@@ -526,9 +533,7 @@ def personalizing_trainer(tcfg: TrainConfig, prior: Path, gl: GLContext, tune: s
             avatar.plate.note(*plate, avatar.background.device)
         shape = split.frames[0].controls.shape
         avatar.personalize(neutral_texture(split, avatar, gl), avatar.neutral_geometry_of(shape))
-    if tune == "decoder":
-        for module in (avatar.identity_encoder, avatar.expression_encoder):
-            module.requires_grad_(False)
+    avatar.tune_only(tune)
     maps_s = time.perf_counter() - t0
     avatar.train()
     frames = capture_frames(avatar, split, gl, on_frame=on_frame)

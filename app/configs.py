@@ -191,8 +191,9 @@ class PersonalizeConfig:
     """A step budget instead of (or as well as) --minutes."""
     lr: Annotated[float, Range(0, 1, above=True)] = 1e-3
     """Adam's learning rate (the seed's Section 4.2.5: 1e-3), decaying tenfold."""
-    tune: Literal["all", "decoder"] = "all"
-    """What fine-tuning changes: every weight, or the decoder alone (the encoders kept as the prior has them)."""
+    tune: Literal["all", "decoder", "texel"] = "all"
+    """What fine-tuning changes: every weight, the decoder alone (the encoders kept as the prior has them), or the
+    decoder's per-texel bias maps alone (what no frame saw stays the prior's: a whole head's outside)."""
     device: Literal["cpu", "cuda"] = "cpu"
     """Where the networks run."""
     seed: int = 0

@@ -27,9 +27,9 @@ import torch
 from models.avatars.registry import load_avatar
 from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
-from models.capture.frames import frame_camera, load_rgb
+from models.capture.frames import frame_camera, load_mask, load_rgb
 from models.head.lbs import rotation_matrix_from_axis_angle
-from models.training.metrics import psnr
+from models.training.metrics import edge_density, psnr
 from models.training.whole import compose
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
@@ -49,18 +49,28 @@ def angle_from_face_deg(frame) -> float:
 
 
 def score(avatar, round_split, raster) -> dict:
-    """PSNR of every test frame of the round capture, and their means by the nearest of ANGLES_DEG."""
+    """PSNR of every test frame of the round capture, and their means by the nearest of ANGLES_DEG; and the edges
+    the render shows within its figure beside the truth's within its mask (`edge_density`: a patchwork of boxes
+    shows more edges than the person has)."""
     rows = []
     for f in round_split.frames:
         truth = load_rgb(f.image_path, avatar.background_colour())
         with torch.inference_mode():
             out = render_image(avatar, frame_camera(round_split, f), f.controls, RenderOptions(buffers=()), raster)
         angle = angle_from_face_deg(f)
-        rows.append({"angle_deg": round(angle, 1), "bucket": int(min(ANGLES_DEG, key=lambda a: abs(a - angle))),
-                     "psnr": psnr(out["rgb"], truth)})
-    by = {str(a): round(float(np.mean([r["psnr"] for r in rows if r["bucket"] == a])), 2)
-          for a in ANGLES_DEG if any(r["bucket"] == a for r in rows)}
-    return {"psnr_by_angle": by, "frames": rows}
+        rgb = np.asarray(out["rgb"])
+        row = {"angle_deg": round(angle, 1), "bucket": int(min(ANGLES_DEG, key=lambda a: abs(a - angle))),
+               "psnr": psnr(rgb, truth), "edges": edge_density(rgb, np.asarray(out["opacity"]).reshape(rgb.shape[:2]))}
+        if "mask_path" in f.extra:
+            row["truth_edges"] = edge_density(truth, load_mask(f.extra["mask_path"]))
+        rows.append(row)
+
+    def by_angle(key: str, digits: int) -> dict:
+        return {str(a): round(float(np.mean([r[key] for r in rows if r["bucket"] == a])), digits)
+                for a in ANGLES_DEG if any(r["bucket"] == a and key in r for r in rows)}
+
+    return {"psnr_by_angle": by_angle("psnr", 2), "edges_by_angle": by_angle("edges", 1),
+            "truth_edges_by_angle": by_angle("truth_edges", 1), "frames": rows}
 
 
 def main() -> None:
@@ -84,7 +94,8 @@ def main() -> None:
         name, folder = item.split("=", 1)
         avatar, meta = load_avatar(folder)
         results["avatars"][name] = {"folder": folder, "steps": meta.get("step"), **score(avatar, round_split, raster)}
-        print(name, results["avatars"][name]["psnr_by_angle"], flush=True)
+        print(name, results["avatars"][name]["psnr_by_angle"], "edges", results["avatars"][name]["edges_by_angle"],
+              "(the truth's", results["avatars"][name]["truth_edges_by_angle"], ")", flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1))
 

@@ -13,8 +13,8 @@ chart's eye cells (the seed's masked gaze)."""
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass
-from typing import Annotated, ClassVar
+from dataclasses import dataclass, replace
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 import torch
@@ -28,6 +28,8 @@ from models.avatars.prior.encoders import ExpressionEncoder, IdentityEncoder, kl
 from models.head.controls import Controls
 from models.head.model import HeadModel
 from models.ranges import Range
+
+PersonalTune = Literal["all", "decoder", "texel"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +48,9 @@ class PriorConfig(PrimitivesConfig):
     """Unused: the prior reads Delta G through its expression encoder (Eq. 1), not beside its condition."""
     gaze_at_eyes: bool = True
     """Gaze joins the decoder only over the chart's eye cells (the seed's masked gaze)."""
+    tune: PersonalTune = "all"
+    """Which weights train (PriorAvatar.tune_only): all (the prior's own training, and personalising a person's
+    avatar), decoder, or texel (the decoder's per-texel bias maps alone: a whole head's outside)."""
 
 
 @dataclass
@@ -84,6 +89,7 @@ class PriorAvatar(PrimitivesAvatar):
         self._step_biases: list[torch.Tensor] | None = None
         """Within a training step (`training_step`): this avatar's bias maps, made once for all the step's frames."""
         self._in_step = False
+        self.tune_only(cfg.tune)
 
     @classmethod
     def default_config(cls, tracked: bool) -> None:
@@ -112,6 +118,24 @@ class PriorAvatar(PrimitivesAvatar):
         self.neutral_texture.copy_(texture.reshape(self.neutral_texture.shape))
         self.neutral_geometry.copy_(geometry.reshape(self.neutral_geometry.shape))
         self._own_biases = None
+
+    def tune_only(self, which: PersonalTune) -> None:
+        """Which weights training changes from now on (the rest kept as they are; the choice is the config's, so a
+        resumed run keeps it): every one ("all"), the decoder's ("decoder": the identity and expression encoders
+        kept), or the decoder's per-texel bias maps alone ("texel": each upsampling's and the slab's; a texel no
+        frame of the video saw gets no gradient and stays the prior's, where fine-tuning the shared weights changes
+        what every texel decodes)."""
+        self.cfg = replace(self.cfg, tune=which)
+        self.requires_grad_(which == "all")
+        if which == "decoder":
+            self.decoder.requires_grad_(True)
+        elif which == "texel":
+            for bias in self.texel_parameters():
+                bias.requires_grad_(True)
+
+    def texel_parameters(self) -> list[torch.nn.Parameter]:
+        """The decoder's per-texel bias maps: its own (untied) bias of every upsampling level and of the slab."""
+        return [*self.decoder.biases, self.decoder.slab_bias]
 
     def neutral_geometry_of(self, shape: np.ndarray) -> torch.Tensor:
         """(1,3,S,S) the geometry map of the head model's neutral face with these identity coefficients."""

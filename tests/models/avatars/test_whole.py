@@ -179,6 +179,12 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, one_second_sca
     lrs = [json.loads((out / "parts" / p / "avatar.json").read_text())["provenance"]["config"]["lr"]
            for p in ("inside", "outside")]
     assert lrs == ["0.01", str(PERSONALIZE_LR)]  # --lr is the inside's; the outside personalises at the prior's
+    # the outside fine-tunes the prior's per-texel maps alone (WHOLE_OUTSIDE_TUNE): its shared weights are the prior's
+    assert json.loads((out / "parts" / "outside" / "avatar.json").read_text())["prior"]["tune"] == "texel"
+    texels = {n for n, _ in small.named_parameters() if n.startswith(("decoder.biases.", "decoder.slab_bias"))}
+    mine = dict(avatar.outside.named_parameters())
+    changed = {n for n, p in small.named_parameters() if not torch.equal(p.detach(), mine[n].detach())}
+    assert changed and changed <= texels, changed - texels
     records = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
     assert records[0]["stage"] == "inside" and records[-1]["stage"] == "outside" and records[-1]["step"] == 5
     assert all(b["elapsed_s"] >= a["elapsed_s"] for a, b in itertools.pairwise(records))

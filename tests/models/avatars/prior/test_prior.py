@@ -141,6 +141,37 @@ def test_a_steps_frames_share_one_pass_of_the_identity_encoder(builtin):
         torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7)
 
 
+def test_tuning_the_texels_alone_changes_only_the_texels_a_loss_reached(builtin):
+    """`tune texel` (a whole head's outside): a step on one primitive's colour changes the decoder's per-texel bias
+    maps alone, and of the slab's only that primitive's M x M texels (its row 0, column 3 on the K x K chart); every
+    other weight, the encoders' and the shared convolutions', and every other texel stay as the prior has them. The
+    choice is the config's: an avatar made from its meta (a resumed run) tunes the same."""
+    torch.manual_seed(0)
+    avatar = PriorAvatar(builtin, SMALL, 1, np.full(3, 0.5, np.float32))
+    S, M = SMALL.grid * SMALL.voxels, SMALL.voxels
+    avatar.personalize(torch.randn(1, 3, S, S), torch.randn(1, 3, S, S))
+    avatar.tune_only("texel")
+    trained = {n for n, p in avatar.named_parameters() if p.requires_grad}
+    assert trained == {f"decoder.biases.{k}" for k in range(len(avatar.decoder.biases))} | {"decoder.slab_bias"}
+    before = {n: p.detach().clone() for n, p in avatar.named_parameters()}
+    opt = torch.optim.Adam(avatar.parameters(), lr=1e-2)
+    avatar.train()
+    prims = avatar.decode(avatar.geometry(Controls()), avatar.codes(None), torch.tensor([0.0, 0.0, 1.0]),
+                          training=True)[0]
+    (prims.colour[3] - 1.0).square().mean().backward()
+    opt.step()
+    for n, p in avatar.named_parameters():
+        if n not in trained:
+            torch.testing.assert_close(p.detach(), before[n], rtol=0, atol=0)
+    moved = (avatar.decoder.slab_bias.detach() != before["decoder.slab_bias"]).any(0)
+    expect = torch.zeros(S, S, dtype=torch.bool)
+    expect[0:M, 3 * M:4 * M] = True
+    assert torch.equal(moved, expect)
+    again = PriorAvatar.from_meta(builtin, {**avatar.meta(), "frames": 1, "background": [0.5] * 3})
+    assert again.cfg.tune == "texel"
+    assert {n for n, p in again.named_parameters() if p.requires_grad} == trained
+
+
 def test_expression_maps_see_the_jaw_not_the_head_turn(builtin):
     avatar = PriorAvatar(builtin, SMALL, 1, np.full(3, 0.5, np.float32))
     turned = avatar.geometry(Controls(root=np.array([0.0, 0.5, 0.0], np.float32)))
