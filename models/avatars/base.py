@@ -79,6 +79,8 @@ class Avatar(nn.Module, ABC):
     """The registry's name (models/avatars/registry.py); avatar.json's "model"."""
     rays_per_step: ClassVar[int] = 1024
     """Training rays a step unless told otherwise."""
+    frames_per_step: ClassVar[int] = 4
+    """Training frames a step draws its rays from unless told otherwise."""
     quality_knobs: ClassVar[tuple[str, ...]] = ()
     """Which fields of a Quality setting change this model's rendering besides the image size (none: the
     model always renders the same way, as the dense NerFACE baseline does)."""

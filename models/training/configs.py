@@ -43,8 +43,9 @@ class TrainConfig:
     rays_per_step: Annotated[int, Range(1, 1 << 20)] | None = None
     """Rays a step; default: the model's (1024 codynerf; 256 nerface, each of whose rays costs 128 samples of an
     8x256 MLP)."""
-    frames_per_step: Annotated[int, Range(1, 1024)] = 4
-    """Training frames a step draws its rays from (--rays-per-step shared evenly between them)."""
+    frames_per_step: Annotated[int, Range(1, 1024)] | None = None
+    """Training frames a step draws its rays from (--rays-per-step shared evenly between them); default: the
+    model's (2 the volumetric primitives, each frame of a step decoded apart; 4 the others)."""
     model_options: tuple[str, ...] = ()
     """The model's own settings, KEY=VALUE each, the fields of its config (the primitives': grid, voxels,
     code_dim, code_swap, expression_maps, ...: README); the rest keep their defaults."""

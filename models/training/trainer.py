@@ -156,6 +156,7 @@ class Trainer:
         self.rest_translation = np.mean([f.controls.translation for f in frames.split.frames], 0) \
             if frames.split.frames else np.zeros(3)
         self.rays_per_step = cfg.rays_per_step or avatar.rays_per_step
+        self.frames_per_step = cfg.frames_per_step or avatar.frames_per_step
         # The networks and each frame's geometry go to the device; images, rays, the k-d trees and the random
         # generator (its state is part of the checkpoint) stay on the CPU, and each step's rays are moved over.
         self.device = device_of(cfg.device)
@@ -182,7 +183,7 @@ class Trainer:
                 "background": self.avatar.background.tolist(),
                 "provenance": {"dataset": str(self.cfg.dataset),
                                "dataset_resolved": str(Path(self.cfg.dataset).resolve()), "steps": self.step,
-                               "skipped_steps": self.skipped_steps,
+                               "skipped_steps": self.skipped_steps, "frames_per_step": self.frames_per_step,
                                "seconds": round(self.elapsed, 1), "config": {k: str(v) for k, v in
                                                                             asdict(self.cfg).items()}},
                 **({"held_out_codes": self.code_choice} if self.code_choice is not None else {})}
@@ -208,13 +209,13 @@ class Trainer:
         return self.cfg.lr * 0.1 ** min(max(progress, 0.0), 1.0)
 
     def train_step(self, progress: float) -> dict[str, float]:
-        fs, g, cfg = self.frames, self.generator, self.cfg
+        fs, g = self.frames, self.generator
         for group in self.opt.param_groups:
             group["lr"] = self.lr_at(progress) * group["lr_scale"]
-        frame_ids = torch.randint(len(fs), (cfg.frames_per_step,), generator=g)
+        frame_ids = torch.randint(len(fs), (self.frames_per_step,), generator=g)
         terms: dict[str, torch.Tensor] = {}
         total = torch.zeros((), device=self.device)
-        per_frame = self.rays_per_step // cfg.frames_per_step
+        per_frame = self.rays_per_step // self.frames_per_step
         with self.avatar.training_step():
             for fid in frame_ids.tolist():
                 if len(fs.active_index[fid]) == 0:

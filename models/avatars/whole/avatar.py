@@ -155,6 +155,7 @@ class WholeHeadAvatar(Avatar):
     reads_raster: ClassVar[bool] = False
     quality_knobs: ClassVar[tuple[str, ...]] = PrimitivesAvatar.quality_knobs
     rays_per_step: ClassVar[int] = PrimitivesAvatar.rays_per_step
+    frames_per_step: ClassVar[int] = PrimitivesAvatar.frames_per_step
     decode_ahead: bool = True
     """Where both parts render a frame, the outside decoded on a thread of its own beside the inside (outside_ahead);
     off, after it (benchmarks/bench_whole.py --poses compares the two)."""

@@ -101,8 +101,25 @@ def test_a_target_colour_that_is_no_number_is_left_out_of_the_step(synth_capture
     monkeypatch.setattr(t.avatar, "loss_terms", counting)
     terms = t.train_step(0.0)
     assert t.skipped_steps == 0
-    assert seen and all(n == 64 // t.cfg.frames_per_step - 2 for n in seen), seen
+    assert seen and all(n == 64 // t.frames_per_step - 2 for n in seen), seen
     assert all(math.isfinite(v) for v in terms.values()), terms
     after = {k: v for k, v in t.avatar.state_dict().items() if k in before}
     assert all(torch.isfinite(v).all() for v in after.values())
     assert any(not torch.equal(after[k], before[k]) for k in before)  # it trained
+
+
+@pytest.mark.parametrize(("model", "given", "frames"), [("primitives", None, 2), ("codynerf", None, 4),
+                                                         ("primitives", 3, 3)])
+def test_a_step_draws_the_models_frames_unless_told(synth_capture, gl, tmp_path, monkeypatch, model, given, frames):
+    """A step of the volumetric primitives draws 2 frames (each decoded apart: a step of 4 cost 1.65 times one of
+    2), the other models 4, `--frames-per-step` any number; the step's rays are shared evenly between them, and
+    the avatar's provenance records the number."""
+    capture = synth_capture("ambient", 12, 24)
+    t = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "av", steps=1, rays_per_step=60, model=model,
+                                     effects="none", frames_per_step=given), gl)
+    seen = []
+    loss_terms = t.avatar.loss_terms
+    monkeypatch.setattr(t.avatar, "loss_terms", lambda batch: seen.append(len(batch.target)) or loss_terms(batch))
+    t.train_step(0.0)
+    assert seen == [60 // frames] * frames
+    assert t.meta()["provenance"]["frames_per_step"] == frames
