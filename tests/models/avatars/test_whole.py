@@ -181,7 +181,7 @@ def test_train_makes_a_whole_head_and_resumes_its_parts(tmp_path, one_second_sca
     assert lrs == ["0.01", str(PERSONALIZE_LR)]  # --lr is the inside's; the outside personalises at the prior's
     # the outside fine-tunes the prior's per-texel maps alone (WHOLE_OUTSIDE_TUNE): its shared weights are the prior's
     assert json.loads((out / "parts" / "outside" / "avatar.json").read_text())["prior"]["tune"] == "texel"
-    texels = {n for n, _ in small.named_parameters() if n.startswith(("decoder.biases.", "decoder.slab_bias"))}
+    texels = {n for n, p in small.named_parameters() if any(p is q for q in small.texel_parameters())}
     mine = dict(avatar.outside.named_parameters())
     changed = {n for n, p in small.named_parameters() if not torch.equal(p.detach(), mine[n].detach())}
     assert changed and changed <= texels, changed - texels
