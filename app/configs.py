@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
+from models.avatars.names import PersonalTune
 from models.ranges import Range
 
 PresetName = Literal["draft", "preview", "final"]
@@ -191,7 +192,7 @@ class PersonalizeConfig:
     """A step budget instead of (or as well as) --minutes."""
     lr: Annotated[float, Range(0, 1, above=True)] = 1e-3
     """Adam's learning rate (the seed's Section 4.2.5: 1e-3), decaying tenfold."""
-    tune: Literal["all", "decoder", "texel"] = "all"
+    tune: PersonalTune = "all"
     """What fine-tuning changes: every weight, the decoder alone (the encoders kept as the prior has them), or the
     decoder's per-texel bias maps alone (what no frame saw stays the prior's: a whole head's outside)."""
     device: Literal["cpu", "cuda"] = "cpu"

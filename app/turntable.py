@@ -14,7 +14,6 @@ from app.display import buffer_image, resized
 from models.avatars.base import Avatar
 from models.avatars.rendering import RenderOptions, preset_options, render_image
 from models.head.controls import Controls
-from render.camera import turntable_camera
 from render.gl.raster import Rasterizer
 
 
@@ -47,8 +46,7 @@ def turntable_frames(avatar: Avatar, rasterizer: Rasterizer, cfg: TurntableConfi
     for k in range(cfg.frames):
         phase = 2 * math.pi * k / cfg.frames
         yaw = sweep * math.sin(phase) if sweep else math.degrees(phase)
-        cam = turntable_camera(avatar.card.rest_vertices(), yaw, cfg.elevation_deg, fov_y_deg=18.0,
-                               width_px=size, height_px=size, zoom=cfg.zoom)
+        cam = avatar.card.turntable_camera(yaw, size, cfg.elevation_deg, cfg.zoom)
         c = talking(avatar, controls, phase) if cfg.animate else controls
         yield resized(buffer_image(render_image(avatar, cam, c, options, rasterizer), "rgb"), cfg.size)
         if on_frame:

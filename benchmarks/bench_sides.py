@@ -26,7 +26,6 @@ from models.capture.dataset import load_split
 from models.capture.frames import load_mask, load_rgb
 from models.head.controls import Controls
 from models.training.metrics import edge_density
-from render.camera import turntable_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
@@ -40,8 +39,7 @@ def sides(avatar, shown, raster: Rasterizer, angles=ANGLES_DEG, size: int = 256)
     rest = avatar.card.at_rest(Controls())
     by, renders = {}, []
     for yaw in angles:
-        cam = turntable_camera(avatar.card.rest_vertices(), float(yaw), 5.0, fov_y_deg=18.0, width_px=size,
-                               height_px=size)
+        cam = avatar.card.turntable_camera(float(yaw), size)
         with torch.inference_mode():
             out = render_image(shown, cam, rest, RenderOptions(buffers=()), raster)
         rgb = np.asarray(out["rgb"])

@@ -31,7 +31,6 @@ from models.avatars.registry import load_avatar
 from models.avatars.rendering import RenderOptions, pixel_rays_of, render_image
 from models.capture.dataset import load_split
 from models.head.controls import Controls
-from render.camera import turntable_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
@@ -127,8 +126,7 @@ def main() -> None:
         whole, _ = load_avatar(folder, model="whole")
         rest = whole.card.at_rest(Controls())
         for yaw in YAWS:
-            cam = turntable_camera(whole.card.rest_vertices(), float(yaw), 5.0, fov_y_deg=18.0, width_px=a.size,
-                                   height_px=a.size)
+            cam = whole.card.turntable_camera(float(yaw), a.size)
             geo = whole.frame_geometry(rest, raster)
             rays, _ = pixel_rays_of(whole, geo, cam, raster)
             with torch.inference_mode():

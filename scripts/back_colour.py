@@ -22,7 +22,6 @@ from models.avatars.rendering import RenderOptions, render_image
 from models.capture.dataset import load_split
 from models.head.controls import Controls
 from models.training.prior import neutral_views
-from render.camera import turntable_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
@@ -30,7 +29,7 @@ from render.gl.raster import Rasterizer
 def back_colour(avatar, raster: Rasterizer, size: int = 256) -> tuple[np.ndarray, np.ndarray]:
     """(3,) each: the mean colour of the upper half of the avatar's opaque silhouette (opacity > 0.9) seen from
     behind (the back of the head), and of its third quarter from the top (the nape, where long hair hangs)."""
-    cam = turntable_camera(avatar.card.rest_vertices(), 180.0, 5.0, fov_y_deg=18.0, width_px=size, height_px=size)
+    cam = avatar.card.turntable_camera(180.0, size)
     with torch.inference_mode():
         out = render_image(avatar, cam, avatar.card.at_rest(Controls()), RenderOptions(buffers=()), raster)
     solid = np.asarray(out["opacity"]) > 0.9

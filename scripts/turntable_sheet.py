@@ -11,22 +11,22 @@ from pathlib import Path
 import numpy as np
 
 from app.head_commands import save_png
+from models.avatars.card import TURNTABLE_ELEVATION_DEG
 from models.avatars.registry import load_avatar
 from models.avatars.rendering import RenderOptions, render_image
 from models.head.controls import Controls
-from render.camera import turntable_camera
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 
 
-def turn(avatar, raster: Rasterizer, angles: int, size: int, elevation_deg: float = 5.0) -> list[np.ndarray]:
+def turn(avatar, raster: Rasterizer, angles: int, size: int, elevation_deg: float = TURNTABLE_ELEVATION_DEG
+         ) -> list[np.ndarray]:
     """(size,size,3) renders round the avatar at rest, from the front to its left."""
     rest = avatar.card.at_rest(Controls())
     views = []
     for k in range(angles):
         yaw = 360.0 * k / angles
-        cam = turntable_camera(avatar.card.rest_vertices(), yaw, elevation_deg, fov_y_deg=18.0, width_px=size,
-                               height_px=size)
+        cam = avatar.card.turntable_camera(yaw, size, elevation_deg)
         views.append(np.asarray(render_image(avatar, cam, rest, RenderOptions(buffers=()), raster)["rgb"]))
     return views
 

@@ -14,6 +14,12 @@ from models.avatars.quality import BUILTIN_PRESETS, Preset
 from models.head.controls import Controls
 from models.head.head import Head
 from models.head.model import HeadModel
+from render.camera import Camera, turntable_camera
+
+TURNTABLE_ELEVATION_DEG = 5.0
+"""A turntable's camera height above the head's centre, degrees: a little above the eyes, as a person looks."""
+TURNTABLE_FOV_DEG = 18.0
+"""A turntable's vertical field of view, degrees: a portrait lens's, the head filling the frame."""
 
 
 def builtin_presets() -> dict[str, Preset]:
@@ -68,6 +74,13 @@ class AvatarCard:
     def rest_vertices(self) -> np.ndarray:
         """The template where at_rest places it (what cameras frame)."""
         return self.head_model.template + self.rest_translation
+
+    def turntable_camera(self, yaw_deg: float, size_px: int, elevation_deg: float = TURNTABLE_ELEVATION_DEG,
+                         zoom: float = 1.0) -> Camera:
+        """A square turntable's camera at this yaw (0: in front): the head at rest filling the frame, seen from
+        elevation_deg above its centre (render.camera.turntable_camera); zoom 2 is twice as close."""
+        return turntable_camera(self.rest_vertices(), yaw_deg, elevation_deg, fov_y_deg=TURNTABLE_FOV_DEG,
+                                width_px=size_px, height_px=size_px, zoom=zoom)
 
     def views_beyond(self, yaw_deg: float, margin_deg: float = 10.0) -> bool:
         """Whether a camera at this yaw (about the head, 0: in front) looks from farther round than the capture

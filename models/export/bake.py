@@ -17,7 +17,7 @@ from models.avatars.base import Avatar
 from models.avatars.rendering import RenderOptions, render_image
 from models.export.chart import Chart
 from models.head.controls import Controls
-from render.camera import Camera, project, turntable_camera
+from render.camera import Camera, project
 from render.fill import push_pull
 from render.gl.raster import Rasterizer
 from render.mesh import vertex_normals
@@ -217,7 +217,7 @@ def bake_texture(avatar: Avatar, chart: Chart, size: int, render_px: int, n_yaws
     background = avatar.background_colour()
     blend = ViewBlend(len(points))
     for k, (yaw, pitch) in enumerate(views):
-        camera = turntable_camera(avatar.card.rest_vertices(), yaw, pitch, width_px=px, height_px=px)
+        camera = avatar.card.turntable_camera(yaw, px, pitch)
         images = render_image(avatar, camera, controls, options, rasterizer)
         raster = rasterizer.rasterize(posed.astype(np.float32), triangles, camera)
         blend.add(k, *seen_from(camera, raster, images, background, points, normals))

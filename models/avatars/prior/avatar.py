@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass, replace
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, ClassVar
 
 import numpy as np
 import torch
 
 from models.avatars.base import TrainingBatch
 from models.avatars.components import losses
+from models.avatars.names import PersonalTune
 from models.avatars.primitives.avatar import PrimitivesAvatar, PrimitivesConfig, PrimitivesGeometry
 from models.avatars.primitives.chart import chart_sampler, geometry_map
 from models.avatars.primitives.decoder import SlabDecoder
@@ -28,8 +29,6 @@ from models.avatars.prior.encoders import ExpressionEncoder, IdentityEncoder, kl
 from models.head.controls import Controls
 from models.head.model import HeadModel
 from models.ranges import Range
-
-PersonalTune = Literal["all", "decoder", "texel"]
 
 
 @dataclass(frozen=True)

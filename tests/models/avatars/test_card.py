@@ -52,3 +52,24 @@ def test_an_older_avatar_json_leaves_the_card_unrecorded(tmp_path):
     assert card.view_range is None and card.capture_px is None and card.turntable_sweep_deg() == 0.0
     np.testing.assert_array_equal(card.rest_translation, np.zeros(3))
     assert not card.views_beyond(180.0)
+
+
+def test_the_cards_turntable_camera_circles_the_head_where_the_capture_held_it():
+    """The camera every turntable, sheet and bench uses (AvatarCard.turntable_camera): about the rest head's centre
+    (its translation counted), 5 degrees above it, at the yaw asked (0: in front, on +z; 90: on +x), the head
+    inside the square frame; a zoom of 2 halves the distance beyond the head's cylinder."""
+    card = read_card(DEMO)
+    v = card.rest_vertices()
+    centre = 0.5 * (v.min(0) + v.max(0))
+    for yaw in (0.0, 90.0, 180.0):
+        cam = card.turntable_camera(yaw, 64)
+        assert (cam.width_px, cam.height_px) == (64, 64)
+        d = cam.position - centre
+        flat = float(np.hypot(d[0], d[2]))
+        assert np.degrees(np.arctan2(d[1], flat)) == pytest.approx(5.0, abs=1e-6)
+        np.testing.assert_allclose(d[[0, 2]] / flat, [np.sin(np.radians(yaw)), np.cos(np.radians(yaw))], atol=1e-9)
+        p = np.c_[v, np.ones(len(v))] @ (cam.projection @ cam.view).T
+        assert np.abs(p[:, :2] / p[:, 3:]).max() <= 1.0
+    radius = float(np.linalg.norm((v - centre)[:, [0, 2]], axis=1).max())
+    far, near = (float(np.linalg.norm(card.turntable_camera(0.0, 64, zoom=z).position - centre)) for z in (1, 2))
+    assert near - radius == pytest.approx((far - radius) / 2, rel=1e-3)
