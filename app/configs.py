@@ -11,6 +11,7 @@ from typing import Annotated, Literal
 
 from models.avatars.names import PersonalTune
 from models.ranges import Range
+from render.camera import TURNTABLE_ELEVATION_DEG
 
 PresetName = Literal["draft", "preview", "final"]
 """An avatar's quality presets (models/avatars/quality.py)."""
@@ -274,7 +275,7 @@ class TurntableConfig:
     """Swing the camera this many degrees to each side of the front; 0: a full turn (default: as far as the
     capture's views went and 10 degrees more, a full turn where they went round the head: a video's avatar has
     seen the head only from about the front)."""
-    elevation_deg: Annotated[float, Range(-89, 89)] = 5.0
+    elevation_deg: Annotated[float, Range(-89, 89)] = TURNTABLE_ELEVATION_DEG
     """Camera height above the head's centre, degrees."""
     zoom: Annotated[float, Range(0.05, 20)] = 1.0
     """Camera distance: 1 frames the head; 2 is twice as close."""

@@ -190,7 +190,14 @@ def framing_camera(vertices: np.ndarray, yaw_deg: float = 0.0, pitch_deg: float 
                   far_m=distance + 2 * radius)
 
 
-def turntable_camera(vertices: np.ndarray, yaw_deg: float, pitch_deg: float = 0.0, fov_y_deg: float = 18.0,
+TURNTABLE_ELEVATION_DEG = 5.0
+"""A turntable's camera height above the head's centre, degrees: a little above the eyes, as a person looks."""
+TURNTABLE_FOV_DEG = 18.0
+"""A turntable's vertical field of view, degrees: a portrait lens's, the head filling the frame."""
+
+
+def turntable_camera(vertices: np.ndarray, yaw_deg: float, pitch_deg: float = 0.0,
+                     fov_y_deg: float = TURNTABLE_FOV_DEG,
                      width_px: int = 256, height_px: int = 256, margin: float = 1.06, zoom: float = 1.0) -> Camera:
     """An orbit camera for a turntable: it fits the vertices' cylinder about the vertical axis through their box's
     centre (its radius across, its height up), so the head fills the frame at every yaw, where framing_camera's

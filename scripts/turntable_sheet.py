@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from app.head_commands import save_png
-from models.avatars.card import TURNTABLE_ELEVATION_DEG
 from models.avatars.registry import load_avatar
 from models.avatars.rendering import RenderOptions, render_image
 from models.head.controls import Controls
+from render.camera import TURNTABLE_ELEVATION_DEG
 from render.gl.context import GLContext
 from render.gl.raster import Rasterizer
 

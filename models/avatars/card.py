@@ -14,12 +14,7 @@ from models.avatars.quality import BUILTIN_PRESETS, Preset
 from models.head.controls import Controls
 from models.head.head import Head
 from models.head.model import HeadModel
-from render.camera import Camera, turntable_camera
-
-TURNTABLE_ELEVATION_DEG = 5.0
-"""A turntable's camera height above the head's centre, degrees: a little above the eyes, as a person looks."""
-TURNTABLE_FOV_DEG = 18.0
-"""A turntable's vertical field of view, degrees: a portrait lens's, the head filling the frame."""
+from render.camera import TURNTABLE_ELEVATION_DEG, TURNTABLE_FOV_DEG, Camera, turntable_camera
 
 
 def builtin_presets() -> dict[str, Preset]:
