@@ -27,6 +27,7 @@ from torch import nn
 
 from models.avatars.base import BACKGROUND, Avatar, RayOutput, TrainingBatch
 from models.avatars.components import losses
+from models.avatars.components.body import BODY_LR_SCALE, BodyLayer, body_frame
 from models.avatars.components.codes import CodeKeys, frame_code, left_out_weights
 from models.avatars.components.plate import Plate
 from models.avatars.components.poses import PoseCorrected
@@ -57,7 +58,7 @@ from models.ranges import Range, check_config
 from render.camera import Camera
 from render.gl.raster import Rasterizer
 from render.gl.shadow import draw_light_depth
-from render.rays import Coverage, Rays
+from render.rays import Coverage, Rays, image_rays
 from render.shadow_map import LightDepthMap
 
 EXPRESSION_MAP_UNIT_M = 0.01
@@ -147,6 +148,10 @@ class PrimitivesConfig:
     controls do not move (1 - chart.expression_share), instead of reaching every slab: a frame's face is decoded
     from its controls and maps alone, the code keeps what the guide mesh cannot say (hair, shoulders, collar).
     A held-out frame's blended code then cannot bring other frames' eyes and mouths."""
+    body_layer: bool = False
+    """A picture of what moves with the body (shoulders, collar, clothes) at the neck, behind the head's primitives
+    and in front of the plate, in the capture's camera alone (components/body.py); its unseen texels continue the
+    nearest seen ones (a frame drawn back shows more of the clothes, not the room)."""
     chunk_rays: Annotated[int, Range(1, 1 << 22)] = 1 << 18
     """Rays a batch when rendering an image: a 512 px frame in one (the waves hold a few tensors of R rays)."""
     reach: Annotated[float, Range(1, 10)] = 2.0
@@ -197,6 +202,7 @@ class PrimitivesGeometry:
     light: LightDepthMap | None = None  # the posed mesh seen from the key light, where the avatar casts shadows
     controls: Controls | None = None  # what posed the mesh (expression corrections pose it again)
     expression: torch.Tensor | None = None  # (1,3,S,S) the expression map (Delta G), where the decoder reads one
+    body: tuple[torch.Tensor, torch.Tensor] | None = None  # the body layer's plane (origin, axes), where it has one
     decoded: dict = field(default_factory=dict)
 
     def to(self, device: torch.device | str) -> PrimitivesGeometry:
@@ -204,7 +210,8 @@ class PrimitivesGeometry:
         return PrimitivesGeometry(self.posed.to(device), self.rotation.to(device), self.translation.to(device),
                                   self.condition.to(device), self.gaze.to(device), w,
                                   None if self.light is None else self.light.to(device), self.controls,
-                                  None if self.expression is None else self.expression.to(device))
+                                  None if self.expression is None else self.expression.to(device),
+                                  None if self.body is None else tuple(t.to(device) for t in self.body))
 
 
 def head_frame(controls: Controls, posed: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
@@ -276,6 +283,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         """What the capture kept (components/): its background plate, where its camera stood."""
         self.code_keys = CodeKeys(head_model.num_expression)
         """The training frames' control keys: new controls take the nearest frames' codes."""
+        self.body = BodyLayer() if cfg.body_layer else None
+        """What moves with the body behind the head, in the capture's camera (components/body.py)."""
 
     def make_decoder(self) -> SlabDecoder:
         """The decoder of the frame's condition (expression and jaw/neck unless only the expression maps carry
@@ -287,6 +296,17 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return SlabDecoder(controls + code + 3 + extra, 6, self.cfg.grid, self.cfg.voxels, 3,
                            self.cfg.width, map_channels=1 if self.casts_shadows else 0,
                            geometry_channels=3 if self.cfg.expression_maps else 0, code_channels=apart)
+
+    def parameter_groups(self) -> list[dict]:
+        """PoseCorrected's groups, the body layer's texture apart at BODY_LR_SCALE (a texel learns only from the
+        rays that meet it, a few of a step's)."""
+        groups = super().parameter_groups()
+        if self.body is None:
+            return groups
+        texture = self.body.texture
+        for group in groups:
+            group["params"] = [p for p in group["params"] if p is not texture]
+        return [*groups, {"params": [texture], "lr_scale": BODY_LR_SCALE}]
 
     # ---- making and describing -------------------------------------------------------------------------
     @classmethod
@@ -418,9 +438,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         cond[E:E + 3], cond[E + 3:E + 6] = controls.rotation("jaw"), controls.rotation("neck")
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
+        body = None if self.body is None else body_frame(
+            joints[1], rotation_matrix_from_axis_angle(torch.as_tensor(controls.root, dtype=v.dtype)),
+            self.head_model.joint_names)
         return PrimitivesGeometry(v[1], rotation, translation, as_t(cond), as_t(gaze),
                                   self.code_keys.weights(controls, time_s), controls=controls,
-                                  expression=self.controls_expression_map(controls, v[1], joints[1, 0]))
+                                  expression=self.controls_expression_map(controls, v[1], joints[1, 0]), body=body)
 
     def frame_geometry(self, controls: Controls, rasterizer: Rasterizer | None, time_s: float | None = None
                        ) -> PrimitivesGeometry:
@@ -465,7 +488,11 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
             return np.zeros_like(raster.hit)
         near = float(raster.depth[np.isfinite(raster.depth)].min())
         margin = self.cfg.reach * float(self.layout_half.max()) * camera.focal_px() / max(near, 1e-3)
-        return binary_dilation(raster.hit, iterations=max(1, int(np.ceil(margin))))
+        pixels = binary_dilation(raster.hit, iterations=max(1, int(np.ceil(margin))))
+        if self.body is not None:  # and every pixel below the mesh's lowest, where the body layer shows the clothes
+            lowest = int(np.nonzero(raster.hit.any(1))[0].max())
+            pixels[max(lowest - int(np.ceil(margin)), 0):] = True
+        return pixels
 
     def codes(self, frame: int | None, weights: torch.Tensor | None = None) -> torch.Tensor:
         """The per-frame code (1,C) of a training frame; new controls: the blend `weights` give, else the mean."""
@@ -541,6 +568,25 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         views = torch.stack([self.view_of(geo, eye.to(geo.translation)) for geo, eye in pairs])
         self.views.note(frames.origins, views, self.background.device)
         self.note_reach(frames)
+        self.note_body(frames)
+
+    @torch.no_grad()
+    def note_body(self, frames, stride_px: int = 2) -> None:
+        """The body layer's texels that some training frame's pixels (every stride_px-th of each row and column)
+        fell on; the rest show their nearest (BodyLayer.note_seen)."""
+        if self.body is None or getattr(frames, "split", None) is None:
+            return
+        seen = np.zeros((self.body.texels,) * 2, bool)
+        for frame, geo in zip(frames.split.frames, frames.geometry, strict=True):
+            if geo.body is None:
+                continue
+            camera = frame_camera(frames.split, frame)
+            origin, directions = image_rays(camera)
+            directions = directions.reshape(camera.height_px, camera.width_px, 3)[::stride_px, ::stride_px]
+            directions = directions.reshape(-1, 3).to(geo.body[0])
+            xy, hit = self.body.plane_coordinates(origin.to(directions).expand_as(directions), directions, geo.body)
+            seen |= self.body.seen_texels(xy, hit)
+        self.body.note_seen(seen)
 
     @torch.no_grad()
     def note_reach(self, frames) -> None:
@@ -663,13 +709,21 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
             rays = self.corrected_rays(rays, geometry, frame)
         code = self.training_code(frame, generator) if training and frame is not None else None
         prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit, code, options)
+        behind = self.behind(rays, geometry)
         if training:
-            out, _ = dispatch.march_rays(rays.origins, rays.directions, self.ray_background(rays), prims,
-                                         self.cfg.samples)
+            out, _ = dispatch.march_rays(rays.origins, rays.directions, behind, prims, self.cfg.samples)
         else:
-            out = self.display_march(rays.origins, rays.directions, self.ray_background(rays), prims, options)
+            out = self.display_march(rays.origins, rays.directions, behind, prims, options)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
         return RayOutput(buffers, (prims, offsets, out, rays, frame, options))
+
+    def behind(self, rays: Rays, geometry: PrimitivesGeometry) -> torch.Tensor:
+        """What each ray sees behind the primitives: the plate's pixel (or the colour), with the body layer over the
+        plate where the avatar has one and the rays carry the plate (the capture's camera: components/body.py)."""
+        background = self.ray_background(rays)
+        if self.body is None or rays.background is None or geometry.body is None:
+            return background
+        return self.body.over(background, rays.origins, rays.directions, geometry.body)
 
     def display_march(self, origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor,
                       prims: march.Primitives, options: RenderOptions | None = None) -> march.MarchOutput:

@@ -1,0 +1,120 @@
+"""What moves with the body behind the head, in the capture's own camera: the shoulders, the collar, the top and
+the hair that lies on them.
+
+A head model ends at the neck. Below it a video shows the person's clothes, which move with the body, not with the
+room: the background plate (plate.py) is the room, and where the body covered it in every frame it holds a guess.
+A held-out frame where the body has moved, or where the camera drew back or zoomed out (more of the top in view
+than any training frame showed), then shows the plate's guess where the video shows the clothes.
+
+The body layer is a flat picture (RGB and opacity, TEXELS x TEXELS over EXTENT_M) standing at the neck, facing
+where the head model's face looks, turned with the torso (the root joint: models/tracking/torso.py). It lies behind
+the head's primitives and in front of the plate: each ray of the capture's camera meets its plane once, and what it
+shows there is composited over the plate before the primitives over both. It is trained with the avatar (the same
+photometric loss through the background the march composites). Texels no training frame saw take their nearest
+seen texel's value (`source`, made when the views are noted): the clothes continue below the lowest edge a
+training frame showed, so a frame drawn back shows more of the top, not the room. Only rays that carry the plate
+(the capture's camera) see it: a turntable or an orbit has no room behind the head, and no flat picture there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+TEXELS = 128
+"""The layer's texels a side."""
+EXTENT_M = (-0.45, 0.45, -0.6, 0.3)
+"""The layer's extent in its plane, metres from the neck joint: (left, right, bottom, top) along the torso's x and
+y axes (7 mm a texel across, 7 down); beyond it the edge's texels continue."""
+START_OPACITY_LOGIT = -4.0
+"""The layer starts nearly clear (1.8% opaque): the plate shows through until the frames say otherwise."""
+BODY_LR_SCALE = 4.0
+"""The texture learns at this many times the networks' rate (at 5e-3 a texel moves 0.02 in logit a step)."""
+GRAZING = 1e-3
+"""A ray whose direction's cosine with the plane's normal is below this misses it."""
+
+
+class BodyLayer(nn.Module):
+    """The layer's texture (1,4,T,T): colour and opacity logits, rows from the top; `source` (T*T,) the texel each
+    one shows (its nearest seen texel; itself where seen), None until the views are noted."""
+
+    def __init__(self, texels: int = TEXELS):
+        super().__init__()
+        texture = torch.zeros(1, 4, texels, texels)
+        texture[:, 3] = START_OPACITY_LOGIT
+        self.texture = nn.Parameter(texture)
+        self.register_buffer("source", torch.arange(texels * texels))
+
+    @property
+    def texels(self) -> int:
+        return self.texture.shape[-1]
+
+    def plane_coordinates(self, origins: torch.Tensor, directions: torch.Tensor, body: tuple[torch.Tensor, torch.Tensor]
+                          ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(R,2) where rays (R,3) meet the layer's plane, in texture coordinates (x right, y down, -1..1 over
+        EXTENT_M; beyond where the ray meets it beyond the extent), and (R,) whether they meet it (in front of the
+        camera, not grazing). body: the plane's origin (3,) and axes (3,3, columns x, y, normal) in the world."""
+        centre, axes = (t.to(directions) for t in body)
+        normal = axes[:, 2]
+        facing = directions @ normal
+        safe = torch.where(facing.abs() < GRAZING, torch.full_like(facing, GRAZING), facing)
+        s = ((centre - origins) @ normal) / safe
+        hit = (facing.abs() >= GRAZING) & (s > 0)
+        point = origins + s.clamp_min(0.0)[:, None] * directions - centre
+        u, v = point @ axes[:, 0], point @ axes[:, 1]
+        left, right, bottom, top = EXTENT_M
+        x = 2.0 * (u - left) / (right - left) - 1.0
+        y = 2.0 * (top - v) / (top - bottom) - 1.0
+        xy = torch.stack([x, y], -1).clamp(-2.0, 2.0)  # far beyond: the edge (grid_sample clamps to the border)
+        return torch.where(hit[:, None], xy, torch.full_like(xy, 2.0)), hit
+
+    def shown(self) -> torch.Tensor:
+        """(1,4,T,T) the texture as it shows: each texel its source's."""
+        T = self.texels
+        return self.texture.reshape(1, 4, T * T)[:, :, self.source].reshape(1, 4, T, T)
+
+    def over(self, background: torch.Tensor, origins: torch.Tensor, directions: torch.Tensor,
+             body: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
+        """(R,3) the layer composited over what each ray saw behind it (R,3)."""
+        xy, hit = self.plane_coordinates(origins, directions, body)
+        texel = F.grid_sample(self.shown(), xy[None, :, None].to(self.texture), mode="bilinear",
+                              padding_mode="border", align_corners=False)[0, :, :, 0].T  # (R,4)
+        colour = torch.sigmoid(texel[:, :3])
+        alpha = torch.sigmoid(texel[:, 3:]) * hit[:, None].to(texel)
+        return alpha * colour.to(background) + (1.0 - alpha) * background
+
+    @torch.no_grad()
+    def note_seen(self, seen: np.ndarray) -> None:
+        """Every texel shows its nearest seen one (seen (T,T) bool: some training frame's pixel fell on it); where
+        none was seen, each itself."""
+        from scipy.ndimage import distance_transform_edt
+
+        seen = np.asarray(seen, bool)
+        T = self.texels
+        if not seen.any():
+            self.source.copy_(torch.arange(T * T))
+            return
+        _, (rows, cols) = distance_transform_edt(~seen, return_indices=True)
+        self.source.copy_(torch.as_tensor((rows * T + cols).ravel()))
+
+    def seen_texels(self, xy: torch.Tensor, hit: torch.Tensor) -> np.ndarray:
+        """(T,T) bool: the texels that texture coordinates xy (R,2) of rays that meet the plane fall on (within the
+        extent)."""
+        T = self.texels
+        inside = hit & (xy.abs() <= 1.0).all(-1)
+        cols = ((xy[inside, 0] + 1.0) * 0.5 * T).floor().clamp(0, T - 1).long()
+        rows = ((xy[inside, 1] + 1.0) * 0.5 * T).floor().clamp(0, T - 1).long()
+        seen = np.zeros((T, T), bool)
+        seen[rows.cpu().numpy(), cols.cpu().numpy()] = True
+        return seen
+
+
+def body_frame(joints: torch.Tensor, root_rotation: torch.Tensor, joint_names: tuple[str, ...]
+               ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The layer's plane for a posed frame: its origin at the neck joint (the root where a model has no neck), its
+    axes (3,3, columns: x, y, normal) the root's rotation of the head model's own (x right, y up, z where the face
+    looks). joints (J,3) posed, root_rotation (3,3)."""
+    at = joint_names.index("neck") if "neck" in joint_names else 0
+    return joints[at], root_rotation

@@ -1,0 +1,94 @@
+"""The body layer (models/avatars/components/body.py): where rays meet its plane, what it composites, the texels it
+fills from the seen ones, and that the loss reaches its texture."""
+
+import math
+
+import numpy as np
+import torch
+
+from models.avatars.components.body import EXTENT_M, START_OPACITY_LOGIT, BodyLayer, body_frame
+
+FACING_CAMERA = (torch.tensor([0.0, -0.1, -1.0]), torch.eye(3))  # the neck 1 m ahead of a camera at the origin
+
+
+def test_a_ray_meets_the_plane_where_worked_by_hand():
+    layer = BodyLayer(texels=8)
+    origins = torch.zeros(4, 3)
+    # straight ahead (the neck's point); 0.2 m right and 0.3 m down at 1 m; along the plane; away from it
+    directions = torch.nn.functional.normalize(torch.tensor(
+        [[0.0, -0.1, -1.0], [0.2, -0.4, -1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), dim=-1)
+    xy, hit = layer.plane_coordinates(origins, directions, FACING_CAMERA)
+    left, right, bottom, top = EXTENT_M
+    assert hit.tolist() == [True, True, False, False]
+    expected = [[2 * (0.0 - left) / (right - left) - 1, 2 * (top - 0.0) / (top - bottom) - 1],
+                [2 * (0.2 - left) / (right - left) - 1, 2 * (top + 0.3) / (top - bottom) - 1]]
+    torch.testing.assert_close(xy[:2], torch.tensor(expected), atol=1e-6, rtol=0)
+
+
+def test_the_plane_turns_with_the_body():
+    """A body turned 90 degrees about the vertical faces the camera edge on: a ray straight at the neck grazes the
+    plane and misses it; turned 60 degrees, a ray 0.1 m right of the neck at the neck's depth meets the plane
+    0.1 / cos(60) = 0.2 m from the neck along the plane... measured along the ray to the turned plane."""
+    layer = BodyLayer(texels=8)
+    turn = lambda deg: torch.tensor([[math.cos(math.radians(deg)), 0, math.sin(math.radians(deg))], [0, 1.0, 0],
+                                     [-math.sin(math.radians(deg)), 0, math.cos(math.radians(deg))]])
+    centre = torch.tensor([0.0, 0.0, -1.0])
+    ahead = torch.tensor([[0.0, 0.0, -1.0]])
+    _, hit = layer.plane_coordinates(torch.zeros(1, 3), ahead, (centre, turn(90.0)))
+    assert not bool(hit[0])
+    xy, hit = layer.plane_coordinates(torch.zeros(1, 3), ahead, (centre, turn(60.0)))
+    assert bool(hit[0])  # straight at the neck: the neck's own point
+    left, right, _, _ = EXTENT_M
+    assert abs(float(xy[0, 0]) - (2 * (0.0 - left) / (right - left) - 1)) < 1e-6
+
+
+def test_it_composites_over_the_plate_and_is_clear_where_it_starts():
+    layer = BodyLayer(texels=8)
+    plate = torch.tensor([[0.2, 0.4, 0.6], [0.2, 0.4, 0.6]])
+    origins = torch.zeros(2, 3)
+    directions = torch.nn.functional.normalize(torch.tensor([[0.0, -0.1, -1.0], [1.0, 0.0, 0.0]]), dim=-1)
+    start = layer.over(plate, origins, directions, FACING_CAMERA)
+    a = 1.0 / (1.0 + math.exp(-START_OPACITY_LOGIT))
+    torch.testing.assert_close(start[0], a * 0.5 + (1 - a) * plate[0], atol=1e-6, rtol=0)
+    torch.testing.assert_close(start[1], plate[1])  # a ray along the plane: the plate alone
+    with torch.no_grad():
+        layer.texture[:, :3] = torch.logit(torch.tensor([0.9, 0.1, 0.3]))[None, :, None, None]
+        layer.texture[:, 3] = 20.0
+    torch.testing.assert_close(layer.over(plate, origins, directions, FACING_CAMERA)[0],
+                               torch.tensor([0.9, 0.1, 0.3]), atol=1e-5, rtol=0)
+
+
+def test_unseen_texels_show_their_nearest_seen_one():
+    """Seen: the top half. The bottom half's texels each show the seen texel straight above them (the clothes go
+    on below the lowest edge a training frame showed), and a ray far below the extent the bottom row's value."""
+    layer = BodyLayer(texels=4)
+    with torch.no_grad():
+        layer.texture[0, 0] = torch.arange(16.0).reshape(4, 4)
+    seen = np.zeros((4, 4), bool)
+    seen[:2] = True
+    layer.note_seen(seen)
+    shown = layer.shown()[0, 0]
+    assert shown.tolist() == [[0, 1, 2, 3], [4, 5, 6, 7], [4, 5, 6, 7], [4, 5, 6, 7]]
+
+
+def test_the_texels_a_frame_saw_and_the_loss_reaching_them():
+    layer = BodyLayer(texels=16)
+    ys = torch.linspace(-0.05, -0.3, 20)  # rays into the upper middle of the plane
+    directions = torch.nn.functional.normalize(torch.stack([torch.zeros(20), ys, -torch.ones(20)], -1), dim=-1)
+    xy, hit = layer.plane_coordinates(torch.zeros(20, 3), directions, FACING_CAMERA)
+    seen = layer.seen_texels(xy, hit)
+    # v from +0.05 to -0.2 m at u = 0: rows (0.3 - 0.05) / 0.9 * 16 = 4.4 to 8.9 of column 8
+    assert np.argwhere(seen).tolist() == [[4, 8], [5, 8], [6, 8], [7, 8], [8, 8]]
+    out = layer.over(torch.zeros(20, 3), torch.zeros(20, 3), directions, FACING_CAMERA)
+    out.sum().backward()
+    grad = layer.texture.grad[0].abs().sum(0)
+    assert torch.isfinite(layer.texture.grad).all() and grad[:, 7:9].sum() > 0 and grad[:, :6].sum() == 0
+
+
+def test_the_plane_stands_at_the_neck_turned_with_the_root():
+    joints = torch.tensor([[0.0, -0.2, -1.0], [0.0, -0.1, -1.0], [0.0, 0.0, -0.9]])
+    rotation = torch.eye(3)
+    origin, axes = body_frame(joints, rotation, ("root", "neck", "jaw"))
+    assert origin.tolist() == joints[1].tolist() and axes is rotation
+    origin, _ = body_frame(joints, rotation, ("root", "jaw", "eye"))
+    assert origin.tolist() == joints[0].tolist()
