@@ -57,17 +57,17 @@ class BodyLayer(nn.Module):
         EXTENT_M; beyond where the ray meets it beyond the extent), and (R,) whether they meet it (in front of the
         camera, not grazing). body: the plane's origin (3,) and axes (3,3, columns x, y, normal) in the world."""
         centre, axes = (t.to(directions) for t in body)
-        normal = axes[:, 2]
-        facing = directions @ normal
-        safe = torch.where(facing.abs() < GRAZING, torch.full_like(facing, GRAZING), facing)
-        s = ((centre - origins) @ normal) / safe
-        hit = (facing.abs() >= GRAZING) & (s > 0)
-        point = origins + s.clamp_min(0.0)[:, None] * directions - centre
-        u, v = point @ axes[:, 0], point @ axes[:, 1]
+        along = directions @ axes  # (R,3): each direction along the plane's x, y and normal
+        at = (origins - centre) @ axes  # where each origin stands in the plane's frame
+        facing = along[:, 2]
+        hit = facing.abs() >= GRAZING
+        s = -at[:, 2] / torch.where(hit, facing, torch.full_like(facing, GRAZING))
+        hit = hit & (s > 0)
+        uv = at[:, :2] + s.clamp_min(0.0)[:, None] * along[:, :2]
         left, right, bottom, top = EXTENT_M
-        x = 2.0 * (u - left) / (right - left) - 1.0
-        y = 2.0 * (top - v) / (top - bottom) - 1.0
-        xy = torch.stack([x, y], -1).clamp(-2.0, 2.0)  # far beyond: the edge (grid_sample clamps to the border)
+        scale = uv.new_tensor([2.0 / (right - left), -2.0 / (top - bottom)])
+        shift = uv.new_tensor([-2.0 * left / (right - left) - 1.0, 2.0 * top / (top - bottom) - 1.0])
+        xy = (uv * scale + shift).clamp(-2.0, 2.0)  # far beyond: the edge (grid_sample clamps to the border)
         return torch.where(hit[:, None], xy, torch.full_like(xy, 2.0)), hit
 
     def shown(self) -> torch.Tensor:
