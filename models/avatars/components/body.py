@@ -11,9 +11,10 @@ where the head model's face looks, turned with the torso (the root joint: models
 the head's primitives and in front of the plate: each ray of the capture's camera meets its plane once, and what it
 shows there is composited over the plate before the primitives over both. It is trained with the avatar (the same
 photometric loss through the background the march composites). Texels no training frame saw take their nearest
-seen texel's value (`source`, made when the views are noted): the clothes continue below the lowest edge a
-training frame showed, so a frame drawn back shows more of the top, not the room. Only rays that carry the plate
-(the capture's camera) see it: a turntable or an orbit has no room behind the head, and no flat picture there.
+seen texels' values, averaged (`source`, made when the views are noted; FILL_BLUR): the clothes continue below the
+lowest edge a training frame showed, so a frame drawn back shows more of the top, not the room. Only rays that carry
+the plate (the capture's camera) see it: a turntable or an orbit has no room behind the head, and no flat picture
+there.
 """
 
 from __future__ import annotations
@@ -32,6 +33,9 @@ START_OPACITY_LOGIT = -4.0
 """The layer starts nearly clear (1.8% opaque): the plate shows through until the frames say otherwise."""
 BODY_LR_SCALE = 4.0
 """The texture learns at this many times the networks' rate (at 5e-3 a texel moves 0.02 in logit a step)."""
+FILL_BLUR = 9
+"""Texels no frame saw show the mean of their nearest seen texels' values over this many texels a side (6 cm): the
+clothes' colour continues, not the last row's pattern drawn out in streaks."""
 GRAZING = 1e-3
 """A ray whose direction's cosine with the plane's normal is below this misses it."""
 
@@ -71,9 +75,15 @@ class BodyLayer(nn.Module):
         return torch.where(hit[:, None], xy, torch.full_like(xy, 2.0)), hit
 
     def shown(self) -> torch.Tensor:
-        """(1,4,T,T) the texture as it shows: each texel its source's."""
+        """(1,4,T,T) the texture as it shows: a seen texel its own value, an unseen one its nearest seen texel's
+        neighbourhood (`source`, averaged over FILL_BLUR texels)."""
         T = self.texels
-        return self.texture.reshape(1, 4, T * T)[:, :, self.source].reshape(1, 4, T, T)
+        filled = self.texture.reshape(1, 4, T * T)[:, :, self.source].reshape(1, 4, T, T)
+        unseen = (self.source != torch.arange(T * T, device=self.source.device)).reshape(1, 1, T, T)
+        if not bool(unseen.any()):
+            return filled
+        soft = F.avg_pool2d(filled, FILL_BLUR, stride=1, padding=FILL_BLUR // 2, count_include_pad=False)
+        return torch.where(unseen, soft, filled)
 
     def over(self, background: torch.Tensor, origins: torch.Tensor, directions: torch.Tensor,
              body: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import torch
 
-from models.avatars.components.body import EXTENT_M, START_OPACITY_LOGIT, BodyLayer, body_frame
+from models.avatars.components.body import EXTENT_M, FILL_BLUR, START_OPACITY_LOGIT, BodyLayer, body_frame
 
 FACING_CAMERA = (torch.tensor([0.0, -0.1, -1.0]), torch.eye(3))  # the neck 1 m ahead of a camera at the origin
 
@@ -58,17 +58,29 @@ def test_it_composites_over_the_plate_and_is_clear_where_it_starts():
                                torch.tensor([0.9, 0.1, 0.3]), atol=1e-5, rtol=0)
 
 
-def test_unseen_texels_show_their_nearest_seen_one():
-    """Seen: the top half. The bottom half's texels each show the seen texel straight above them (the clothes go
-    on below the lowest edge a training frame showed), and a ray far below the extent the bottom row's value."""
-    layer = BodyLayer(texels=4)
+def test_unseen_texels_show_their_nearest_seen_ones_averaged():
+    """Seen: the top half of 12 x 12 texels. Each texel of the bottom half takes the seen texel straight above it
+    (the clothes go on below the lowest edge a training frame showed), then the mean of those over FILL_BLUR
+    texels a side (cut at the texture's edges), worked here by loops; the seen texels keep their own values."""
+    T = 12
+    layer = BodyLayer(texels=T)
+    values = np.random.default_rng(0).random((T, T))
     with torch.no_grad():
-        layer.texture[0, 0] = torch.arange(16.0).reshape(4, 4)
-    seen = np.zeros((4, 4), bool)
-    seen[:2] = True
+        layer.texture[0, 0] = torch.as_tensor(values)
+    seen = np.zeros((T, T), bool)
+    seen[:6] = True
     layer.note_seen(seen)
-    shown = layer.shown()[0, 0]
-    assert shown.tolist() == [[0, 1, 2, 3], [4, 5, 6, 7], [4, 5, 6, 7], [4, 5, 6, 7]]
+    filled = values.copy()
+    filled[6:] = values[5]
+    half = FILL_BLUR // 2
+    shown = layer.shown()[0, 0].detach().numpy()
+    for y in range(T):
+        for x in range(T):
+            window = filled[max(y - half, 0):y + half + 1, max(x - half, 0):x + half + 1]
+            want = values[y, x] if y < 6 else window.mean()
+            assert abs(shown[y, x] - want) < 1e-6, (y, x)
+    layer.note_seen(np.ones((T, T), bool))  # everything seen: the texture as it is
+    np.testing.assert_array_equal(layer.shown()[0, 0].detach().numpy(), values.astype(np.float32))
 
 
 def test_the_texels_a_frame_saw_and_the_loss_reaching_them():
