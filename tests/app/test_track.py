@@ -685,10 +685,10 @@ def test_a_room_per_frame_stands_behind_each_frame(face_video, landmarker, tmp_p
     clear = img["opacity"] < 1e-4
     assert clear.mean() > 0.05
     # Where the primitives are clear: the room under the body layer (models/avatars/components/body.py), which
-    # starts clear and after 3 steps is still all but clear.
+    # starts at 1.8% opacity (a haze over the room where no training ray reaches it).
     origin, directions = image_rays(camera)
     with torch.no_grad():
         behind = avatar.body.over(torch.as_tensor(frame_room(f).reshape(-1, 3)), origin.expand_as(directions),
                                   directions, avatar.geometry(f.controls).body).numpy().reshape(img["rgb"].shape)
     np.testing.assert_allclose(img["rgb"][clear], behind[clear], atol=1e-4)
-    np.testing.assert_allclose(img["rgb"][clear], frame_room(f)[clear], atol=5e-4)
+    assert np.abs(img["rgb"][clear] - frame_room(f)[clear]).max() < 0.02
