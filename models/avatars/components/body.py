@@ -44,7 +44,8 @@ GRAZING = 1e-3
 
 class BodyLayer(nn.Module):
     """The layer's texture (1,4,T,T): colour and opacity logits, rows from the top; `source` (T*T,) the texel each
-    one shows (its nearest seen texel; itself where seen), None until the views are noted."""
+    one shows (its nearest seen texel; itself where seen, and every texel itself until the views are noted), and
+    `unseen` (1,1,T,T), where it is not itself or None where every texel is (derived from source, not saved)."""
 
     def __init__(self, texels: int = TEXELS):
         super().__init__()
@@ -52,6 +53,17 @@ class BodyLayer(nn.Module):
         texture[:, 3] = START_OPACITY_LOGIT
         self.texture = nn.Parameter(texture)
         self.register_buffer("source", torch.arange(texels * texels))
+        self.register_buffer("unseen", None, persistent=False)
+
+    def note_unseen(self) -> None:
+        """`unseen` from `source`, once (not on every step's shown())."""
+        T = self.texels
+        unseen = (self.source != torch.arange(T * T, device=self.source.device)).reshape(1, 1, T, T)
+        self.register_buffer("unseen", unseen if bool(unseen.any()) else None, persistent=False)
+
+    def _load_from_state_dict(self, *args, **kwargs):
+        super()._load_from_state_dict(*args, **kwargs)
+        self.note_unseen()
 
     @property
     def texels(self) -> int:
@@ -60,8 +72,9 @@ class BodyLayer(nn.Module):
     def plane_coordinates(self, origins: torch.Tensor, directions: torch.Tensor, body: tuple[torch.Tensor, torch.Tensor]
                           ) -> tuple[torch.Tensor, torch.Tensor]:
         """(R,2) where rays (R,3) meet the layer's plane, in texture coordinates (x right, y down, -1..1 over
-        EXTENT_M; beyond where the ray meets it beyond the extent), and (R,) whether they meet it (in front of the
-        camera, not grazing). body: the plane's origin (3,) and axes (3,3, columns x, y, normal) in the world."""
+        EXTENT_M, beyond it outside the extent, held to +-2; 2 where a ray misses), and (R,) whether they meet it
+        (in front of the camera, not grazing). body: the plane's origin (3,) and axes (3,3, columns x, y, normal) in
+        the world."""
         centre, axes = (t.to(directions) for t in body)
         along = directions @ axes  # (R,3): each direction along the plane's x, y and normal
         at = (origins - centre) @ axes  # where each origin stands in the plane's frame
@@ -81,11 +94,10 @@ class BodyLayer(nn.Module):
         neighbourhood (`source`, averaged over FILL_BLUR texels)."""
         T = self.texels
         filled = self.texture.reshape(1, 4, T * T)[:, :, self.source].reshape(1, 4, T, T)
-        unseen = (self.source != torch.arange(T * T, device=self.source.device)).reshape(1, 1, T, T)
-        if not bool(unseen.any()):
+        if self.unseen is None:
             return filled
         soft = F.avg_pool2d(filled, FILL_BLUR, stride=1, padding=FILL_BLUR // 2, count_include_pad=False)
-        return torch.where(unseen, soft, filled)
+        return torch.where(self.unseen, soft, filled)
 
     def over(self, background: torch.Tensor, origins: torch.Tensor, directions: torch.Tensor,
              body: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
@@ -107,9 +119,10 @@ class BodyLayer(nn.Module):
         T = self.texels
         if not seen.any():
             self.source.copy_(torch.arange(T * T))
-            return
-        _, (rows, cols) = distance_transform_edt(~seen, return_indices=True)
-        self.source.copy_(torch.as_tensor((rows * T + cols).ravel()))
+        else:
+            _, (rows, cols) = distance_transform_edt(~seen, return_indices=True)
+            self.source.copy_(torch.as_tensor((rows * T + cols).ravel()))
+        self.note_unseen()
 
     def seen_texels(self, xy: torch.Tensor, hit: torch.Tensor) -> np.ndarray:
         """(T,T) bool: the texels that texture coordinates xy (R,2) of rays that meet the plane fall on (within the

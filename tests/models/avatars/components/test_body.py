@@ -27,8 +27,8 @@ def test_a_ray_meets_the_plane_where_worked_by_hand():
 
 def test_the_plane_turns_with_the_body():
     """A body turned 90 degrees about the vertical faces the camera edge on: a ray straight at the neck grazes the
-    plane and misses it; turned 60 degrees, a ray 0.1 m right of the neck at the neck's depth meets the plane
-    0.1 / cos(60) = 0.2 m from the neck along the plane... measured along the ray to the turned plane."""
+    plane and misses it; turned 60 degrees, the same ray meets the plane at the neck's own point (the middle
+    column)."""
     layer = BodyLayer(texels=8)
     turn = lambda deg: torch.tensor([[math.cos(math.radians(deg)), 0, math.sin(math.radians(deg))], [0, 1.0, 0],
                                      [-math.sin(math.radians(deg)), 0, math.cos(math.radians(deg))]])
