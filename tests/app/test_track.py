@@ -685,7 +685,7 @@ def test_a_room_per_frame_stands_behind_each_frame(face_video, landmarker, tmp_p
     clear = img["opacity"] < 1e-4
     assert clear.mean() > 0.05
     # Where the primitives are clear: the room under the body layer (models/avatars/components/body.py), which
-    # starts at 1.8% opacity (a haze over the room where no training ray reaches it).
+    # starts at 1.8% opacity (3 steps here teach it little).
     origin, directions = image_rays(camera)
     with torch.no_grad():
         behind = avatar.body.over(torch.as_tensor(frame_room(f).reshape(-1, 3)), origin.expand_as(directions),

@@ -10,8 +10,8 @@ The body layer is a flat picture (RGB and opacity, TEXELS x TEXELS over EXTENT_M
 where the head model's face looks, turned with the torso (the root joint: models/tracking/torso.py). It lies behind
 the head's primitives and in front of the plate: each ray of the capture's camera meets its plane once, and what it
 shows there is composited over the plate before the primitives over both. It is trained with the avatar (the same
-photometric loss through the background the march composites). Texels no training frame saw take their nearest
-seen texels' values, averaged (`source`, made when the views are noted; FILL_BLUR): the clothes continue below the
+photometric loss through the background the march composites). Texels no training ray reached take their nearest
+taught texels' values, averaged (`source`, made when the views are noted; FILL_BLUR): the clothes continue below the
 lowest edge a training frame showed, so a frame drawn back shows more of the top, not the room. Only rays that carry
 the plate (the capture's camera) see it: a turntable or an orbit has no room behind the head, and no flat picture
 there.
@@ -30,14 +30,15 @@ EXTENT_M = (-0.45, 0.45, -0.6, 0.3)
 """The layer's extent in its plane, metres from the neck joint: (left, right, bottom, top) along the torso's x and
 y axes (7 mm a texel across, 7 down); beyond it the edge's texels continue."""
 START_OPACITY_LOGIT = -4.0
-"""The layer starts nearly clear (1.8% opaque), the plate showing through until the frames say otherwise. Where no
-training ray reaches (the room far from the person) it stays so: a 1.8% haze over the room there. Started at -9
-(clear) it learnt too slowly: `portrait_seaside` at 10 minutes 21.79 dB held out against 22.86 (docs/results.md)."""
+"""The layer starts nearly clear (1.8% opaque), the plate showing through until the frames say otherwise. A texel no
+training ray reaches (the room far from the person) shows its nearest taught texel (`source`), not this start's haze
+over the room. Started at -9 (clear) it learnt too slowly: `portrait_seaside` at 10 minutes 21.79 dB held out
+against 22.86 (docs/results.md)."""
 BODY_LR_SCALE = 4.0
 """The texture learns at this many times the networks' rate (at 5e-3 a texel moves 0.02 in logit a step)."""
 FILL_BLUR = 9
-"""Texels no frame saw show the mean of their nearest seen texels' values over this many texels a side (6 cm): the
-clothes' colour continues, not the last row's pattern drawn out in streaks."""
+"""Texels no training ray reached show the mean of their nearest taught texels' values over this many texels a side
+(6 cm): the clothes' colour continues, not the last row's pattern drawn out in streaks."""
 GRAZING = 1e-3
 """A ray whose direction's cosine with the plane's normal is below this misses it."""
 
@@ -124,17 +125,16 @@ class BodyLayer(nn.Module):
             self.source.copy_(torch.as_tensor((rows * T + cols).ravel()))
         self.note_unseen()
 
-    def seen_texels(self, xy: torch.Tensor, hit: torch.Tensor) -> np.ndarray:
-        """(T,T) bool: the texels that texture coordinates xy (R,2) of rays that meet the plane fall on (within the
-        extent)."""
+    def texel_centres(self, body: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
+        """(T*T,3) the world points of the texels' centres, rows from the top (the plane at body: its origin and axes,
+        as plane_coordinates)."""
         T = self.texels
-        inside = hit & (xy.abs() <= 1.0).all(-1)
-        cols = ((xy[inside, 0] + 1.0) * 0.5 * T).floor().clamp(0, T - 1).long()
-        rows = ((xy[inside, 1] + 1.0) * 0.5 * T).floor().clamp(0, T - 1).long()
-        seen = np.zeros((T, T), bool)
-        seen[rows.cpu().numpy(), cols.cpu().numpy()] = True
-        return seen
-
+        left, right, bottom, top = EXTENT_M
+        centre, axes = body
+        x = left + (torch.arange(T, dtype=axes.dtype, device=axes.device) + 0.5) * (right - left) / T
+        y = top - (torch.arange(T, dtype=axes.dtype, device=axes.device) + 0.5) * (top - bottom) / T
+        yy, xx = torch.meshgrid(y, x, indexing="ij")
+        return centre + xx.reshape(-1, 1) * axes[:, 0] + yy.reshape(-1, 1) * axes[:, 1]
 
 def body_frame(joints: torch.Tensor, root_rotation: torch.Tensor, joint_names: tuple[str, ...]
                ) -> tuple[torch.Tensor, torch.Tensor]:

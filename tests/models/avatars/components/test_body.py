@@ -1,5 +1,5 @@
 """The body layer (models/avatars/components/body.py): where rays meet its plane, what it composites, the texels it
-fills from the seen ones, and that the loss reaches its texture."""
+fills from the seen ones, its texels' centres, and that the loss reaches its texture."""
 
 import math
 
@@ -83,18 +83,29 @@ def test_unseen_texels_show_their_nearest_seen_ones_averaged():
     np.testing.assert_array_equal(layer.shown()[0, 0].detach().numpy(), values.astype(np.float32))
 
 
-def test_the_texels_a_frame_saw_and_the_loss_reaching_them():
+def test_the_texels_centres_and_the_loss_reaching_the_texels_a_ray_meets():
     layer = BodyLayer(texels=16)
+    left, right, bottom, top = EXTENT_M
+    neck = torch.tensor([0.0, -0.1, -1.0])
+    turn = torch.tensor([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # x along -z: turned 90 degrees
+    centres = layer.texel_centres((neck, turn)).reshape(16, 16, 3)
+    # texel (row 4, column 8): (left + 8.5 / 16 * 0.9, top - 4.5 / 16 * 0.9) in the plane, along x -> -z, y -> y
+    u, v = left + 8.5 / 16 * (right - left), top - 4.5 / 16 * (top - bottom)
+    torch.testing.assert_close(centres[4, 8], neck + torch.tensor([0.0, v, -u]), atol=1e-6, rtol=0)
+    # a ray through a texel's centre meets the plane there: texture coordinates at the texel's centre
+    at = layer.texel_centres(FACING_CAMERA).reshape(16, 16, 3)[4, 8]
+    xy, hit = layer.plane_coordinates(torch.zeros(1, 3), torch.nn.functional.normalize(at, dim=0)[None],
+                                      FACING_CAMERA)
+    assert bool(hit[0])
+    torch.testing.assert_close(xy[0], torch.tensor([2 * 8.5 / 16 - 1, 2 * 4.5 / 16 - 1]), atol=1e-5, rtol=0)
     ys = torch.linspace(-0.05, -0.3, 20)  # rays into the upper middle of the plane
     directions = torch.nn.functional.normalize(torch.stack([torch.zeros(20), ys, -torch.ones(20)], -1), dim=-1)
-    xy, hit = layer.plane_coordinates(torch.zeros(20, 3), directions, FACING_CAMERA)
-    seen = layer.seen_texels(xy, hit)
-    # v from +0.05 to -0.2 m at u = 0: rows (0.3 - 0.05) / 0.9 * 16 = 4.4 to 8.9 of column 8
-    assert np.argwhere(seen).tolist() == [[4, 8], [5, 8], [6, 8], [7, 8], [8, 8]]
     out = layer.over(torch.zeros(20, 3), torch.zeros(20, 3), directions, FACING_CAMERA)
     out.sum().backward()
     grad = layer.texture.grad[0].abs().sum(0)
+    # v from +0.05 to -0.2 m at u = 0: rows (0.3 - 0.05) / 0.9 * 16 = 4.4 to 8.9 about columns 7 and 8
     assert torch.isfinite(layer.texture.grad).all() and grad[:, 7:9].sum() > 0 and grad[:, :6].sum() == 0
+    assert grad[:3].sum() == 0 and grad[10:].sum() == 0
 
 
 def test_the_plane_stands_at_the_neck_turned_with_the_root():

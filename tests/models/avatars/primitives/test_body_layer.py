@@ -73,3 +73,52 @@ def test_the_body_layer_is_kept_with_the_weights(builtin_model):
     groups = avatar.parameter_groups()
     assert [g["lr_scale"] for g in groups][-1] > 1.0 and groups[-1]["params"] == [avatar.body.texture]
     assert sum(len(g["params"]) for g in groups) == len(list(avatar.parameters()))
+
+
+def test_texels_no_training_ray_reaches_show_the_taught_ones_not_their_start(builtin_model, tmp_path):
+    """note_body counts the texels whose centres fall on pixels training draws rays from (FrameSet.active_index),
+    not every pixel of the frame: here training draws from the image's left half alone. A texel whose centre only
+    the right half shows (the room far from the person, in a video) then shows its nearest taught texel's values;
+    taught clear, the room shows through it exactly, where its own untaught start (START_OPACITY_LOGIT) would lay a
+    haze over it."""
+    from models.avatars.components.body import START_OPACITY_LOGIT
+    from models.capture.dataset import CaptureSplit, Frame
+    from models.training.data import FrameSet
+    from render.rays import image_rays
+
+    torch.manual_seed(0)
+    avatar = PrimitivesAvatar(builtin_model, PrimitivesConfig(grid=8, voxels=4, width=16, body_layer=True), 1,
+                              np.zeros(3, np.float32))
+    cam = framing_camera(builtin_model.template, 0.0, 0.0, fov_y_deg=30.0, width_px=48, height_px=48, zoom=0.6)
+    frame = Frame(0, tmp_path / "0.png", np.linalg.inv(cam.view), np.zeros(0), Controls())
+    split = CaptureSplit(tmp_path, "train", "avatar-studio", 48, 48, cam.intrinsics, "builtin", np.zeros(0),
+                         np.zeros(3), None, [frame])
+    left = torch.as_tensor(np.flatnonzero(np.arange(48 * 48) % 48 < 24).astype(np.int32))
+    geo = avatar.geometry(Controls())
+    frames = FrameSet(split, torch.zeros(1, 48, 48, 3, dtype=torch.uint8), torch.zeros(3), torch.zeros(1, 3),
+                      torch.zeros(48 * 48, 3), torch.eye(3, dtype=torch.float64)[None], None, [geo], [left])
+    avatar.note_body(frames)
+    # Where each texel's centre lies in the image, by the pinhole worked here (camera looks down -z).
+    T = avatar.body.texels
+    at = avatar.body.texel_centres(geo.body).double().numpy() @ cam.view[:3, :3].T + cam.view[:3, 3]
+    fx, fy, cx, cy = cam.intrinsics
+    col, row = cx + fx * at[:, 0] / -at[:, 2], cy - fy * at[:, 1] / -at[:, 2]
+    in_image = (col >= 0) & (col < 48) & (row >= 0) & (row < 48)
+    taught = (in_image & (col < 24)).reshape(T, T)
+    only_right = (in_image & (col >= 24)).reshape(T, T)
+    assert taught.sum() > 100 and only_right.sum() > 100
+    own = torch.arange(T * T).reshape(T, T)
+    source = avatar.body.source.reshape(T, T)
+    assert torch.equal(source[taught], own[taught])  # a taught texel shows itself
+    assert not bool((source[only_right] == own[only_right]).any())
+    assert bool(taught.reshape(-1)[avatar.body.source].all())  # every texel shows a taught one
+    origin, directions = image_rays(cam)
+    right = torch.as_tensor(np.arange(48 * 48) % 48 >= 27)
+    room = torch.rand(48 * 48, 3)
+    with torch.no_grad():
+        assert abs(float(avatar.body.texture[0, 3, 0, 0]) - START_OPACITY_LOGIT) < 1e-9
+        hazy = avatar.body.over(room, origin.expand_as(directions), directions, geo.body)
+        assert (hazy[right] - room[right]).abs().max() > 5e-3  # before any teaching: the start's haze
+        avatar.body.texture[0, 3][torch.as_tensor(taught)] = -30.0  # the loss taught the room's texels clear
+        shown = avatar.body.over(room, origin.expand_as(directions), directions, geo.body)
+    np.testing.assert_allclose(shown[right].numpy(), room[right].numpy(), atol=1e-6)
