@@ -486,6 +486,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     def image_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         return np.ones((camera.height_px, camera.width_px), bool)
 
+    @property
+    def shows_body(self) -> bool:
+        """Whether the body layer shows in the capture's frames: the avatar has one and the capture a plate (a
+        tracked video's room) for the frames' rays to carry; a capture with a background colour never shows it."""
+        return self.body is not None and self.plate.camera is not None
+
     def training_pixels(self, camera: Camera, raster: Coverage) -> np.ndarray:
         """The mesh's pixels and those within `reach` of its largest primitive's half-size beyond them."""
         if not raster.hit.any():
@@ -493,7 +499,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         near = float(raster.depth[np.isfinite(raster.depth)].min())
         margin = self.cfg.reach * float(self.layout_half.max()) * camera.focal_px() / max(near, 1e-3)
         pixels = binary_dilation(raster.hit, iterations=max(1, int(np.ceil(margin))))
-        if self.body is not None:  # and every pixel below the mesh's lowest, where the body layer shows the clothes
+        if self.shows_body:  # and every pixel below the mesh's lowest, where the body layer shows the clothes
             lowest = int(np.nonzero(raster.hit.any(1))[0].max())
             pixels[max(lowest - int(np.ceil(margin)), 0):] = True
         return pixels
@@ -583,7 +589,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         edge cuts, which its few rays taught little (counted as seen wherever any pixel fell on it, a frame's last
         row reaching a tenth into such a texel left it near its start, and the clothes below it showed clear:
         `portrait_seaside`'s held-out frames 22.88 dB against 23.36 by centres, docs/results.md)."""
-        if self.body is None or getattr(frames, "split", None) is None:
+        if not self.shows_body or getattr(frames, "split", None) is None:
             return
         T = self.body.texels
         seen = np.zeros(T * T, bool)

@@ -93,6 +93,7 @@ def test_texels_no_training_ray_reaches_show_the_taught_ones_not_their_start(bui
     frame = Frame(0, tmp_path / "0.png", np.linalg.inv(cam.view), np.zeros(0), Controls())
     split = CaptureSplit(tmp_path, "train", "avatar-studio", 48, 48, cam.intrinsics, "builtin", np.zeros(0),
                          np.zeros(3), None, [frame])
+    avatar.plate.note(np.zeros((48, 48, 3), np.float32), cam)  # a tracked video's room: the layer shows
     left = torch.as_tensor(np.flatnonzero(np.arange(48 * 48) % 48 < 24).astype(np.int32))
     geo = avatar.geometry(Controls())
     frames = FrameSet(split, torch.zeros(1, 48, 48, 3, dtype=torch.uint8), torch.zeros(3), torch.zeros(1, 3),
@@ -122,3 +123,30 @@ def test_texels_no_training_ray_reaches_show_the_taught_ones_not_their_start(bui
         avatar.body.texture[0, 3][torch.as_tensor(taught)] = -30.0  # the loss taught the room's texels clear
         shown = avatar.body.over(room, origin.expand_as(directions), directions, geo.body)
     np.testing.assert_allclose(shown[right].numpy(), room[right].numpy(), atol=1e-6)
+
+
+def test_the_rows_below_the_mesh_train_only_where_the_capture_has_a_plate(builtin_model):
+    """Training draws rays from every row below the mesh's lowest for the body layer only where the frames' rays
+    carry a plate (a tracked video's room): a capture with a background colour never shows the layer."""
+    from render.gl.context import GLContext
+    from render.gl.raster import Rasterizer
+
+    avatar = two_colour_avatar(builtin_model)
+    cam = framing_camera(builtin_model.template, 0.0, 0.0, fov_y_deg=30.0, width_px=48, height_px=48, zoom=0.5)
+    gl = GLContext.headless()
+    try:
+        raster = Rasterizer(gl)
+        cover = raster.coverage(builtin_model.template, builtin_model.triangles, cam)
+        raster.release()
+    finally:
+        gl.release()
+    lowest = int(np.nonzero(cover.hit.any(1))[0].max())
+    assert lowest < 40
+    assert not avatar.shows_body
+    plain = avatar.training_pixels(cam, cover)
+    assert plain[lowest].any() and not plain[-1].any()  # the mesh's neighbourhood alone
+    avatar.plate.note(np.zeros((48, 48, 3), np.float32), cam)
+    assert avatar.shows_body
+    with_plate = avatar.training_pixels(cam, cover)
+    partial = ~with_plate.all(1)  # the rows above the band: as without the plate
+    assert with_plate[lowest:].all() and partial.sum() >= 16 and np.array_equal(with_plate[partial], plain[partial])
