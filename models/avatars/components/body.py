@@ -136,6 +136,7 @@ class BodyLayer(nn.Module):
         yy, xx = torch.meshgrid(y, x, indexing="ij")
         return centre + xx.reshape(-1, 1) * axes[:, 0] + yy.reshape(-1, 1) * axes[:, 1]
 
+
 def body_frame(joints: torch.Tensor, root_rotation: torch.Tensor, joint_names: tuple[str, ...]
                ) -> tuple[torch.Tensor, torch.Tensor]:
     """The layer's plane for a posed frame: its origin at the neck joint (the root where a model has no neck), its

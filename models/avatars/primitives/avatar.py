@@ -584,11 +584,11 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
     def note_body(self, frames) -> None:
         """The body layer's texels whose centres some training frame shows on a pixel training draws rays from (its
         `active_index`; every pixel where the frames keep none); the rest show their nearest (BodyLayer.note_seen).
-        A texel no training ray reaches (the room far from the person) so takes the values of the nearest one the
-        loss taught, not its own untaught start (a haze of START_OPACITY_LOGIT over the room); so does one a frame's
-        edge cuts, which its few rays taught little (counted as seen wherever any pixel fell on it, a frame's last
-        row reaching a tenth into such a texel left it near its start, and the clothes below it showed clear:
-        `portrait_seaside`'s held-out frames 22.88 dB against 23.36 by centres, docs/results.md)."""
+        A texel no training ray reaches (the room far from the person) so shows the nearest one the loss taught, not
+        its own untaught start (a haze of START_OPACITY_LOGIT over the room). By centres, not by any pixel falling on
+        a texel: a texel a frame's edge cuts a tenth into is taught little, and counted as seen it stood near its
+        start and the clothes' fill below it showed clear (`portrait_seaside`'s held-out frames, the avatar noted
+        again: 22.88 dB by any pixel, 23.36 by centres; docs/results.md)."""
         if not self.shows_body or getattr(frames, "split", None) is None:
             return
         T = self.body.texels
