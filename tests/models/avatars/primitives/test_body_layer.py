@@ -125,21 +125,16 @@ def test_texels_no_training_ray_reaches_show_the_taught_ones_not_their_start(bui
     np.testing.assert_allclose(shown[right].numpy(), room[right].numpy(), atol=1e-6)
 
 
-def test_the_rows_below_the_mesh_train_only_where_the_capture_has_a_plate(builtin_model):
+def test_the_rows_below_the_mesh_train_only_where_the_capture_has_a_plate(builtin_model, gl):
     """Training draws rays from every row below the mesh's lowest for the body layer only where the frames' rays
     carry a plate (a tracked video's room): a capture with a background colour never shows the layer."""
-    from render.gl.context import GLContext
     from render.gl.raster import Rasterizer
 
     avatar = two_colour_avatar(builtin_model)
     cam = framing_camera(builtin_model.template, 0.0, 0.0, fov_y_deg=30.0, width_px=48, height_px=48, zoom=0.5)
-    gl = GLContext.headless()
-    try:
-        raster = Rasterizer(gl)
-        cover = raster.coverage(builtin_model.template, builtin_model.triangles, cam)
-        raster.release()
-    finally:
-        gl.release()
+    raster = Rasterizer(gl)
+    cover = raster.coverage(builtin_model.template, builtin_model.triangles, cam)
+    raster.release()
     lowest = int(np.nonzero(cover.hit.any(1))[0].max())
     assert lowest < 40
     assert not avatar.shows_body
