@@ -582,8 +582,8 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
 
     @torch.no_grad()
     def note_body(self, frames) -> None:
-        """The body layer's texels whose centres some training frame shows on a pixel training draws rays from (its
-        `active_index`; every pixel where the frames keep none); the rest show their nearest (BodyLayer.note_seen).
+        """The body layer's texels whose centres some training frame shows on a pixel training draws rays from (the
+        FrameSet's `active_index`); the rest show their nearest (BodyLayer.note_seen).
         A texel no training ray reaches (the room far from the person) so shows the nearest one the loss taught, not
         its own untaught start (a haze of START_OPACITY_LOGIT over the room). By centres, not by any pixel falling on
         a texel: a texel a frame's edge cuts a tenth into is taught little, and counted as seen it stood near its
@@ -593,16 +593,13 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
             return
         T = self.body.texels
         seen = np.zeros(T * T, bool)
-        active = getattr(frames, "active_index", None)
-        for k, (frame, geo) in enumerate(zip(frames.split.frames, frames.geometry, strict=True)):
+        for frame, geo, active in zip(frames.split.frames, frames.geometry, frames.active_index, strict=True):
             if geo.body is None:
                 continue
             camera = frame_camera(frames.split, frame)
             H, W = camera.height_px, camera.width_px
-            trained = np.ones(H * W, bool)
-            if active is not None:
-                trained[:] = False
-                trained[active[k].numpy()] = True
+            trained = np.zeros(H * W, bool)
+            trained[active.numpy()] = True
             x, y, depth = project(camera, self.body.texel_centres(geo.body).double().cpu().numpy())
             col, row = np.floor(x), np.floor(y)
             inside = (depth > 0) & (col >= 0) & (col < W) & (row >= 0) & (row < H)
