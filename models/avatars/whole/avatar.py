@@ -15,7 +15,8 @@ inside where that point faces a direction within the cone, widened by a margin t
 cone (SWEEP_DEG at its rim, 0 from VIEW_FADE_DEG's end), the outside where it faces further round, and both rendered
 and their buffers mixed by a smoothstep over FACING_FADE_DEG between. So as the camera turns away from what the
 video saw, the boundary sweeps across the head from its far side to the cone's rim, and only the rays near it
-render twice: a frame costs little more than one part does."""
+render twice: a frame costs little more than one part does. And the inside's share of every ray falls with the
+camera's own angle beyond the cone (SEEN_FADE_DEG): from 30 degrees beyond, the frame is the outside's alone."""
 
 from __future__ import annotations
 
@@ -55,6 +56,13 @@ FACING_FADE_DEG = (0.0, 20.0)
 the synthetic person 25-75 degrees round. Measured against (10, 40): on the synthetic
 person seen from the front 23.62 / 21.17 / 24.01 dB at 45 / 90 / 135 degrees against 23.08 / 20.73 / 23.78, d3's
 held-out turns 25.23 against 25.21, and by eye fewer of the inside's speckles on the cheeks at 30-60 degrees."""
+SEEN_FADE_DEG = (15.0, 30.0)
+"""Over this angle of the camera beyond the captured cone the inside's share of every ray falls from all to none
+(smoothstep, times the facing's): the inside's volume draws a clean surface only from about the views it trained
+from, and from further round its front is the video's picture smeared through the volume. By the facing alone the
+face's front stayed the inside's from every camera, mixed with the outside's head where the cheeks turn away, and
+the two faces (the outside's features sit a little elsewhere) showed doubled eyes and noses 30 to 60 degrees round
+on real people's whole heads (the README's turntables). Measured: docs/results.md, "Beyond the captured views"."""
 EPS = 1e-3
 """Weights within this of 0 or 1 render one model only."""
 _AHEAD = ThreadPoolExecutor(1, thread_name_prefix="whole-outside")
@@ -193,7 +201,7 @@ class WholeHeadAvatar(Avatar):
         return {"model": self.name, "effects": list(self.effects), "inside": part(self.inside),
                 "outside": part(self.outside),
                 "blend": {"view_fade_deg": list(VIEW_FADE_DEG), "sweep_deg": SWEEP_DEG,
-                          "facing_fade_deg": list(FACING_FADE_DEG)}}
+                          "facing_fade_deg": list(FACING_FADE_DEG), "seen_fade_deg": list(SEEN_FADE_DEG)}}
 
     @classmethod
     def buffer_names(cls, meta: dict) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -280,8 +288,8 @@ class WholeHeadAvatar(Avatar):
         """(R,) how much of each ray the inside renders (module docstring): 1 where the ray's camera stands within
         the captured cone (seen from the head's middle, as the inside's decoder reads its view); beyond, 1 where the
         ray meets the head where it faces into the cone widened by the camera's margin (SWEEP_DEG, shrinking over
-        VIEW_FADE_DEG), falling to 0 over FACING_FADE_DEG beyond that; 1 everywhere for an inside that kept no cone
-        (a capture from all round)."""
+        VIEW_FADE_DEG), falling to 0 over FACING_FADE_DEG beyond that, and all of it times the camera's fall over
+        SEEN_FADE_DEG; 1 everywhere for an inside that kept no cone (a capture from all round)."""
         views = self.inside.views
         if views.axis is None:
             return rays.origins.new_ones(len(rays.origins))
@@ -299,7 +307,8 @@ class WholeHeadAvatar(Avatar):
         facing = F.normalize(sphere_points(rays.origins, rays.directions, centre, geometry.radius) - centre, dim=-1)
         side = beyond_cone_deg(facing @ R, axis, cos_half)
         margin = SWEEP_DEG * smooth_fall(view, *VIEW_FADE_DEG)
-        return torch.where(view <= 0.0, 1.0, smooth_fall(side - margin, *FACING_FADE_DEG))
+        seen = smooth_fall(side - margin, *FACING_FADE_DEG) * smooth_fall(view, *SEEN_FADE_DEG)
+        return torch.where(view <= 0.0, 1.0, seen)
 
     def render_rays(self, rays: Rays, geometry: WholeGeometry, frame: int | None,
                     generator: torch.Generator | None = None, training: bool = False, options: Any = None
