@@ -38,6 +38,10 @@ KEY_SCALE_FLOOR = 0.01
 frames never moved would otherwise blow any change of it up into a distance that outweighs all the rest."""
 
 
+GAZE_KEYS = slice(9, 15)
+"""The eyes' rotations (left, then right) in a control_key: after the root's, the neck's and the jaw's, three each."""
+
+
 def frame_code(embedding: torch.nn.Embedding, frame: int | None, weights: torch.Tensor | None = None
                ) -> torch.Tensor:
     """(1,C) a training frame's code; for new controls (frame None) the training frames' codes blended by
@@ -137,6 +141,20 @@ class CodeKeys(Kept):
             self.register_buffer("time_scale", None)
         else:
             self.keep("time_scale", torch.tensor(float(scale), device=self.keys.device))
+
+    def trained_range(self, columns: slice) -> tuple[np.ndarray, np.ndarray] | None:
+        """The least and the most the training frames' controls took in these columns of their keys (control_key's
+        units: radians, expression weights); None without keys.
+
+        >>> k = CodeKeys(0)
+        >>> k.note([Controls(root=np.array([0.1, 0.0, 0.0])), Controls(root=np.array([0.3, 0.0, 0.0]))])
+        >>> [[round(float(x), 3) for x in v] for v in k.trained_range(slice(0, 3))]
+        [[0.1, 0.0, 0.0], [0.3, 0.0, 0.0]]
+        """
+        if self.keys is None:
+            return None
+        raw = (self.keys[:, columns] * self.scale[columns]).cpu().numpy()
+        return raw.min(0), raw.max(0)
 
     def weights(self, controls: Controls, time_s: float | None = None) -> torch.Tensor | None:
         """(N,) the training frames' share of the codes for these controls; None without keys (an older avatar,

@@ -28,7 +28,7 @@ from torch import nn
 from models.avatars.base import BACKGROUND, Avatar, RayOutput, TrainingBatch
 from models.avatars.components import losses
 from models.avatars.components.body import BODY_LR_SCALE, BodyLayer, body_frame
-from models.avatars.components.codes import CodeKeys, frame_code, left_out_weights
+from models.avatars.components.codes import GAZE_KEYS, CodeKeys, frame_code, left_out_weights
 from models.avatars.components.plate import Plate
 from models.avatars.components.poses import PoseCorrected
 from models.avatars.components.rigid import head_pose, head_turn, turned_on_body
@@ -441,6 +441,9 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         cond[:n] = controls.expression[:n]
         cond[E:E + 3], cond[E + 3:E + 6] = controls.rotation("jaw"), controls.rotation("neck")
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
+        held = self.code_keys.trained_range(GAZE_KEYS)
+        if held is not None:  # the decoder reads the gaze everywhere (the eyes turn with their joints regardless):
+            gaze = np.clip(gaze, *held).astype(np.float32)  # beyond what training showed it speckled the whole face
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
         body = None if self.body is None else body_frame(
             joints[1], rotation_matrix_from_axis_angle(torch.as_tensor(controls.root, dtype=v.dtype)),

@@ -151,3 +151,25 @@ def test_the_times_and_the_choice_are_saved_and_old_keys_load_without_them():
     untimed = CodeKeys(num_expression=1)
     untimed.note(controls, [0.5] * 11 + [None])  # a frame without a time: no times kept
     assert untimed.times is None
+
+
+def test_the_decoder_reads_no_gaze_beyond_what_the_training_frames_showed():
+    """The primitives' decoder reads the gaze over the whole head: a gaze beyond every training frame's (a capture's
+    tracked eyes are often all a little off 0, so the sliders' rest is beyond them) is read as the nearest one
+    training showed, each eye's each axis held to the frames' least and most; the eyes themselves still turn with
+    their joints. Worked by hand: frames' left eyes 0.1 to 0.3 about x and -0.05 to 0.05 about y, right eyes 0.2 and
+    0 to 0.1; asked for left (-0.5, 0.4), right (0.15, 0.08), the decoder reads left (0.1, 0.05), right (0.2, 0.08)."""
+    avatar, _ = load_avatar(DEMO)
+    n = avatar.n_frames
+    frames = [Controls(gaze_left=np.array([0.1 + 0.2 * k / (n - 1), 0.05 * (-1) ** k, 0.0], np.float32),
+                       gaze_right=np.array([0.2, 0.1 * k / (n - 1), 0.0], np.float32)) for k in range(n)]
+    asked = Controls(gaze_left=np.array([-0.5, 0.4, 0.0], np.float32),
+                     gaze_right=np.array([0.15, 0.08, 0.0], np.float32))
+    before = avatar.geometry(asked)  # no keys yet: read as asked
+    torch.testing.assert_close(before.gaze[0], torch.tensor([-0.5, 0.4, 0.0, 0.15, 0.08, 0.0]))
+    avatar.code_keys.note(frames)
+    held = avatar.geometry(asked)
+    torch.testing.assert_close(held.gaze[0], torch.tensor([0.1, 0.05, 0.0, 0.2, 0.08, 0.0]))
+    torch.testing.assert_close(held.posed, before.posed)  # the mesh, eyes and all, posed as asked
+    inside = avatar.geometry(frames[3])
+    torch.testing.assert_close(inside.gaze[0], torch.as_tensor(np.r_[frames[3].gaze_left, frames[3].gaze_right]))
