@@ -443,7 +443,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         gaze = np.concatenate([controls.rotation(j) for j in GAZE_JOINTS]).astype(np.float32)
         held = self.code_keys.trained_range(GAZE_KEYS)
         if held is not None:  # the decoder reads the gaze everywhere (the eyes turn with their joints regardless):
-            gaze = np.clip(gaze, *held).astype(np.float32)  # beyond what training showed it speckled the whole face
+            gaze = np.clip(gaze, *held).astype(np.float32)  # beyond what training showed, the eyes came out smeared
         as_t = lambda a: torch.as_tensor(a)[None].to(v.device)
         body = None if self.body is None else body_frame(
             joints[1], rotation_matrix_from_axis_angle(torch.as_tensor(controls.root, dtype=v.dtype)),
