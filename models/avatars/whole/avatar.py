@@ -16,7 +16,8 @@ cone (SWEEP_DEG at its rim, 0 from VIEW_FADE_DEG's end), the outside where it fa
 and their buffers mixed by a smoothstep over FACING_FADE_DEG between. So as the camera turns away from what the
 video saw, the boundary sweeps across the head from its far side to the cone's rim, and only the rays near it
 render twice: a frame costs little more than one part does. And the inside's share of every ray falls with the
-camera's own angle beyond the cone (SEEN_FADE_DEG): from 30 degrees beyond, the frame is the outside's alone."""
+camera's own angle beyond the cone (SEEN_FADE_DEG): from 15 degrees beyond, every ray the inside shows renders both,
+and from 30 the frame is the outside's alone."""
 
 from __future__ import annotations
 
