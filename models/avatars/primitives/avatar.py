@@ -48,7 +48,7 @@ from models.avatars.primitives.chart import (
 )
 from models.avatars.primitives.decoder import SlabDecoder
 from models.avatars.primitives.layout import primitive_layout, surface_frames
-from models.avatars.primitives.seen import edge_fade, inside_share
+from models.avatars.primitives.seen import edge_fade, eye_height_m, height_fade, inside_share, voxel_heights
 from models.avatars.rendering import RenderOptions
 from models.capture.frames import frame_camera
 from models.head.controls import Controls
@@ -125,6 +125,11 @@ class PrimitivesConfig:
     stretch_at_most: Annotated[float, Range(1, 1000)] | None = None
     """Shown, a primitive's longest axis is at most this many times its shortest (None: no limit; each grows up to
     e^3 times its place's size in any case). Training leaves its boxes as the decoder makes them."""
+    neck_fade: bool = False
+    """Shown, the density fades out down the neck by each voxel's height in the head's own frame (seen.py
+    NECK_FADE_M below the eyes): the neck ends in a soft edge from every side, not in its lowest boxes' faces. A whole
+    head's outside, which shows where the video did not look (whole/avatar.py); training decodes as the decoder makes
+    it, and an avatar shown in the video's own views keeps the neck and shoulders the frames showed."""
     opacity_window: bool = False
     """Each primitive's opacity is weighted by MVP's window exp(-8 (x^8 + y^8 + z^8)) over its box (x, y, z in
     [-1, 1]): 1 in its middle, 0.26 at 0.8 of the way out, nothing on its faces, so no box's edge shows from any
@@ -685,6 +690,10 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         fade = self.slab_fade()
         if fade is not None:  # nothing where the capture never looked (seen.py)
             density = density * fade.to(density)
+        eyes = eye_height_m(self.head_model) if self.cfg.neck_fade and not training else None
+        if eyes is not None:  # a soft end to the neck (seen.py)
+            density = density * height_fade(voxel_heights(centres, rotations, half, self.cfg.voxels, geo.rotation,
+                                                          geo.translation), eyes).to(density)
         colour = torch.sigmoid(colour_raw)
         extras = self.shown_channels(lit) if extras is None else extras
         if training:  # no loss reads the normals or the visibility: the march composites colour alone

@@ -176,10 +176,15 @@ class WholeHeadAvatar(Avatar):
         super().__init__(inside.head_model, inside.n_frames, inside.background_colour())
         self.inside = inside
         self.outside = outside
-        # The outside's display stops sooner (training composites every candidate) and keeps its boxes within
-        # OUTSIDE_STRETCH; the inside renders as its own folder does.
+        # The outside's display stops sooner (training composites every candidate), keeps its boxes within
+        # OUTSIDE_STRETCH and, where the person has a body below the head (the inside's body layer: a video's
+        # shoulders and clothes), fades its neck out under the chin (PrimitivesConfig.neck_fade). No frame saw that
+        # body from behind: there the prior's neck came out as a stump in blocks of the collar's colours, ending in
+        # its lowest boxes' faces. A capture with no body (a synthetic head, whose mesh is the whole person) keeps
+        # the neck to the mesh's end: faded, the synthetic person's frames 45 to 180 degrees round lost 1.9-8.2 dB
+        # (docs/results.md). The inside renders as its own folder does.
         outside.cfg = replace(outside.cfg, stop_below=max(outside.cfg.stop_below, OUTSIDE_STOP_BELOW),
-                              stretch_at_most=OUTSIDE_STRETCH)
+                              stretch_at_most=OUTSIDE_STRETCH, neck_fade=inside.body is not None)
         with torch.no_grad():  # one room behind both: the inside's
             outside.background.copy_(inside.background)
 

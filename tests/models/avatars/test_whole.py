@@ -312,3 +312,54 @@ def test_the_outside_stops_its_rays_at_a_hundredth_of_their_light(whole):
     finally:
         whole.outside.cfg = kept
     assert 0.0 < np.abs(frame - deep).max() <= OUTSIDE_STOP_BELOW + 1e-6  # 0.003 here: rays did stop sooner
+
+
+def test_the_outsides_neck_ends_in_a_soft_edge_below_a_body():
+    """Where the inside has a body layer (a video's shoulders), a whole head's outside shows its density times a
+    smooth step down the neck in the head's own frame (all of it to NECK_FADE_M[0] below the eyes, none from
+    NECK_FADE_M[1]), where the head is turned and nodded too; the prior on its own, training's decode and a whole head
+    with no body keep every voxel's. Each voxel's point made one by one here, from its box."""
+    from dataclasses import replace
+
+    from models.avatars.primitives.seen import NECK_FADE_M, eye_height_m
+
+    head = load_builtin()
+    inside = PrimitivesAvatar.for_capture(head, 4, np.zeros(3, np.float32), (), None,
+                                          PrimitivesConfig(grid=8, voxels=2, width=16, body_layer=True))
+    torch.manual_seed(3)
+    alone = PriorAvatar.for_capture(head, 1, np.zeros(3, np.float32), (), None, replace(SMALL, voxels=4))
+    eyes = eye_height_m(head)
+    joints = head.J_regressor @ head.template
+    assert eyes == pytest.approx(0.5 * (joints[3, 1] + joints[4, 1]))  # eye_l, eye_r
+    controls = Controls(neck=np.array([0.3, 0.5, 0.1], np.float32), translation=np.array([0.01, -0.02, 0.03]))
+    geo = alone.geometry(controls)
+    eye = torch.tensor([0.0, 0.0, 1.0])
+    with torch.no_grad():
+        own, _ = alone.decode(geo, alone.codes(None), eye)
+        torch.manual_seed(4)  # training's decode draws its expression code
+        trained, _ = alone.decode(geo, alone.codes(None), eye, training=True)
+        outside = WholeHeadAvatar(inside, alone).outside
+        shown, _ = outside.decode(geo, outside.codes(None), eye)
+        torch.manual_seed(4)
+        taught, _ = outside.decode(geo, outside.codes(None), eye, training=True)
+    M = shown.density.shape[1]
+    assert torch.equal(taught.density, trained.density)
+    expected = torch.empty_like(shown.density)
+    R, t = geo.rotation.double(), geo.translation.double()
+    for p in range(len(shown.centres)):
+        for z, y, x in itertools.product(range(M), repeat=3):
+            local = torch.tensor([x, y, z], dtype=torch.float64) * 2.0 / (M - 1) - 1.0
+            point = shown.centres[p].double() + shown.rotations[p].double() @ (shown.half_sizes[p].double() * local)
+            height = float((R.T @ (point - t))[1])
+            s = min(max((height - (eyes - NECK_FADE_M[1])) / (NECK_FADE_M[1] - NECK_FADE_M[0]), 0.0), 1.0)
+            expected[p, z, y, x] = s * s * (3.0 - 2.0 * s)
+    # The outside's shown boxes are within OUTSIDE_STRETCH, the prior's own as decoded: the same density grids
+    # before the fade, so the fade is their ratio.
+    torch.testing.assert_close(shown.density, own.density * expected, rtol=1e-5, atol=1e-6)
+    assert float((expected == 1).float().mean()) > 0.5 and float(expected.min()) < 0.3  # the head kept, the neck not
+    assert 0 < int(((expected > 0) & (expected < 1)).sum())  # a soft edge, not a cut
+    bodiless = PrimitivesAvatar.for_capture(head, 4, np.zeros(3, np.float32), (), None,
+                                            PrimitivesConfig(grid=8, voxels=2, width=16))
+    with torch.no_grad():
+        kept, _ = WholeHeadAvatar(bodiless, alone).outside.decode(geo, alone.codes(None), eye)
+    torch.testing.assert_close(kept.density, own.density, rtol=0, atol=0)
