@@ -99,6 +99,17 @@ class Avatar(nn.Module, ABC):
     """Whether the pixels it renders (image_pixels) and their rays read the posed guide mesh's raster; False: every
     pixel's ray, no mesh rasterized (the primitives' march finds the rays that meet a primitive itself)."""
 
+    @property
+    def trains_on_surface(self) -> bool:
+        """Whether training's rays carry their distance to the guide mesh (training_surface): a frame's raster is
+        then kept (N,H,W); by default where the avatar reads its raster."""
+        return self.reads_raster
+
+    def training_surface(self, raster: Any) -> np.ndarray:
+        """(H,W) the distance along each pixel's ray to the guide mesh that training's rays carry (Rays.surface_t),
+        from a frame's raster (render/gl/raster.py Raster): inf where none. By default the raster's own."""
+        return raster.distance
+
     @classmethod
     def default_config(cls, tracked: bool) -> Any:
         """The config a new avatar of a capture gets (None: for_capture's own defaults); tracked: a tracked video,

@@ -123,9 +123,9 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
     dirs_cam = (d / np.linalg.norm(d, axis=-1, keepdims=True)).astype(np.float32)
     H, W = dirs_cam.shape[:2]
     images = torch.empty(n, H, W, 4 if any(has_alpha(f.image_path) for f in split.frames) else 3, dtype=torch.uint8)
-    # A model that reads no raster (its rays need no distance to the mesh: Avatar.reads_raster) gets the coverage
-    # alone, as the second pass does: half the time, and no (N,H,W) distances kept (256 KB a frame at 256 px).
-    surf = torch.empty(n, H, W) if avatar.reads_raster else None
+    # A model whose training rays need no distance to the mesh (Avatar.trains_on_surface) gets the coverage alone,
+    # as the second pass does: half the time, and no (N,H,W) distances kept (256 KB a frame at 256 px).
+    surf = torch.empty(n, H, W) if avatar.trains_on_surface else None
     has_masks = n > 0 and all("mask_path" in f.extra for f in split.frames)
     geos, cameras, reach = [], [], []
     raster = Rasterizer(gl)
@@ -142,7 +142,7 @@ def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
             mask = load_mask(f.extra["mask_path"])
             reach.append(foreground_reach_m(r.hit, r.depth, mask, cam.focal_px()))
         if surf is not None:
-            surf[k] = torch.from_numpy(r.distance.astype(np.float32))
+            surf[k] = torch.from_numpy(avatar.training_surface(r).astype(np.float32))
         geos.append(geo)
         cameras.append(cam)
         if on_frame is not None:

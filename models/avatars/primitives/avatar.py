@@ -43,6 +43,7 @@ from models.avatars.primitives.chart import (
     chart_sampler,
     expression_share,
     eye_cells,
+    face_vertices,
     geometry_map,
     texel_points,
 )
@@ -125,6 +126,11 @@ class PrimitivesConfig:
     stretch_at_most: Annotated[float, Range(1, 1000)] | None = None
     """Shown, a primitive's longest axis is at most this many times its shortest (None: no limit; each grows up to
     e^3 times its place's size in any case). Training leaves its boxes as the decoder makes them."""
+    face_depth: Annotated[float, Range(0)] = 0.0
+    """The weight of the face's depth term (a tracked video's): on each training ray that meets the face of the guide
+    mesh (chart.face_vertices' triangles), the share of its light composited further than FACE_DEPTH_MARGIN_M in
+    front of or behind the mesh, so the face is a surface about the tracked mesh and not the video's picture smeared
+    in depth; 0: none (no raster kept for training)."""
     neck_fade: bool = False
     """Shown, the density fades out down the neck by each voxel's height in the head's own frame (seen.py
     NECK_FADE_M below the eyes): the neck ends in a soft edge from every side, not in its lowest boxes' faces. A whole
@@ -169,6 +175,11 @@ class PrimitivesConfig:
         if self.code_off_face and self.code_dim == 0:
             raise ValueError("code_off_face needs a per-frame code (code_dim > 0)")
 
+
+FACE_DEPTH_MARGIN_M = 0.015
+"""The face's depth term (PrimitivesConfig.face_depth) leaves the light composited within this of the tracked mesh
+along the ray alone: the tracked surface's own error (a few millimetres), a fringe on the forehead and glasses'
+rims (about 1.5 cm before the eyes' surface) lie within it."""
 
 VIDEO_SETTINGS = {"front": 2.0, "expression_maps": True, "global_expression": False, "opacity_window": True,
                   "keep_size": True, "body_layer": True}
@@ -731,18 +742,41 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return geo.decoded[lit, extras]
 
     # ---- rays ------------------------------------------------------------------------------------------
+    @property
+    def trains_on_surface(self) -> bool:
+        return self.cfg.face_depth > 0
+
+    def training_surface(self, raster) -> np.ndarray:
+        """The distance to the guide mesh on the pixels where it shows the face (face_vertices' triangles), inf
+        elsewhere: the crown and the back of the mesh lie under the hair, not on it."""
+        face = getattr(self, "_face_triangles", None)
+        if face is None:
+            face = self._face_triangles = face_vertices(self.head_model)[np.asarray(self.head_model.triangles)].all(1)
+        on = (raster.triangle >= 0) & face[np.maximum(raster.triangle, 0)]
+        return np.where(on, raster.distance, np.inf)
+
+    def face_band(self, rays: Rays) -> tuple[torch.Tensor, torch.Tensor]:
+        """(lo, hi) (R,) along each ray, FACE_DEPTH_MARGIN_M either side of the mesh's face where the ray meets it
+        (Rays.surface_t), everything where it does not."""
+        t = rays.surface_t
+        on = torch.isfinite(t)
+        inf = torch.full_like(t, float("inf"))
+        return torch.where(on, t - FACE_DEPTH_MARGIN_M, -inf), torch.where(on, t + FACE_DEPTH_MARGIN_M, inf)
+
     def render_rays(self, rays: Rays, geometry: PrimitivesGeometry, frame: int | None,
                     generator: torch.Generator | None = None, training: bool = False,
-                    options: RenderOptions | None = None, lit: bool = False) -> RayOutput:
+                    options: RenderOptions | None = None, lit: bool = False,
+                    band: tuple[torch.Tensor, torch.Tensor] | None = None) -> RayOutput:
         """rgb, opacity and depth of R rays marched through the primitives they meet (one pinhole's rays are
-        binned in screen tiles, march.candidate_lists). lit: decoded with every texel lit (inspection)."""
+        binned in screen tiles, march.candidate_lists). lit: decoded with every texel lit (inspection). band
+        (training): march's, the march output's off_band then each ray's light outside it."""
         if self.pose_corrections is not None and frame is not None:
             rays = self.corrected_rays(rays, geometry, frame)
         code = self.training_code(frame, generator) if training and frame is not None else None
         prims, offsets = self.decoded(geometry, frame, rays.origins.mean(0), training, lit, code, options)
         behind = self.behind(rays, geometry)
         if training:
-            out, _ = dispatch.march_rays(rays.origins, rays.directions, behind, prims, self.cfg.samples)
+            out, _ = dispatch.march_rays(rays.origins, rays.directions, behind, prims, self.cfg.samples, band=band)
         else:
             out = self.display_march(rays.origins, rays.directions, behind, prims, options)
         buffers = {"rgb": out.rgb, "opacity": out.opacity, "depth": out.depth}
@@ -775,9 +809,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return "" if self.displayed_by is None else str(self.displayed_by)
 
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
-        out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True)
+        band = self.face_band(batch.rays) if self.cfg.face_depth > 0 else None
+        out = self.render_rays(batch.rays, batch.geometry, batch.frame, batch.generator, training=True, band=band)
         terms = {"photometric": losses.photometric(out.buffers["rgb"], batch.target), **self.regularisers(out),
                  "codes": self.cfg.codes * losses.code_l2(self.codes(batch.frame))}
+        if band is not None:  # the face's light composited off the tracked surface (its share, over every ray)
+            terms["face_depth"] = self.cfg.face_depth * out.internals[2].off_band.mean()
         if self.pose_corrections is not None:
             terms["pose_corrections"] = self.cfg.correction_prior * self.pose_correction_term(batch.frame)
         if self.expression_corrections is not None:

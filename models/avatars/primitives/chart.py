@@ -97,13 +97,18 @@ EXPRESSION_REACH_M = 3e-3
 on ICT's head 40% of the vertices (at 1 mm 65%, and every 8 x 8 cell of the front-2 chart touches one)."""
 
 
-def expression_share(model: HeadModel, size: int, cells: int, front: float = 0.0) -> torch.Tensor:
-    """(1,1,cells,cells): the share of each chart cell's texels that lie on the part of the head the controls move
-    (a triangle whose vertices some expression weight of 1 moves further than EXPRESSION_REACH_M, or that the jaw
-    or an eye carries); 0 on the crown, the back and the sides of the neck."""
+def face_vertices(model: HeadModel) -> np.ndarray:
+    """(V,) the vertices on the part of the head the controls move: some expression weight of 1 moves it further
+    than EXPRESSION_REACH_M, or the jaw or an eye carries it (the face; not the crown, the back, the neck's sides)."""
     moved = np.abs(np.asarray(model.expr_basis)).max(axis=(1, 2)) > EXPRESSION_REACH_M \
         if model.expr_basis.shape[-1] else np.zeros(model.num_vertices, bool)
-    moved |= carried_by(model, (*GAZE_JOINTS, "jaw"))
+    return moved | carried_by(model, (*GAZE_JOINTS, "jaw"))
+
+
+def expression_share(model: HeadModel, size: int, cells: int, front: float = 0.0) -> torch.Tensor:
+    """(1,1,cells,cells): the share of each chart cell's texels that lie on the part of the head the controls move
+    (face_vertices' triangles); 0 on the crown, the back and the sides of the neck."""
+    moved = face_vertices(model)
     s = chart_sampler(model, size, front)
     texel = np.zeros(size * size, np.float32)
     texel[s.valid] = moved[np.asarray(model.triangles)[s.triangles[s.valid]]].all(1)

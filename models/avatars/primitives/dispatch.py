@@ -49,16 +49,17 @@ class Ran:
 
 
 def march_rays(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: march.Primitives,
-               samples: int, display: Display | None = None) -> tuple[march.MarchOutput, Ran]:
+               samples: int, display: Display | None = None,
+               band: tuple[torch.Tensor, torch.Tensor] | None = None) -> tuple[march.MarchOutput, Ran]:
     """R rays (origins, directions (R,3), background (R,3) or (3,)) marched through the primitives, `samples`
-    samples a segment at most: for training (display None: one pass, every candidate, gradients) or for display;
-    and which code ran."""
+    samples a segment at most: for training (display None: one pass, every candidate, gradients; band: march's) or
+    for display; and which code ran."""
     lookups_why = native.unavailable(prims, origins, display=False)
     gather = native.trilinear if not lookups_why else None
     lookups = "torch" if lookups_why else "c"
     if display is None:
         lists = march.candidate_lists(origins, directions, prims)
-        return march.march(origins, directions, background, prims, lists, samples, gather=gather), \
+        return march.march(origins, directions, background, prims, lists, samples, gather=gather, band=band), \
             Ran("torch", lookups, lookups_why)
     march_why = native.unavailable(prims, origins, display=True)
     if not march_why:

@@ -325,6 +325,7 @@ class MarchOutput:
     depth: torch.Tensor  # (R,) sum w t / sum w (0 where nothing)
     samples: int  # lookups made
     segments: int  # segments sampled
+    off_band: torch.Tensor | None = None  # (R,) sum w over samples outside each ray's band (march's `band`)
 
 
 DISPLAY_MIN_WEIGHT = 1e-4
@@ -339,7 +340,8 @@ termination by groups): fewer, larger operations than one candidate a wave, and 
 def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Tensor, prims: Primitives,
           lists: CandidateLists, samples: int, stop_below: float = 0.0, gather: Gather | None = None,
           wave: int = WAVE_CANDIDATES, min_weight: float = 0.0, adaptive: bool = False,
-          should_stop: Callable[[], bool] | None = None) -> MarchOutput:
+          should_stop: Callable[[], bool] | None = None,
+          band: tuple[torch.Tensor, torch.Tensor] | None = None) -> MarchOutput:
     """Composite the primitives along R rays (origins, directions (R,3), background (R,3) or (3,)), each through
     its candidate list in order, `samples` samples a segment. Without stop_below (training) every candidate in one
     pass; with stop_below > 0 (display) in waves of `wave` candidates of every live ray, and a ray takes no more
@@ -349,12 +351,13 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
     takes one sample a voxel it crosses and one more, `samples` at most (voxel_counts), where training takes
     `samples` on every segment. gather: the lookups by this trilinear function instead of grid_sample (`trilinear`:
     the reference's gathers). should_stop: asked before each wave; yes raises RenderCancelled (a newer request
-    won)."""
+    won). band (lo, hi) (R,) each: the output's off_band is each ray's compositing weight at samples whose t lies
+    below lo or above hi (training's face depth: PrimitivesAvatar.loss_terms)."""
     R = len(origins)
     lookup_of = Lookups(prims, gather)
     frames = box_frames(origins, prims)
     dtype, device = prims.density.dtype, origins.device
-    total = Composited.empty(R, prims.colour.shape[-1], dtype, device)
+    total = Composited.empty(R, prims.colour.shape[-1], dtype, device, band is not None)
     trans = torch.ones(R, dtype=dtype, device=device)
     longest = int(lists.count.max()) if R else 0
     step = max(1, longest) if stop_below <= 0 else max(1, wave)
@@ -371,12 +374,12 @@ def march(origins: torch.Tensor, directions: torch.Tensor, background: torch.Ten
         ray = torch.repeat_interleave(r, n)
         k = k0 + torch.arange(len(ray), device=device) - torch.repeat_interleave(n.cumsum(0) - n, n)
         total = composite_pairs(origins, directions, prims, lookup_of, frames, ray,
-                                lists.prims[lists.start[ray] + k], samples, trans, total, min_weight, adaptive)
+                                lists.prims[lists.start[ray] + k], samples, trans, total, min_weight, adaptive, band)
         trans = torch.exp(-total.optical_depth).to(dtype)
     depth = torch.where(total.opacity > 1e-10, total.depth / total.opacity.clamp_min(1e-10),
                         torch.zeros_like(total.depth))
     return MarchOutput(total.values[:, :3] + trans[:, None] * background, total.values[:, 3:], total.opacity, depth,
-                       total.lookups, total.segments)
+                       total.lookups, total.segments, total.off_band)
 
 
 STRIPES = 16
@@ -497,7 +500,8 @@ class Lookups:
 @dataclass
 class Composited:
     """What some segments of R rays add: colour channels, opacity and sum w t (each from the light that reaches
-    them), the optical depth they put in the way (float64), and the lookups and segments made."""
+    them), the optical depth they put in the way (float64), the lookups and segments made, and (where the march has
+    a band) the weight outside each ray's band."""
 
     values: torch.Tensor  # (R,C)
     opacity: torch.Tensor  # (R,)
@@ -505,33 +509,39 @@ class Composited:
     optical_depth: torch.Tensor  # (R,)
     lookups: int = 0
     segments: int = 0
+    off_band: torch.Tensor | None = None  # (R,)
 
     @staticmethod
-    def empty(R: int, channels: int, dtype: torch.dtype, device: torch.device | str) -> Composited:
+    def empty(R: int, channels: int, dtype: torch.dtype, device: torch.device | str, band: bool = False
+              ) -> Composited:
         z = lambda: torch.zeros(R, dtype=dtype, device=device)  # a tensor each: display adds into them in place
         return Composited(torch.zeros(R, channels, dtype=dtype, device=device), z(), z(),
-                          torch.zeros(R, dtype=torch.float64, device=device))
+                          torch.zeros(R, dtype=torch.float64, device=device), off_band=z() if band else None)
 
     def added(self, value_ray: torch.Tensor, values: torch.Tensor, ray: torch.Tensor, opacity: torch.Tensor,
-              depth: torch.Tensor, optical_depth: torch.Tensor, lookups: int, segments: int) -> Composited:
+              depth: torch.Tensor, optical_depth: torch.Tensor, lookups: int, segments: int,
+              off_band: tuple[torch.Tensor, torch.Tensor] | None = None) -> Composited:
         """These sums with values (V,C) added to rays value_ray (V,) and the segments' opacity, depth and optical
-        depth (S,) to rays ray (S,): in place where no gradient is recorded (display: a wave's few rays into the
-        whole image's sums), else as new tensors (training's one pass)."""
+        depth (S,) to rays ray (S,), and off_band's weights (N,) to its rays (N,): in place where no gradient is
+        recorded (display: a wave's few rays into the whole image's sums), else as new tensors (training's one
+        pass)."""
         add = torch.Tensor.index_add if torch.is_grad_enabled() else torch.Tensor.index_add_
+        off = self.off_band if off_band is None else add(self.off_band, 0, off_band[0], off_band[1])
         return Composited(add(self.values, 0, value_ray, values), add(self.opacity, 0, ray, opacity),
                           add(self.depth, 0, ray, depth), add(self.optical_depth, 0, ray, optical_depth),
-                          self.lookups + lookups, self.segments + segments)
+                          self.lookups + lookups, self.segments + segments, off)
 
 
 def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Primitives, lookups: Lookups,
                     frames: BoxFrames, ray: torch.Tensor, prim: torch.Tensor, samples: int, trans: torch.Tensor,
-                    total: Composited, min_weight: float = 0.0, adaptive: bool = False) -> Composited:
+                    total: Composited, min_weight: float = 0.0, adaptive: bool = False,
+                    band: tuple[torch.Tensor, torch.Tensor] | None = None) -> Composited:
     """`total` (the sums of the rays' earlier segments) with the (ray, primitive) pairs (Q,) in order (ray by ray,
     each ray's front to back) composited over the light `trans` (R,) that reaches each ray's first: the slab test,
     `samples` samples a segment where they meet, laid out one after another ray by ray, each sample's light exp(-)
     the optical depth of its ray's samples before it here; the colour looked up only where a sample's weight
     reaches min_weight; adaptive: a segment takes one sample a voxel it crosses and one more, `samples` at most
-    (voxel_counts)."""
+    (voxel_counts); band (lo, hi) (R,): the weight of the samples outside their ray's [lo, hi] added to off_band."""
     t0, t1, meet, o_box, d_box = ray_box_segments(origins, directions, prims, ray, prim, frames)
     hit = torch.nonzero(meet).squeeze(1)
     ray, prim, o_box, d_box, t0, t1 = (x.index_select(0, hit) for x in (ray, prim, o_box, d_box, t0, t1))
@@ -559,5 +569,9 @@ def composite_pairs(origins: torch.Tensor, directions: torch.Tensor, prims: Prim
     else:
         value_ray = ray if taken.every else sample_ray
         values, looked = taken.to_add(w[:, None] * lookups.colour(points).to(tau.dtype)), N
+    off = None
+    if band is not None:
+        outside = (t < band[0].index_select(0, sample_ray)) | (t > band[1].index_select(0, sample_ray))
+        off = (sample_ray, w * outside.to(w.dtype))
     return total.added(value_ray, values, ray if taken.every else sample_ray, taken.to_add(w), taken.to_add(w * t),
-                       taken.to_add(tau.double()), N + looked, S)
+                       taken.to_add(tau.double()), N + looked, S, off)
