@@ -40,6 +40,7 @@ from models.avatars.primitives.chart import (
     GAZE_JOINTS,
     GEOMETRY_SCALE_M,
     ChartSampler,
+    carried_by,
     chart_sampler,
     expression_share,
     eye_cells,
@@ -747,11 +748,14 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return self.cfg.face_depth > 0
 
     def training_surface(self, raster) -> np.ndarray:
-        """The distance to the guide mesh on the pixels where it shows the face (face_vertices' triangles), inf
-        elsewhere: the crown and the back of the mesh lie under the hair, not on it."""
+        """The distance to the guide mesh on the pixels where it shows the face (face_vertices' triangles) but not
+        an eyeball, inf elsewhere: the crown and the back of the mesh lie under the hair, not on it, and the lids
+        cover the head model's eyeballs as the video's eyes open and close (held to them, a white blob showed on an
+        eye from 15 degrees round)."""
         face = getattr(self, "_face_triangles", None)
         if face is None:
-            face = self._face_triangles = face_vertices(self.head_model)[np.asarray(self.head_model.triangles)].all(1)
+            on_face = face_vertices(self.head_model) & ~carried_by(self.head_model, GAZE_JOINTS)
+            face = self._face_triangles = on_face[np.asarray(self.head_model.triangles)].all(1)
         on = (raster.triangle >= 0) & face[np.maximum(raster.triangle, 0)]
         return np.where(on, raster.distance, np.inf)
 

@@ -170,6 +170,31 @@ def test_one_slab_of_known_density_hand_worked():
     torch.testing.assert_close(out.depth, torch.tensor([1.0]), atol=0.02, rtol=0)  # the slab's middle, near enough
 
 
+def test_the_light_outside_a_band_hand_worked():
+    """The same slab (t from 0.95 to 1.05 along the ray), 5 samples at t = 0.96, 0.98, ..., 1.04, each 0.02 long:
+    sample i's weight is e^(-0.4 i) (1 - e^-0.4). Band [0.97, 1.03]: the first and the last lie outside it, so
+    off_band = (1 - e^-0.4)(1 + e^-1.6); a ray whose band is everything, or that meets nothing, has none. Its
+    gradient reaches the density, and a march without a band keeps none."""
+    P, M = 1, 2
+    density = torch.full((P, M, M, M), 20.0, dtype=torch.float64, requires_grad=True)
+    prims = march.Primitives(torch.zeros(1, 3, dtype=torch.float64), torch.eye(3, dtype=torch.float64)[None],
+                             torch.full((1, 3), 0.05, dtype=torch.float64), density,
+                             torch.tensor([1.0, 0, 0], dtype=torch.float64).expand(P, M, M, M, 3))
+    o = torch.tensor([[0.01, -0.02, -1.0], [0.0, 0.0, -1.0], [0.5, 0.5, -1.0]], dtype=torch.float64)
+    d = torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64).expand(3, 3)
+    inf = float("inf")
+    band = (torch.tensor([0.97, -inf, 0.97], dtype=torch.float64), torch.tensor([1.03, inf, 1.03], dtype=torch.float64))
+    out = march.march(o, d, torch.zeros(3, dtype=torch.float64), prims, march.every_primitive(o, prims), samples=5,
+                      band=band)
+    a = 1 - math.exp(-0.4)
+    torch.testing.assert_close(out.off_band, torch.tensor([a * (1 + math.exp(-1.6)), 0.0, 0.0], dtype=torch.float64))
+    out.off_band.sum().backward()
+    assert torch.isfinite(density.grad).all() and float(density.grad.abs().sum()) > 0
+    assert march.march(o, d, torch.zeros(3, dtype=torch.float64), prims.__class__(
+        prims.centres, prims.rotations, prims.half_sizes, density.detach(), prims.colour),
+        march.every_primitive(o, prims), samples=5).off_band is None
+
+
 def test_hard_cases_stay_finite():
     """Primitives of zero size, rays along a face, densities of 0 and 1e6, the camera inside a primitive."""
     prims = random_primitives(P=20, M=4, seed=7, dtype=torch.float32)
@@ -193,10 +218,12 @@ def test_hard_cases_stay_finite():
     d = density.clone().requires_grad_(True)
     h = half.clone().requires_grad_(True)
     p = march.Primitives(centres, prims.rotations, h, d, prims.colour)
-    out = march.march(origins, dirs, torch.zeros(3), p, march.candidate_lists(origins, dirs, p), 8)
+    band = (torch.full((len(origins),), 0.3), torch.full((len(origins),), 0.5))  # a face's band, on every ray
+    out = march.march(origins, dirs, torch.zeros(3), p, march.candidate_lists(origins, dirs, p), 8, band=band)
     assert torch.isfinite(out.rgb).all() and torch.isfinite(out.opacity).all() and torch.isfinite(out.depth).all()
+    assert torch.isfinite(out.off_band).all() and (out.off_band <= out.opacity + 1e-5).all()
     assert (out.opacity <= 1 + 1e-5).all()
-    (out.rgb.sum() + out.depth.sum()).backward()
+    (out.rgb.sum() + out.depth.sum() + out.off_band.sum()).backward()
     assert torch.isfinite(d.grad).all() and torch.isfinite(h.grad).all()
 
 

@@ -372,3 +372,66 @@ def test_an_avatar_from_before_the_fade_resumes_and_fades_nothing(synth_capture,
     assert "seen_fade" not in load_avatar(out)[0].state_dict()
     assert main(["train", str(capture), "--out", str(out), "--steps", "3", "--resume", "--rays-per-step", "64"]) == 0
     assert "seen_fade" not in load_avatar(out)[0].state_dict()
+
+
+def test_the_face_depth_term_keeps_the_face_on_the_tracked_surface(synth_capture, gl, tmp_path):
+    """face_depth > 0: training keeps each frame's distance to the guide mesh on the face's pixels alone (the
+    triangles face_vertices marks, but the eyeballs'; inf on the crown and off the head), as a raster of the frame
+    gives it; the loss
+    has the term, and trained with it the share of the face rays' light composited more than FACE_DEPTH_MARGIN_M
+    off the mesh falls below what the same steps without it leave. face_depth 0: no distances kept. (The eyeballs
+    are not the face's surface here: the lids cover them.)"""
+    from dataclasses import replace
+
+    from models.avatars.primitives.avatar import FACE_DEPTH_MARGIN_M
+    from models.avatars.primitives.chart import GAZE_JOINTS, carried_by, face_vertices
+    from models.training.trainer import TrainingBatch
+
+    capture = synth_capture("studio", 16, 48)
+    plain = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "plain", model="primitives", steps=1,
+                                         checkpoint_seconds=1e9), gl, SMALL)
+    assert plain.frames.surface_t is None and not plain.avatar.trains_on_surface
+    cfg = replace(SMALL, face_depth=1.0)
+    t = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "fd", model="primitives", steps=1,
+                                     checkpoint_seconds=1e9), gl, cfg)
+    assert t.avatar.trains_on_surface and t.frames.surface_t is not None
+    head = t.avatar.head_model
+    face = (face_vertices(head) & ~carried_by(head, GAZE_JOINTS))[np.asarray(head.triangles)].all(1)
+    r = Rasterizer(gl)
+    for k in (0, 7):
+        f = t.split.frames[k]
+        raster = r.rasterize(t.frames.geometry[k].posed.cpu().numpy(), head.triangles, frame_camera(t.split, f))
+        on = (raster.triangle >= 0) & face[np.maximum(raster.triangle, 0)]
+        kept = t.frames.surface_t[k].numpy()
+        assert on.sum() > 100 and ((raster.triangle >= 0) & ~on).sum() > 20  # face, and head that is not face
+        np.testing.assert_array_equal(np.isfinite(kept), on)
+        np.testing.assert_allclose(kept[on], raster.distance[on].astype(np.float32))
+    r.release()
+
+    def off_share(trainer) -> float:
+        """The face rays' light more than the margin off the mesh, on frame 3's face pixels."""
+        fs = trainer.frames
+        pick = torch.from_numpy(np.flatnonzero(np.isfinite(t.frames.surface_t[3].numpy().ravel())))
+        rays = fs.rays(3, pick)
+        rays = type(rays)(rays.origins, rays.directions, t.frames.surface_t[3].reshape(-1)[pick], rays.background)
+        with torch.no_grad():
+            out = trainer.avatar.render_rays(rays, fs.geometry[3], 3, training=True,
+                                             band=t.avatar.face_band(rays))
+        return float(out.internals[2].off_band.mean())
+
+    terms = t.avatar.loss_terms(TrainingBatch(3, t.frames.rays(3, torch.arange(48 * 48)), torch.zeros(48 * 48, 3),
+                                              t.frames.geometry[3], 0.0, torch.Generator().manual_seed(0)))
+    assert "face_depth" in terms and 0 < float(terms["face_depth"].detach()) < 1.0
+    torch.manual_seed(0)
+    without = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "w0", model="primitives", steps=150,
+                                           checkpoint_seconds=1e9), gl, SMALL)
+    torch.manual_seed(0)
+    with_term = prepare_training(TrainConfig(dataset=capture, out=tmp_path / "w1", model="primitives", steps=150,
+                                             checkpoint_seconds=1e9), gl, cfg)
+    for trainer in (without, with_term):
+        for _ in range(150):
+            trainer.train_step(0.5)
+    assert FACE_DEPTH_MARGIN_M == 0.015
+    shares = off_share(with_term), off_share(without)
+    print("face light off the surface, with the term and without:", shares)
+    assert shares[0] < 0.7 * shares[1], shares
