@@ -129,9 +129,13 @@ class PrimitivesConfig:
     e^3 times its place's size in any case). Training leaves its boxes as the decoder makes them."""
     face_depth: Annotated[float, Range(0)] = 0.0
     """The weight of the face's depth term (a tracked video's): on each training ray that meets the face of the guide
-    mesh (chart.face_vertices' triangles), the share of its light composited further than FACE_DEPTH_MARGIN_M in
-    front of or behind the mesh, so the face is a surface about the tracked mesh and not the video's picture smeared
-    in depth; 0: none (no raster kept for training)."""
+    mesh (chart.face_vertices' triangles), the share of its light composited further than face_margin_m in front of
+    or behind the mesh, so the face is a surface about the tracked mesh and not the video's picture smeared in depth;
+    0: none (no raster kept for training)."""
+    face_margin_m: Annotated[float, Range(0, 1, above=True)] = 0.015
+    """The face's depth term leaves the light composited within this of the tracked mesh along the ray alone: the
+    tracked surface's own error (a few millimetres), a fringe on the forehead and glasses' rims (about 1.5 cm before
+    the eyes' surface) lie within it."""
     neck_fade: bool = False
     """Shown, the density fades out down the neck by each voxel's height in the head's own frame (seen.py
     NECK_FADE_M below the eyes): the neck ends in a soft edge from every side, not in its lowest boxes' faces. A whole
@@ -176,11 +180,6 @@ class PrimitivesConfig:
         if self.code_off_face and self.code_dim == 0:
             raise ValueError("code_off_face needs a per-frame code (code_dim > 0)")
 
-
-FACE_DEPTH_MARGIN_M = 0.015
-"""The face's depth term (PrimitivesConfig.face_depth) leaves the light composited within this of the tracked mesh
-along the ray alone: the tracked surface's own error (a few millimetres), a fringe on the forehead and glasses'
-rims (about 1.5 cm before the eyes' surface) lie within it."""
 
 VIDEO_SETTINGS = {"front": 2.0, "expression_maps": True, "global_expression": False, "opacity_window": True,
                   "keep_size": True, "body_layer": True}
@@ -760,12 +759,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         return np.where(on, raster.distance, np.inf)
 
     def face_band(self, rays: Rays) -> tuple[torch.Tensor, torch.Tensor]:
-        """(lo, hi) (R,) along each ray, FACE_DEPTH_MARGIN_M either side of the mesh's face where the ray meets it
+        """(lo, hi) (R,) along each ray, face_margin_m either side of the mesh's face where the ray meets it
         (Rays.surface_t), everything where it does not."""
-        t = rays.surface_t
+        t, m = rays.surface_t, self.cfg.face_margin_m
         on = torch.isfinite(t)
         inf = torch.full_like(t, float("inf"))
-        return torch.where(on, t - FACE_DEPTH_MARGIN_M, -inf), torch.where(on, t + FACE_DEPTH_MARGIN_M, inf)
+        return torch.where(on, t - m, -inf), torch.where(on, t + m, inf)
 
     def render_rays(self, rays: Rays, geometry: PrimitivesGeometry, frame: int | None,
                     generator: torch.Generator | None = None, training: bool = False,

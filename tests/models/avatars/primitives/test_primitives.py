@@ -378,12 +378,11 @@ def test_the_face_depth_term_keeps_the_face_on_the_tracked_surface(synth_capture
     """face_depth > 0: training keeps each frame's distance to the guide mesh on the face's pixels alone (the
     triangles face_vertices marks, but the eyeballs'; inf on the crown and off the head), as a raster of the frame
     gives it; the loss
-    has the term, and trained with it the share of the face rays' light composited more than FACE_DEPTH_MARGIN_M
-    off the mesh falls below what the same steps without it leave. face_depth 0: no distances kept. (The eyeballs
+    has the term, and trained with it the share of the face rays' light composited more than face_margin_m off
+    the mesh falls below what the same steps without it leave. face_depth 0: no distances kept. (The eyeballs
     are not the face's surface here: the lids cover them.)"""
     from dataclasses import replace
 
-    from models.avatars.primitives.avatar import FACE_DEPTH_MARGIN_M
     from models.avatars.primitives.chart import GAZE_JOINTS, carried_by, face_vertices
     from models.training.trainer import TrainingBatch
 
@@ -431,7 +430,7 @@ def test_the_face_depth_term_keeps_the_face_on_the_tracked_surface(synth_capture
     for trainer in (without, with_term):
         for _ in range(150):
             trainer.train_step(0.5)
-    assert FACE_DEPTH_MARGIN_M == 0.015
+    assert cfg.face_margin_m == 0.015
     shares = off_share(with_term), off_share(without)
     print("face light off the surface, with the term and without:", shares)
     assert shares[0] < 0.7 * shares[1], shares
