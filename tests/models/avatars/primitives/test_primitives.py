@@ -401,18 +401,20 @@ def test_the_face_depth_term_keeps_the_face_on_the_tracked_surface(synth_capture
         f = t.split.frames[k]
         raster = r.rasterize(t.frames.geometry[k].posed.cpu().numpy(), head.triangles, frame_camera(t.split, f))
         on = (raster.triangle >= 0) & face[np.maximum(raster.triangle, 0)]
-        kept = t.frames.surface_t[k].numpy()
+        kept = t.frames.surface_t[k].float().numpy()
+        assert t.frames.surface_t.dtype == torch.float16  # half precision: the face's depth needs no more
         assert on.sum() > 100 and ((raster.triangle >= 0) & ~on).sum() > 20  # face, and head that is not face
         np.testing.assert_array_equal(np.isfinite(kept), on)
-        np.testing.assert_allclose(kept[on], raster.distance[on].astype(np.float32))
+        np.testing.assert_allclose(kept[on], raster.distance[on], rtol=1e-3)
     r.release()
 
     def off_share(trainer) -> float:
         """The face rays' light more than the margin off the mesh, on frame 3's face pixels."""
         fs = trainer.frames
-        pick = torch.from_numpy(np.flatnonzero(np.isfinite(t.frames.surface_t[3].numpy().ravel())))
+        pick = torch.from_numpy(np.flatnonzero(np.isfinite(t.frames.surface_t[3].float().numpy().ravel())))
         rays = fs.rays(3, pick)
-        rays = type(rays)(rays.origins, rays.directions, t.frames.surface_t[3].reshape(-1)[pick], rays.background)
+        rays = type(rays)(rays.origins, rays.directions, t.frames.surface_t[3].reshape(-1)[pick].float(),
+                          rays.background)
         with torch.no_grad():
             out = trainer.avatar.render_rays(rays, fs.geometry[3], 3, training=True,
                                              band=t.avatar.face_band(rays))
@@ -430,7 +432,7 @@ def test_the_face_depth_term_keeps_the_face_on_the_tracked_surface(synth_capture
     for trainer in (without, with_term):
         for _ in range(150):
             trainer.train_step(0.5)
-    assert cfg.face_margin_m == 0.015
+    assert cfg.face_margin_m == 0.02
     shares = off_share(with_term), off_share(without)
     print("face light off the surface, with the term and without:", shares)
     assert shares[0] < 0.7 * shares[1], shares
