@@ -39,7 +39,8 @@ class FrameSet:
     origins: torch.Tensor  # (N,3)
     camera_directions: torch.Tensor  # (H*W,3) unit, camera space, of the split's intrinsics
     rotations: torch.Tensor  # (N,3,3) float64, camera to world
-    surface_t: torch.Tensor | None  # (N,H,W) inf where the pixel misses the mesh; None: the avatar reads no raster
+    surface_t: torch.Tensor | None  # (N,H,W) inf where none (Avatar.training_surface); None: training reads none
+    # (Avatar.trains_on_surface)
     geometry: list[Any]  # the avatar's frame_geometry of each frame
     active_index: list[torch.Tensor]  # per frame, the flat indices of the pixels training draws rays from (the
     # avatar's training_pixels)
@@ -112,7 +113,8 @@ READING, PLACING = "reading the frames", "placing the mesh in the frames"
 def build_frames(split: CaptureSplit, avatar: Avatar, gl: GLContext,
                  on_frame: Callable[[str, int, int], None] | None = None) -> FrameSet:
     """Read the split's images (and masks), make each frame's geometry, rasterize the posed mesh (for the surface
-    distance along each pixel's ray, where the avatar reads the raster), and let the avatar fit its settings to the
+    distance along each pixel's ray, where the avatar's training reads it: trains_on_surface), and let the avatar
+    fit its settings to the
     capture and choose where training draws rays. One frame at a time into tensors made once: what a frame's
     raster holds (3 MB at 256 px) is not kept for every frame of a long video, the mesh is rasterized again once the
     avatar's settings are fitted; the masks only say how far the person reaches (not kept), the images are kept as

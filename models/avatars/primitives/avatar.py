@@ -9,8 +9,9 @@ meet (march.py). Display caches the decode on the frame's geometry, so a frame's
 
 Losses (MVP's, those that apply here): photometric (squared error, as the other models), the volume prior (the
 primitives' summed volume, relative to where they started: keeps them tight, so empty space costs nothing), the
-offsets' L2 (primitives stay near their places on the mesh), and the per-frame codes' L2; with `train
---corrections` on a tracked video, the per-frame pose and expression corrections' priors (components/poses.py).
+offsets' L2 (primitives stay near their places on the mesh), and the per-frame codes' L2; on a tracked video the
+face's depth (face_depth: the face's light held within face_margin_m of the tracked mesh), and with `train
+--corrections` the per-frame pose and expression corrections' priors (components/poses.py).
 """
 
 from __future__ import annotations
@@ -136,8 +137,10 @@ class PrimitivesConfig:
     """The face's depth term leaves the light composited within this of the tracked mesh along the ray alone: the
     tracked surface's own error (a few millimetres), a fringe on the forehead and glasses' rims (about 1.5 cm before
     the eyes' surface) lie within it. At 10 minutes (docs/results.md), 1.5 cm cost the grimacing man's held-out
-    frames 0.8 dB (the built-in head cannot make his grimaces, so his face lies off its mesh), 3 cm kept them and
-    lost the furthest turns' gain and the clean face 20 degrees round; 2 cm keeps both."""
+    frames 0.8 dB (the built-in head cannot make his grimaces, so his face lies off its mesh) and gave d3's furthest
+    turns 1.0; 3 cm kept him, lost the turns' gain and the clean face 20 degrees round; 2 cm kept him, a third of the
+    turns' gain and the clean face. The band is the tracked pose's: with `--corrections` a frame's corrected rays
+    meet the mesh a little elsewhere (the corrections are millimetres; the margin takes them in)."""
     neck_fade: bool = False
     """Shown, the density fades out down the neck by each voxel's height in the head's own frame (seen.py
     NECK_FADE_M below the eyes): the neck ends in a soft edge from every side, not in its lowest boxes' faces. A whole

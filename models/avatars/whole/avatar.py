@@ -409,5 +409,12 @@ class WholeHeadAvatar(Avatar):
             found.append((idx, model.inspect(part, geo, names)))
         return self.mixed(w, found, names, lambda made: made)
 
+    @property
+    def trains_on_surface(self) -> bool:
+        return self.inside.trains_on_surface
+
+    def training_surface(self, raster) -> np.ndarray:
+        return self.inside.training_surface(raster)
+
     def loss_terms(self, batch: TrainingBatch) -> dict[str, torch.Tensor]:
         return self.inside.loss_terms(replace(batch, geometry=batch.geometry.inside))
