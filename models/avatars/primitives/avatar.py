@@ -709,7 +709,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         fade = self.slab_fade()
         if fade is not None:  # nothing where the capture never looked (seen.py)
             density = density * fade.to(density)
-        eyes = eye_height_m(self.head_model) if self.cfg.neck_fade and not training else None
+        eyes = self.eye_height() if self.cfg.neck_fade and not training else None
         if eyes is not None:  # a soft end to the neck (seen.py)
             density = density * height_fade(voxel_heights(centres, rotations, half, self.cfg.voxels, geo.rotation,
                                                           geo.translation), eyes).to(density)
@@ -722,6 +722,12 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
             texels = light.reshape(K, M, K, M).permute(0, 2, 1, 3).reshape(K * K, 1, M, M, 1)[cells]
             colour = torch.cat([colour, texels.expand(-1, M, -1, -1, -1)], -1)
         return march.Primitives(centres, rotations, half, density, colour), offsets
+
+    def eye_height(self) -> float | None:
+        """seen.eye_height_m of the head model, worked out once (the neck fade reads it at every decode)."""
+        if not hasattr(self, "_eye_height"):
+            self._eye_height = eye_height_m(self.head_model)
+        return self._eye_height
 
     def training_code(self, frame: int, generator: torch.Generator | None) -> torch.Tensor:
         """(1,C) the code a training step decodes with: the frame's own, or on code_swap's share of the steps the
