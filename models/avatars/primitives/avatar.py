@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, replace
+from functools import cached_property
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -709,7 +710,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         fade = self.slab_fade()
         if fade is not None:  # nothing where the capture never looked (seen.py)
             density = density * fade.to(density)
-        eyes = self.eye_height() if self.cfg.neck_fade and not training else None
+        eyes = self.eye_height if self.cfg.neck_fade and not training else None
         if eyes is not None:  # a soft end to the neck (seen.py)
             density = density * height_fade(voxel_heights(centres, rotations, half, self.cfg.voxels, geo.rotation,
                                                           geo.translation), eyes).to(density)
@@ -723,11 +724,16 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
             colour = torch.cat([colour, texels.expand(-1, M, -1, -1, -1)], -1)
         return march.Primitives(centres, rotations, half, density, colour), offsets
 
+    @cached_property
     def eye_height(self) -> float | None:
         """seen.eye_height_m of the head model, worked out once (the neck fade reads it at every decode)."""
-        if not hasattr(self, "_eye_height"):
-            self._eye_height = eye_height_m(self.head_model)
-        return self._eye_height
+        return eye_height_m(self.head_model)
+
+    @cached_property
+    def face_triangles(self) -> np.ndarray:
+        """(F,) the triangles of the face's surface (face_vertices' but the eyeballs', which the lids cover)."""
+        on_face = face_vertices(self.head_model) & ~carried_by(self.head_model, GAZE_JOINTS)
+        return on_face[np.asarray(self.head_model.triangles)].all(1)
 
     def training_code(self, frame: int, generator: torch.Generator | None) -> torch.Tensor:
         """(1,C) the code a training step decodes with: the frame's own, or on code_swap's share of the steps the
@@ -765,11 +771,7 @@ class PrimitivesAvatar(PoseCorrected, Avatar):
         an eyeball, inf elsewhere: the crown and the back of the mesh lie under the hair, not on it, and the lids
         cover the head model's eyeballs as the video's eyes open and close (held to them, a white blob showed on an
         eye from 15 degrees round)."""
-        face = getattr(self, "_face_triangles", None)
-        if face is None:
-            on_face = face_vertices(self.head_model) & ~carried_by(self.head_model, GAZE_JOINTS)
-            face = self._face_triangles = on_face[np.asarray(self.head_model.triangles)].all(1)
-        on = (raster.triangle >= 0) & face[np.maximum(raster.triangle, 0)]
+        on = (raster.triangle >= 0) & self.face_triangles[np.maximum(raster.triangle, 0)]
         return np.where(on, raster.distance, np.inf)
 
     def face_band(self, rays: Rays) -> tuple[torch.Tensor, torch.Tensor]:
